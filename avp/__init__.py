@@ -1,0 +1,37 @@
+"""avp: active visual perching for quadrotors.
+
+Plans minimum-snap perching trajectories on the flat outputs (x, y, z, yaw) after Mao et al.,
+"Robust Active Visual Perching With Quadrotors on Inclined Surfaces", IEEE T-RO 2023. Equation
+numbers in docstrings, such as (12), refer to that paper.
+"""
+
+from __future__ import annotations
+
+try:
+    from . import _avp_rust
+except ImportError as exc:  # pragma: no cover - exercised only on a broken install
+    raise ImportError(
+        "avp._avp_rust is not built: install the package with `pip install .` or "
+        "`pip install -e .` (needs a Rust toolchain), or run `maturin develop`"
+    ) from exc
+
+from .errors import (
+    AvpError,
+    BoundsNotCertifiedError,
+    ConfigError,
+    InfeasibleError,
+    PlanningError,
+    SolverError,
+)
+
+__version__: str = _avp_rust.__version__
+
+__all__ = [
+    "AvpError",
+    "BoundsNotCertifiedError",
+    "ConfigError",
+    "InfeasibleError",
+    "PlanningError",
+    "SolverError",
+    "__version__",
+]

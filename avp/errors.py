@@ -1,0 +1,60 @@
+"""The one exception hierarchy of avp.
+
+Every error the library raises on purpose is an :class:`AvpError`. Messages name the field that
+is wrong and say what to change (qpsolvers style). Solver-library exceptions are caught and
+re-raised as :class:`SolverError` so that they do not leak through the abstraction.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:  # pragma: no cover
+    from .planner import PlanResult
+
+__all__ = [
+    "AvpError",
+    "ConfigError",
+    "PlanningError",
+    "InfeasibleError",
+    "SolverError",
+    "BoundsNotCertifiedError",
+]
+
+
+class AvpError(Exception):
+    """Base class of every error raised by avp."""
+
+
+class ConfigError(AvpError, ValueError):
+    """Bad input: wrong shape, NaN/inf, non-orthonormal rotation, impossible limits...
+
+    Attributes
+    ----------
+    field:
+        Name of the offending argument or field (``"target.R_WS"``, ``"limits.thrust_min"``).
+    """
+
+    def __init__(self, field: str, message: str) -> None:
+        self.field = field
+        super().__init__(f"{field}: {message}")
+
+
+class PlanningError(AvpError):
+    """Planning produced no trajectory; ``result`` holds the diagnostics (a ``PlanResult``)."""
+
+    def __init__(self, message: str, result: "PlanResult | Any | None" = None) -> None:
+        self.result = result
+        super().__init__(message)
+
+
+class InfeasibleError(PlanningError):
+    """The perching constraints admit no trajectory (even after dropping the FoV rows)."""
+
+
+class SolverError(PlanningError):
+    """The QP back-end is missing, or failed without an infeasibility certificate."""
+
+
+class BoundsNotCertifiedError(PlanningError):
+    """Actuator bounds could not be certified within the allowed duration changes."""

@@ -1,0 +1,36 @@
+//! The crate's one error type. Kernels return `Result` and never panic on input paths; the
+//! Python wrappers map every variant to `ValueError` with the message below.
+use std::fmt;
+
+#[derive(Debug, Clone, PartialEq)]
+pub enum Error {
+    /// An argument has the wrong shape or length.
+    Shape { arg: &'static str, detail: String },
+    /// An argument holds NaN or an infinity.
+    NonFinite { arg: &'static str },
+    /// An argument violates a documented precondition.
+    Invalid { arg: &'static str, detail: String },
+}
+
+pub type Result<T> = std::result::Result<T, Error>;
+
+impl fmt::Display for Error {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Error::Shape { arg, detail } => write!(f, "{arg}: wrong shape: {detail}"),
+            Error::NonFinite { arg } => write!(f, "{arg}: contains NaN or inf; pass finite values"),
+            Error::Invalid { arg, detail } => write!(f, "{arg}: {detail}"),
+        }
+    }
+}
+
+impl std::error::Error for Error {}
+
+/// Fails with [`Error::NonFinite`] when any value is NaN or infinite.
+pub fn check_finite(arg: &'static str, values: &[f64]) -> Result<()> {
+    if values.iter().all(|v| v.is_finite()) {
+        Ok(())
+    } else {
+        Err(Error::NonFinite { arg })
+    }
+}

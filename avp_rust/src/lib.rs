@@ -1,0 +1,21 @@
+//! Numeric kernels of `avp` (active visual perching).
+//!
+//! Pure functions on plain slices: spline evaluation ([`spline`]), polynomial algebra ([`poly`]),
+//! Sturm sequences and bound certificates (`sturm`, `certify`, `exact`), and the anticipation
+//! step (6) of the replanner (`anticipation`). The PyO3 wrappers live in `python` behind the
+//! `python` feature, so `cargo test` runs without linking libpython.
+//!
+//! Conventions: polynomial coefficients are stored in **ascending** powers (the constant
+//! coefficient comes first); spline coefficients have shape `(segments, axes, coeffs)` in
+//! physical units with per-segment local time `tau = t - t_i`.
+#![deny(unsafe_code)]
+#![warn(clippy::all)]
+
+pub mod error;
+pub mod poly;
+pub mod spline;
+
+#[cfg(feature = "python")]
+mod python;
+
+pub use error::{Error, Result};

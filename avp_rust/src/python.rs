@@ -1,0 +1,56 @@
+//! Thin PyO3 wrappers: convert NumPy arrays to slices, call a kernel, convert back. Every
+//! kernel error becomes `ValueError`; kernels return `Result` and do not panic on input paths.
+#![allow(clippy::useless_conversion)]
+use numpy::{IntoPyArray, PyArray3, PyReadonlyArray1, PyReadonlyArray3, PyUntypedArrayMethods};
+use pyo3::exceptions::PyValueError;
+use pyo3::prelude::*;
+
+use crate::error::Error;
+use crate::spline::{self, SplineView};
+
+pub(crate) fn to_py_err(e: Error) -> PyErr {
+    PyValueError::new_err(e.to_string())
+}
+
+pub(crate) fn contiguous<'a>(
+    arg: &'static str,
+    slice: std::result::Result<&'a [f64], numpy::NotContiguousError>,
+) -> PyResult<&'a [f64]> {
+    slice.map_err(|_| PyValueError::new_err(format!("{arg}: must be a C-contiguous float64 array")))
+}
+
+/// Evaluates a spline at `times` for each derivative order in `orders`.
+///
+/// `coeffs` has shape `(segments, axes, coeffs)` (ascending powers of `t - knots[i]`),
+/// `knots` shape `(segments + 1,)`. Returns shape `(len(orders), len(times), axes)`.
+#[pyfunction(name = "eval_spline")]
+fn eval_spline_py<'py>(
+    py: Python<'py>,
+    coeffs: PyReadonlyArray3<'py, f64>,
+    knots: PyReadonlyArray1<'py, f64>,
+    times: PyReadonlyArray1<'py, f64>,
+    orders: Vec<usize>,
+) -> PyResult<Bound<'py, PyArray3<f64>>> {
+    let shape = coeffs.shape();
+    let shape = (shape[0], shape[1], shape[2]);
+    let c = contiguous("coeffs", coeffs.as_slice())?;
+    let k = contiguous("knots", knots.as_slice())?;
+    let t = contiguous("times", times.as_slice())?;
+    if let Some(&bad) = orders.iter().find(|&&o| o > 64) {
+        return Err(PyValueError::new_err(format!("orders: derivative order {bad} is too large (at most 64)")));
+    }
+    let view = SplineView::new(c, shape, k).map_err(to_py_err)?;
+    let n_times = t.len();
+    let n_orders = orders.len();
+    let out = py.detach(|| spline::evaluate(&view, t, &orders)).map_err(to_py_err)?;
+    let arr = numpy::ndarray::Array3::from_shape_vec((n_orders, n_times, shape.1), out)
+        .map_err(|e| PyValueError::new_err(format!("internal shape error: {e}")))?;
+    Ok(arr.into_pyarray(py))
+}
+
+#[pymodule]
+pub fn _avp_rust(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    m.add_function(wrap_pyfunction!(eval_spline_py, m)?)?;
+    Ok(())
+}

@@ -1,0 +1,143 @@
+//! Piecewise-polynomial splines: coefficients `(segments, axes, coeffs)` in ascending powers of
+//! local time `tau = t - knots[i]`, evaluated for any derivative order over a batch of times.
+use crate::error::{check_finite, Error, Result};
+use crate::poly;
+
+/// A borrowed view of a spline, validated once.
+#[derive(Debug, Clone, Copy)]
+pub struct SplineView<'a> {
+    coeffs: &'a [f64],
+    knots: &'a [f64],
+    n_segments: usize,
+    n_axes: usize,
+    n_coeffs: usize,
+}
+
+impl<'a> SplineView<'a> {
+    /// Checks shapes (`coeffs.len() == S * A * C`, `knots.len() == S + 1`), finiteness, and
+    /// strictly increasing knots.
+    pub fn new(
+        coeffs: &'a [f64],
+        shape: (usize, usize, usize),
+        knots: &'a [f64],
+    ) -> Result<Self> {
+        let (n_segments, n_axes, n_coeffs) = shape;
+        if n_segments == 0 || n_axes == 0 || n_coeffs == 0 {
+            return Err(Error::Shape {
+                arg: "coeffs",
+                detail: format!("got shape {shape:?}; every dimension must be at least 1"),
+            });
+        }
+        if coeffs.len() != n_segments * n_axes * n_coeffs {
+            return Err(Error::Shape {
+                arg: "coeffs",
+                detail: format!("{} values do not fill shape {shape:?}", coeffs.len()),
+            });
+        }
+        if knots.len() != n_segments + 1 {
+            return Err(Error::Shape {
+                arg: "knots",
+                detail: format!("expected {} knots for {n_segments} segments, got {}", n_segments + 1, knots.len()),
+            });
+        }
+        check_finite("coeffs", coeffs)?;
+        check_finite("knots", knots)?;
+        if knots.windows(2).any(|w| w[1] <= w[0]) {
+            return Err(Error::Invalid { arg: "knots", detail: "must be strictly increasing".into() });
+        }
+        Ok(Self { coeffs, knots, n_segments, n_axes, n_coeffs })
+    }
+
+    pub fn n_segments(&self) -> usize {
+        self.n_segments
+    }
+    pub fn n_axes(&self) -> usize {
+        self.n_axes
+    }
+    pub fn n_coeffs(&self) -> usize {
+        self.n_coeffs
+    }
+    pub fn knots(&self) -> &'a [f64] {
+        self.knots
+    }
+
+    /// Coefficients of one segment and axis.
+    #[inline]
+    pub fn poly(&self, segment: usize, axis: usize) -> &'a [f64] {
+        let start = (segment * self.n_axes + axis) * self.n_coeffs;
+        &self.coeffs[start..start + self.n_coeffs]
+    }
+
+    /// Segment that owns time `t`: right-continuous at interior knots, the first segment for
+    /// `t < t0` and the last for `t >= tf` (polynomial extrapolation outside the domain).
+    #[inline]
+    pub fn segment_of(&self, t: f64) -> usize {
+        let interior = &self.knots[1..self.n_segments];
+        interior.partition_point(|&k| k <= t)
+    }
+
+    /// `order`-th derivative of every axis at `t`, written into `out[..n_axes]`.
+    #[inline]
+    pub fn eval_into(&self, t: f64, order: usize, out: &mut [f64]) {
+        let seg = self.segment_of(t);
+        let tau = t - self.knots[seg];
+        for (axis, o) in out.iter_mut().enumerate().take(self.n_axes) {
+            *o = poly::eval_derivative(self.poly(seg, axis), order, tau);
+        }
+    }
+}
+
+/// Evaluates the spline at every time for every derivative order.
+///
+/// Returns a flat vector laid out `[order][time][axis]` (shape `(orders, times, axes)`).
+pub fn evaluate(spline: &SplineView<'_>, times: &[f64], orders: &[usize]) -> Result<Vec<f64>> {
+    check_finite("times", times)?;
+    let a = spline.n_axes();
+    let mut out = vec![0.0; orders.len() * times.len() * a];
+    for (oi, &order) in orders.iter().enumerate() {
+        for (ti, &t) in times.iter().enumerate() {
+            let start = (oi * times.len() + ti) * a;
+            spline.eval_into(t, order, &mut out[start..start + a]);
+        }
+    }
+    Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn two_segment() -> (Vec<f64>, Vec<f64>) {
+        // axis 0: p1 = 1 + t, p2 = 2 + t ; axis 1: p1 = t^2, p2 = 1 + 2 tau + tau^2
+        let coeffs = vec![1.0, 1.0, 0.0, 0.0, 0.0, 1.0, 2.0, 1.0, 0.0, 1.0, 2.0, 1.0];
+        (coeffs, vec![0.0, 1.0, 3.0])
+    }
+
+    #[test]
+    fn picks_segments_and_evaluates_derivatives() {
+        let (c, k) = two_segment();
+        let s = SplineView::new(&c, (2, 2, 3), &k).unwrap();
+        assert_eq!(s.segment_of(-1.0), 0);
+        assert_eq!(s.segment_of(0.5), 0);
+        assert_eq!(s.segment_of(1.0), 1);
+        assert_eq!(s.segment_of(5.0), 1);
+        let v = evaluate(&s, &[0.5, 2.0], &[0, 1, 2]).unwrap();
+        assert_eq!(v, vec![1.5, 0.25, 3.0, 4.0, 1.0, 1.0, 1.0, 4.0, 0.0, 2.0, 0.0, 2.0]);
+    }
+
+    #[test]
+    fn rejects_bad_input() {
+        let (c, k) = two_segment();
+        assert!(matches!(SplineView::new(&c, (2, 2, 4), &k), Err(Error::Shape { arg: "coeffs", .. })));
+        assert!(matches!(SplineView::new(&c, (2, 2, 3), &k[..2]), Err(Error::Shape { arg: "knots", .. })));
+        assert!(matches!(
+            SplineView::new(&c, (2, 2, 3), &[0.0, 1.0, 1.0]),
+            Err(Error::Invalid { arg: "knots", .. })
+        ));
+        let mut bad = c.clone();
+        bad[3] = f64::NAN;
+        assert!(matches!(SplineView::new(&bad, (2, 2, 3), &k), Err(Error::NonFinite { arg: "coeffs" })));
+        let s = SplineView::new(&c, (2, 2, 3), &k).unwrap();
+        assert!(evaluate(&s, &[f64::INFINITY], &[0]).is_err());
+    }
+}
