@@ -35,3 +35,27 @@ __all__ = [
     "SolverError",
     "__version__",
 ]
+
+from .config import ContactVelocity, PlannerConfig, PreImpactMode, QpForm, TimeAllocation, VehicleLimits
+from .planner import PlanResult, PlanStatus, PlanTimings, plan, plan_detailed
+from .trajectory import Derivative, FlatOutput, Trajectory
+from .types import PerchTarget, State
+
+__all__ += [
+    "ContactVelocity",
+    "Derivative",
+    "FlatOutput",
+    "PerchTarget",
+    "PlanResult",
+    "PlanStatus",
+    "PlanTimings",
+    "PlannerConfig",
+    "PreImpactMode",
+    "QpForm",
+    "State",
+    "TimeAllocation",
+    "Trajectory",
+    "VehicleLimits",
+    "plan",
+    "plan_detailed",
+]

@@ -1,0 +1,75 @@
+"""Input validation shared by the public dataclasses: read-only float arrays, finiteness,
+shapes, rotations. Every failure is a :class:`~avp.errors.ConfigError` naming the field."""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from .errors import ConfigError
+
+ORTHONORMAL_TOL = 1e-6
+"""Tolerance on ``|R^T R - I|`` (max entry) and ``|det R - 1|`` for rotation inputs."""
+
+
+def frozen_array(field: str, value: Any, shape: tuple[int, ...]) -> npt.NDArray[np.float64]:
+    """A finite float64 copy of ``value`` with exactly ``shape``, marked read-only."""
+    try:
+        arr = np.array(value, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise ConfigError(field, f"expected numbers of shape {shape}, got {value!r}") from exc
+    if arr.shape != shape:
+        if arr.size == math.prod(shape) and arr.ndim <= 1 and len(shape) == 1:
+            arr = arr.reshape(shape)
+        else:
+            raise ConfigError(field, f"expected shape {shape}, got {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        raise ConfigError(field, "contains NaN or inf; pass finite values")
+    arr.setflags(write=False)
+    return arr
+
+
+def finite_float(field: str, value: Any) -> float:
+    """``value`` as a finite float."""
+    try:
+        out = float(value)
+    except (TypeError, ValueError) as exc:
+        raise ConfigError(field, f"expected a number, got {value!r}") from exc
+    if not math.isfinite(out):
+        raise ConfigError(field, f"must be finite, got {out}")
+    return out
+
+
+def positive_float(field: str, value: Any, *, allow_inf: bool = False) -> float:
+    """``value`` as a float > 0 (``inf`` allowed when ``allow_inf``, meaning "no limit")."""
+    try:
+        out = float(value)
+    except (TypeError, ValueError) as exc:
+        raise ConfigError(field, f"expected a positive number, got {value!r}") from exc
+    if math.isnan(out) or out <= 0.0 or (math.isinf(out) and not allow_inf):
+        raise ConfigError(field, f"must be positive{' (or inf for no limit)' if allow_inf else ''} and finite, got {out}")
+    return out
+
+
+def rotation(field: str, value: Any) -> npt.NDArray[np.float64]:
+    """A proper rotation matrix (orthonormal, det +1), read-only."""
+    R = frozen_array(field, value, (3, 3))
+    err = float(np.max(np.abs(R.T @ R - np.eye(3))))
+    if err > ORTHONORMAL_TOL:
+        raise ConfigError(field, f"is not orthonormal (max |R^T R - I| = {err:.2e}); pass a rotation matrix")
+    det = float(np.linalg.det(R))
+    if abs(det - 1.0) > ORTHONORMAL_TOL:
+        raise ConfigError(field, f"has determinant {det:.3f}; a rotation needs +1 (right-handed frame)")
+    return R
+
+
+def unit_vector(field: str, value: Any) -> npt.NDArray[np.float64]:
+    """``value`` normalised to unit length; rejects (near) zero vectors."""
+    v = np.array(frozen_array(field, value, (3,)))
+    n = float(np.linalg.norm(v))
+    if n < 1e-9:
+        raise ConfigError(field, "must be a nonzero vector")
+    return v / n

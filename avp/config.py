@@ -1,0 +1,227 @@
+"""Planner configuration with the paper's defaults (Sec. VI-A): vehicle limits, contact
+velocity, pre-impact band (14), time allocation and solver settings.
+
+All fields are SI (m, s, rad, N). Frozen dataclasses validated on construction; derive a
+variant with :func:`dataclasses.replace`.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from enum import Enum
+from typing import Any
+
+import numpy as np
+
+from . import _validate as v
+from .errors import ConfigError
+from .frames import GRAVITY
+
+__all__ = [
+    "PreImpactMode",
+    "QpForm",
+    "VehicleLimits",
+    "ContactVelocity",
+    "TimeAllocation",
+    "PlannerConfig",
+]
+
+
+class PreImpactMode(Enum):
+    """How the pre-impact attitude band (14) is imposed over ``[t_f - t_k, t_f)``."""
+
+    PAPER = "paper: componentwise box between c0 and (1+q) c0, eq. (14)"
+    CONE = "cone: tilt of a + g e3 from s3 in a polyhedral cone, thrust along s3 in [alpha, (1+q) alpha]"
+    OFF = "off: no pre-impact band"
+
+
+class QpForm(Enum):
+    """How the QP (5) is handed to the solver."""
+
+    REDUCED = "reduced: equalities eliminated by a null-space basis (exact to rounding)"
+    FULL = "full: coefficients with A c = b passed to the solver as is"
+
+
+@dataclass(frozen=True)
+class VehicleLimits:
+    """Vehicle mass and actuator limits, checked by the bound certificates (15), (21)-(29).
+
+    ``thrust_rate_max`` and ``body_rate_max`` may be ``inf`` (not checked).
+    """
+
+    mass: float = 0.5
+    thrust_min: float = 0.5 * 0.5  # N, 0.5 m/s^2 mass-normalised
+    thrust_max: float = 0.5 * 2.0 * GRAVITY  # N, 2 g
+    thrust_rate_max: float = math.inf  # N/s
+    body_rate_max: float = math.inf  # rad/s
+
+    def __post_init__(self) -> None:
+        v.positive_float("limits.mass", self.mass)
+        if not (math.isfinite(self.thrust_min) and self.thrust_min >= 0.0):
+            raise ConfigError("limits.thrust_min", f"must be finite and >= 0 N, got {self.thrust_min}")
+        v.positive_float("limits.thrust_max", self.thrust_max)
+        if self.thrust_min >= self.thrust_max:
+            raise ConfigError(
+                "limits.thrust_min",
+                f"({self.thrust_min} N) must be below limits.thrust_max ({self.thrust_max} N)",
+            )
+        v.positive_float("limits.thrust_rate_max", self.thrust_rate_max, allow_inf=True)
+        v.positive_float("limits.body_rate_max", self.body_rate_max, allow_inf=True)
+
+    @property
+    def accel_min(self) -> float:
+        """Mass-normalised minimum thrust (m/s^2)."""
+        return self.thrust_min / self.mass
+
+    @property
+    def accel_max(self) -> float:
+        """Mass-normalised maximum thrust (m/s^2)."""
+        return self.thrust_max / self.mass
+
+
+@dataclass(frozen=True)
+class ContactVelocity:
+    """Velocity at contact in the target frame S; ``None`` leaves a component free.
+
+    ``normal`` is ``v . s3`` (negative = into the pad; paper: 0.3 m/s into it), ``slope`` is
+    ``v . s1`` (negative = down the slope; paper: 2 m/s down), ``lateral`` is ``v . s2``.
+    With ``scale_slope_with_incline`` the slide is multiplied by ``sin(incline)``, so it is the
+    paper's value on a wall and vanishes on a level pad where "down the slope" has no meaning.
+    """
+
+    normal: float | None = -0.3
+    slope: float | None = -2.0
+    lateral: float | None = 0.0
+    scale_slope_with_incline: bool = True
+
+    def __post_init__(self) -> None:
+        for name in ("normal", "slope", "lateral"):
+            val = getattr(self, name)
+            if val is not None:
+                object.__setattr__(self, name, v.finite_float(f"contact_velocity.{name}", val))
+
+    def components(self, incline: float) -> tuple[float | None, float | None, float | None]:
+        """``(v.s1, v.s2, v.s3)`` requested at contact for a pad of this ``incline``."""
+        slope = self.slope
+        if slope is not None and self.scale_slope_with_incline:
+            slope = slope * math.sin(incline)
+        return slope, self.lateral, self.normal
+
+
+@dataclass(frozen=True)
+class TimeAllocation:
+    """Initial duration rule: ``T = t_attitude + sqrt(2 d / a_nominal) + |v0| / a_nominal``.
+
+    ``d`` is the start-to-target distance. With the defaults this gives 1.0 / 1.4 / 1.8 s at
+    1.5 / 3.5 / 7.5 m from rest, the thrust-feasible totals a reference prototype found at 2 g on a
+    90 deg wall (DESIGN.md); the initial speed term adds the time to bleed off ``|v0|``. Segments
+    share the total equally.
+    """
+
+    nominal_acceleration: float = 4.6
+    attitude_time: float = 0.2
+    min_duration: float = 0.4
+
+    def __post_init__(self) -> None:
+        v.positive_float("time_allocation.nominal_acceleration", self.nominal_acceleration)
+        if not (math.isfinite(self.attitude_time) and self.attitude_time >= 0):
+            raise ConfigError("time_allocation.attitude_time", "must be finite and >= 0 s")
+        v.positive_float("time_allocation.min_duration", self.min_duration)
+
+    def total(self, distance: float, speed: float) -> float:
+        a = self.nominal_acceleration
+        return max(self.min_duration, self.attitude_time + math.sqrt(2.0 * distance / a) + speed / a)
+
+
+@dataclass(frozen=True)
+class PlannerConfig:
+    """Everything one plan needs besides the start state and the target.
+
+    Parameters
+    ----------
+    n_segments, degree:
+        Spline shape: ``n_segments`` polynomials of ``degree`` per flat output (paper: 7).
+    position_cost_order, yaw_cost_order:
+        ``j`` of the cost (4): 4 (snap) for position, 2 or 3 for yaw.
+    continuity_order:
+        Highest derivative continuous at interior knots (4 = snap).
+    alpha:
+        Mass-normalised thrust at contact (m/s^2) in (12): ``a(t_f) = alpha s3 - g e3``.
+    q, t_k, dt:
+        Pre-impact band (14): width ``q``, window ``t_k`` before contact sampled every ``dt``.
+    band_min_width:
+        PAPER mode: floor (m/s^2) on each component's band width; 0 reproduces the paper's
+        zero-width rows where a component of ``alpha s3 - g e3`` is zero (DESIGN.md).
+    cone_half_angle, cone_facets:
+        CONE mode: tilt cone of ``a + g e3`` about ``s3`` (rad), inner polyhedral approximation.
+    min_distance:
+        A target closer than this to the start (m) is rejected.
+    solver, qp_form, solver_options:
+        qpsolvers back-end name (``"daqp"``, ``"proxqp"``, ``"osqp"``...), how the QP is
+        passed, and extra keyword arguments merged over avp's per-solver tolerances.
+    """
+
+    n_segments: int = 3
+    degree: int = 7
+    position_cost_order: int = 4
+    yaw_cost_order: int = 3
+    continuity_order: int = 4
+    alpha: float = 4.0
+    q: float = 0.1
+    t_k: float = 0.15
+    dt: float = 0.01
+    pre_impact: PreImpactMode = PreImpactMode.PAPER
+    band_min_width: float = 0.1
+    cone_half_angle: float = math.radians(15.0)
+    cone_facets: int = 8
+    contact_velocity: ContactVelocity = field(default_factory=ContactVelocity)
+    limits: VehicleLimits = field(default_factory=VehicleLimits)
+    time_allocation: TimeAllocation = field(default_factory=TimeAllocation)
+    min_distance: float = 0.05
+    g: float = GRAVITY
+    solver: str = "daqp"
+    qp_form: QpForm = QpForm.REDUCED
+    solver_options: tuple[tuple[str, Any], ...] = ()
+
+    def __post_init__(self) -> None:
+        for name, lo in (("n_segments", 1), ("degree", 1), ("position_cost_order", 1),
+                         ("yaw_cost_order", 1), ("continuity_order", 0), ("cone_facets", 3)):
+            val = getattr(self, name)
+            if isinstance(val, bool) or not isinstance(val, (int, np.integer)) or val < lo:
+                raise ConfigError(f"config.{name}", f"must be an integer >= {lo}, got {val!r}")
+        if self.degree > 20:
+            raise ConfigError("config.degree", f"at most 20 is supported, got {self.degree}")
+        if self.continuity_order >= self.degree:
+            raise ConfigError("config.continuity_order", f"must be below the degree ({self.degree})")
+        if self.position_cost_order > self.degree or self.yaw_cost_order > self.degree:
+            raise ConfigError("config.degree", "must be at least the cost orders")
+        if self.degree < 2 * self.position_cost_order - 1:
+            raise ConfigError("config.degree", f"must be >= {2 * self.position_cost_order - 1} for a cost of order {self.position_cost_order}")
+        v.positive_float("config.alpha", self.alpha)
+        if not (math.isfinite(self.q) and self.q >= 0):
+            raise ConfigError("config.q", f"must be finite and >= 0, got {self.q}")
+        v.positive_float("config.t_k", self.t_k)
+        v.positive_float("config.dt", self.dt)
+        if not (math.isfinite(self.band_min_width) and self.band_min_width >= 0):
+            raise ConfigError("config.band_min_width", "must be finite and >= 0 m/s^2")
+        if not (0.0 < self.cone_half_angle < math.pi / 2):
+            raise ConfigError("config.cone_half_angle", "must be in (0, pi/2) rad")
+        v.positive_float("config.min_distance", self.min_distance)
+        v.positive_float("config.g", self.g)
+        if not isinstance(self.pre_impact, PreImpactMode):
+            raise ConfigError("config.pre_impact", f"must be a PreImpactMode, got {self.pre_impact!r}")
+        if not isinstance(self.qp_form, QpForm):
+            raise ConfigError("config.qp_form", f"must be a QpForm, got {self.qp_form!r}")
+        if not isinstance(self.solver, str):
+            raise ConfigError("config.solver", f"must be a qpsolvers solver name, got {self.solver!r}")
+        if self.alpha > self.limits.accel_max:
+            raise ConfigError(
+                "config.alpha",
+                f"contact thrust {self.alpha} m/s^2 exceeds limits.thrust_max/mass = {self.limits.accel_max:.2f} m/s^2",
+            )
+
+    @property
+    def band_samples(self) -> int:
+        """Number of band (14) samples, ``round(t_k/dt)`` (``int`` would give 14 for 0.15/0.01)."""
+        return int(round(self.t_k / self.dt))

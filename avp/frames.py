@@ -1,0 +1,112 @@
+"""Frames and the differential-flatness map (10), (11), (13) and (22).
+
+Everything here is vectorised over a leading time axis: inputs of shape ``(..., 3)`` (and
+``(...,)`` for yaw) give outputs with the same leading shape. World frame W is z-up, gravity
+``g`` along ``-e3``; body frame B has ``b3`` along the thrust; the attitude follows the paper's
+construction (13): ``b2_des = [-sin psi, cos psi, 0]``, ``b1 = (b2_des x b3)/|.|``,
+``b2 = b3 x b1``. No QP code lives here.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import numpy.typing as npt
+
+__all__ = [
+    "GRAVITY",
+    "thrust_vector",
+    "thrust_magnitude",
+    "attitude",
+    "body_rates",
+    "yaw_from_b2",
+    "rotation_error_angle",
+]
+
+GRAVITY = 9.81
+"""Standard gravity used throughout (m/s^2), as in the paper."""
+
+E3 = np.array([0.0, 0.0, 1.0])
+
+Array = npt.NDArray[np.float64]
+
+
+def thrust_vector(acc: npt.ArrayLike, g: float = GRAVITY) -> Array:
+    """Mass-normalised thrust vector ``f = a + g e3`` (m/s^2), from (1)."""
+    a = np.asarray(acc, dtype=float)
+    return a + g * E3
+
+
+def thrust_magnitude(acc: npt.ArrayLike, g: float = GRAVITY) -> Array:
+    """Mass-normalised thrust ``|a + g e3|`` (m/s^2), eq. (10) divided by the mass."""
+    return np.linalg.norm(thrust_vector(acc, g), axis=-1)
+
+
+def _b2_des(yaw: Array) -> Array:
+    return np.stack([-np.sin(yaw), np.cos(yaw), np.zeros_like(yaw)], axis=-1)
+
+
+def attitude(acc: npt.ArrayLike, yaw: npt.ArrayLike, g: float = GRAVITY) -> Array:
+    """Attitude ``R_WB`` (columns ``b1, b2, b3``) from acceleration and yaw, eqs. (11), (13).
+
+    Shape ``(..., 3, 3)``. Singular where the thrust vanishes (free fall) or ``b3`` is parallel
+    to ``b2_des`` (roll of +-90 deg); there the result holds NaN, which callers must check.
+    """
+    f = thrust_vector(acc, g)
+    yaw_arr = np.asarray(yaw, dtype=float)
+    b3 = f / np.linalg.norm(f, axis=-1, keepdims=True)
+    v = np.cross(_b2_des(yaw_arr), b3)
+    b1 = v / np.linalg.norm(v, axis=-1, keepdims=True)
+    b2 = np.cross(b3, b1)
+    return np.stack([b1, b2, b3], axis=-1)
+
+
+def body_rates(
+    acc: npt.ArrayLike,
+    jerk: npt.ArrayLike,
+    yaw: npt.ArrayLike,
+    yaw_rate: npt.ArrayLike,
+    g: float = GRAVITY,
+) -> Array:
+    """Body angular velocity ``Omega`` (rad/s, body frame) with ``hat(Omega) = R^T dR/dt``.
+
+    ``w1 = -b2.j/|f|`` and ``w2 = b1.j/|f|`` are (22); ``w3 = b2 . d(b1)/dt`` is the exact
+    yaw term of the construction (13) (the paper's (24) in Z-Y-X Euler angles).
+    """
+    a = np.asarray(acc, dtype=float)
+    j = np.asarray(jerk, dtype=float)
+    yaw_arr = np.asarray(yaw, dtype=float)
+    yaw_rate_arr = np.asarray(yaw_rate, dtype=float)
+    f = thrust_vector(a, g)
+    fn = np.linalg.norm(f, axis=-1, keepdims=True)
+    b3 = f / fn
+    b3_dot = (j - np.sum(b3 * j, axis=-1, keepdims=True) * b3) / fn
+    b2d = _b2_des(yaw_arr)
+    b2d_dot = yaw_rate_arr[..., None] * np.stack(
+        [-np.cos(yaw_arr), -np.sin(yaw_arr), np.zeros_like(yaw_arr)], axis=-1
+    )
+    v = np.cross(b2d, b3)
+    vn = np.linalg.norm(v, axis=-1, keepdims=True)
+    b1 = v / vn
+    b2 = np.cross(b3, b1)
+    v_dot = np.cross(b2d_dot, b3) + np.cross(b2d, b3_dot)
+    w1 = -np.sum(b2 * j, axis=-1) / fn[..., 0]
+    w2 = np.sum(b1 * j, axis=-1) / fn[..., 0]
+    w3 = np.sum(b2 * v_dot, axis=-1) / vn[..., 0]
+    return np.stack([w1, w2, w3], axis=-1)
+
+
+def yaw_from_b2(b2: npt.ArrayLike) -> float:
+    """Yaw ``psi`` whose ``b2_des = [-sin psi, cos psi, 0]`` points along ``b2``'s horizontal part.
+
+    Used for the terminal yaw (13): ``b2_des`` parallel to ``s2`` makes ``R_WB(t_f) = R_WS``.
+    """
+    v = np.asarray(b2, dtype=float)
+    return float(np.arctan2(-v[0], v[1]))
+
+
+def rotation_error_angle(R_a: npt.ArrayLike, R_b: npt.ArrayLike) -> Array:
+    """Geodesic angle (rad) between rotations, ``arccos((tr(R_a^T R_b) - 1)/2)``."""
+    Ra = np.asarray(R_a, dtype=float)
+    Rb = np.asarray(R_b, dtype=float)
+    tr = np.einsum("...ij,...ij->...", Ra, Rb)
+    return np.arccos(np.clip((tr - 1.0) / 2.0, -1.0, 1.0))

@@ -1,0 +1,50 @@
+"""Closed-form cost (4): ``sum_i int_0^{T_i} |d^j p_i / dt^j|^2 dt`` per flat output.
+
+In normalised time ``u = t/T_i`` the integral is ``T_i^(1 - 2j) c_hat^T G_j c_hat`` with the Gram
+matrix ``G_j[k, l] = k!/(k-j)! l!/(l-j)! / (k + l - 2j + 1)``; no quadrature.
+"""
+
+from __future__ import annotations
+
+from functools import lru_cache
+
+import numpy as np
+import numpy.typing as npt
+
+from .layout import N_AXES, YAW, DecisionLayout
+
+Array = npt.NDArray[np.float64]
+
+
+@lru_cache(maxsize=64)
+def gram(degree: int, order: int) -> Array:
+    """``int_0^1 (d^j/du^j u^k)(d^j/du^j u^l) du`` for ``k, l <= degree`` (read-only)."""
+    n = degree + 1
+    G = np.zeros((n, n))
+    for k in range(order, n):
+        for m in range(order, n):
+            fk = np.prod(np.arange(k - order + 1, k + 1, dtype=float))
+            fm = np.prod(np.arange(m - order + 1, m + 1, dtype=float))
+            G[k, m] = fk * fm / (k + m - 2 * order + 1)
+    G.setflags(write=False)
+    return G
+
+
+def cost_matrix(layout: DecisionLayout, durations: Array, position_order: int, yaw_order: int) -> Array:
+    """Block-diagonal Hessian ``P`` with ``c_hat^T P c_hat`` proportional to the cost (4).
+
+    Each axis block is scaled by ``T_total^(2j - 1)`` so entries stay O(1) whatever the
+    durations; the minimiser is unchanged (the axes are separate sums).
+    """
+    S, n = layout.n_segments, layout.n_coeffs
+    T = np.asarray(durations, dtype=float)
+    total = float(T.sum())
+    P = np.zeros((layout.n_variables, layout.n_variables))
+    for axis in range(N_AXES):
+        j = yaw_order if axis == YAW else position_order
+        G = gram(layout.degree, j)
+        w = (total / T) ** (2 * j - 1)
+        for seg in range(S):
+            s = layout.start(axis, seg)
+            P[s : s + n, s : s + n] = w[seg] * G
+    return P

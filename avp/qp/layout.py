@@ -1,0 +1,95 @@
+"""Decision-vector layout: the only place with index arithmetic.
+
+The decision vector stacks, for each flat output (x, y, z, yaw) and segment, the
+``N + 1`` **normalised** coefficients ``c_hat_k = c_k T_i^k`` of ``p_i(u) = sum_k c_hat_k u^k``
+with ``u = (t - t_i)/T_i`` in ``[0, 1]`` (DESIGN.md: normalised time keeps the constraint
+matrix well scaled). Column of ``(axis, segment, k)`` is ``(axis * S + segment) * (N + 1) + k``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import cached_property, lru_cache
+
+import numpy as np
+import numpy.typing as npt
+
+Array = npt.NDArray[np.float64]
+
+N_AXES = 4
+"""x, y, z, yaw."""
+YAW = 3
+
+
+@dataclass(frozen=True)
+class DecisionLayout:
+    n_segments: int
+    degree: int
+
+    @property
+    def n_coeffs(self) -> int:
+        return self.degree + 1
+
+    @property
+    def n_variables(self) -> int:
+        return N_AXES * self.n_segments * self.n_coeffs
+
+    def start(self, axis: int, segment: int) -> int:
+        """First column of ``(axis, segment)``."""
+        return (axis * self.n_segments + segment) * self.n_coeffs
+
+    @cached_property
+    def falling(self) -> Array:
+        """``falling[r, k] = k!/(k-r)!`` (0 for ``k < r``), orders 0..N."""
+        n = self.n_coeffs
+        out = np.zeros((n, n))
+        for r in range(n):
+            for k in range(r, n):
+                out[r, k] = np.prod(np.arange(k - r + 1, k + 1, dtype=float))
+        return out
+
+    @cached_property
+    def endpoint_basis(self) -> tuple[Array, Array]:
+        """``(B0, B1)``: ``B0[r]`` / ``B1[r]`` are the order-``r`` basis rows at ``u = 0`` / ``u = 1``."""
+        B0 = np.diag(self.falling.diagonal()).copy()  # d^r/du^r u^k at 0 is r! delta_kr
+        B1 = self.falling.copy()
+        B0.setflags(write=False)
+        B1.setflags(write=False)
+        return B0, B1
+
+    def basis(self, order: int, u: Array | float) -> Array:
+        """Rows ``d^r/du^r u^k`` at ``u`` (shape ``(*shape(u), N + 1)``)."""
+        uu = np.asarray(u, dtype=float)[..., None]
+        k = np.arange(self.n_coeffs)
+        powers = np.where(k >= order, k - order, 0)
+        return self.falling[order] * np.where(k >= order, uu**powers, 0.0)
+
+    def columns(self, axis: int | npt.NDArray[np.intp], segment: int | npt.NDArray[np.intp]) -> npt.NDArray[np.intp]:
+        """Column indices of the coefficients of ``(axis, segment)`` (broadcast, last axis ``k``)."""
+        start = (np.asarray(axis) * self.n_segments + np.asarray(segment)) * self.n_coeffs
+        return np.asarray(start)[..., None] + np.arange(self.n_coeffs)
+
+    def locate(self, knots_rel: Array, t: Array) -> tuple[npt.NDArray[np.intp], Array]:
+        """Segment index and normalised time ``u`` of times ``t`` relative to the plan start."""
+        tt = np.asarray(t, dtype=float)
+        seg = np.clip(np.searchsorted(knots_rel, tt, side="right") - 1, 0, self.n_segments - 1)
+        u = (tt - knots_rel[seg]) / (knots_rel[seg + 1] - knots_rel[seg])
+        return seg, u
+
+    def to_physical(self, c_hat: Array, durations: Array) -> Array:
+        """Decision vector -> ``(S, 4, N + 1)`` coefficients in powers of ``t - t_i`` (seconds)."""
+        c = np.asarray(c_hat, dtype=float).reshape(N_AXES, self.n_segments, self.n_coeffs)
+        scale = np.asarray(durations, dtype=float)[:, None] ** -np.arange(self.n_coeffs)[None, :]
+        return np.ascontiguousarray((c * scale[None]).transpose(1, 0, 2))
+
+    def from_physical(self, coeffs: Array, durations: Array) -> Array:
+        """Inverse of :meth:`to_physical`."""
+        c = np.asarray(coeffs, dtype=float).transpose(1, 0, 2)
+        scale = np.asarray(durations, dtype=float)[:, None] ** np.arange(self.n_coeffs)[None, :]
+        return (c * scale[None]).reshape(-1)
+
+
+@lru_cache(maxsize=32)
+def layout_for(n_segments: int, degree: int) -> DecisionLayout:
+    """Shared layout instance, so its cached tables are built once per shape."""
+    return DecisionLayout(n_segments, degree)

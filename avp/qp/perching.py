@@ -1,0 +1,117 @@
+"""Perching constraints: terminal position, acceleration (12), contact velocity in S, terminal
+yaw (13), and the pre-impact band (14) in the paper's componentwise form or as a tilt cone."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import numpy.typing as npt
+
+from ..config import PlannerConfig, PreImpactMode
+from ..frames import yaw_from_b2
+from ..types import PerchTarget
+from .layout import YAW, DecisionLayout
+from .rows import derivative_rows, vector_rows
+
+Array = npt.NDArray[np.float64]
+E3 = np.array([0.0, 0.0, 1.0])
+
+
+def terminal_acceleration(target: PerchTarget, alpha: float, g: float) -> Array:
+    """``c0 = alpha s3 - g e3``, eq. (12): the acceleration that makes ``b3 = s3`` at contact."""
+    return alpha * target.s3 - g * E3
+
+
+def terminal_yaw(target: PerchTarget, near: float) -> float:
+    """Yaw with ``b2_des`` parallel to ``s2`` (13), unwrapped to within pi of ``near``."""
+    psi = yaw_from_b2(target.s2)
+    return psi + 2.0 * math.pi * round((near - psi) / (2.0 * math.pi))
+
+
+def terminal_rows(
+    layout: DecisionLayout,
+    knots_rel: Array,
+    target: PerchTarget,
+    config: PlannerConfig,
+    yaw_start: float,
+    t_scale: float,
+) -> tuple[Array, Array, list[str]]:
+    """Equalities at ``t_f``: position, acceleration (12), requested velocity components in S,
+    yaw (13). Returns rows, right-hand side and a name per row."""
+    tf = float(knots_rel[-1])
+    rows, rhs, names = [], [], []
+    P = vector_rows(layout, knots_rel, 0, tf)[0]
+    V = vector_rows(layout, knots_rel, 1, tf)[0]
+    A = vector_rows(layout, knots_rel, 2, tf)[0]
+    for axis in range(3):
+        rows.append(P[axis]); rhs.append(target.point[axis]); names.append(f"terminal position {'xyz'[axis]}")
+    c0 = terminal_acceleration(target, config.alpha, config.g)
+    for axis in range(3):
+        rows.append(A[axis] * t_scale**2); rhs.append(c0[axis] * t_scale**2)
+        names.append(f"terminal acceleration (12) {'xyz'[axis]}")
+    for label, direction, value in zip(
+        ("s1", "s2", "s3"), target.R_WS.T, config.contact_velocity.components(target.incline)
+    ):
+        if value is None:
+            continue
+        rows.append((direction @ V) * t_scale); rhs.append(value * t_scale)
+        names.append(f"contact velocity v.{label}")
+    rows.append(derivative_rows(layout, knots_rel, YAW, 0, tf)[0])
+    rhs.append(terminal_yaw(target, yaw_start))
+    names.append("terminal yaw (13)")
+    return np.array(rows), np.array(rhs), names
+
+
+def band_times(config: PlannerConfig, tf: float) -> Array:
+    """Sample times ``t_f - t_k + j dt``, ``0 <= j < round(t_k/dt)``, of (14), clipped to ``t >= 0``."""
+    t = tf - config.t_k + config.dt * np.arange(config.band_samples)
+    return t[t >= 0.0]
+
+
+def pre_impact_rows(
+    layout: DecisionLayout,
+    knots_rel: Array,
+    target: PerchTarget,
+    config: PlannerConfig,
+) -> tuple[Array, Array, Array]:
+    """Pre-impact band (14): rows ``G`` with ``lower <= G c_hat <= upper``.
+
+    PAPER: per component, ``a_i(t)`` between ``c0_i`` and ``(1+q) c0_i`` (min/max, since a
+    negative component flips the order), widened symmetrically to ``band_min_width``.
+    CONE: ``f = a + g e3`` has ``alpha <= f.s3 <= (1+q) alpha`` and lies in a polyhedral cone
+    of half-angle ``cone_half_angle`` about ``s3`` (inner approximation with ``cone_facets``
+    faces, so the true tilt never exceeds the angle).
+    """
+    n = layout.n_variables
+    if config.pre_impact is PreImpactMode.OFF:
+        return np.zeros((0, n)), np.zeros(0), np.zeros(0)
+    times = band_times(config, float(knots_rel[-1]))
+    if times.size == 0:
+        return np.zeros((0, n)), np.zeros(0), np.zeros(0)
+    A = vector_rows(layout, knots_rel, 2, times)  # (m, 3, n)
+    c0 = terminal_acceleration(target, config.alpha, config.g)
+    if config.pre_impact is PreImpactMode.PAPER:
+        lo = np.minimum(c0, (1.0 + config.q) * c0)
+        hi = np.maximum(c0, (1.0 + config.q) * c0)
+        pad = np.maximum(0.0, config.band_min_width - (hi - lo)) / 2.0
+        lo, hi = lo - pad, hi + pad
+        G = A.reshape(-1, n)
+        return G, np.tile(lo, times.size), np.tile(hi, times.size)
+    # CONE mode
+    s1, s2, s3 = target.s1, target.s2, target.s3
+    gz = config.g * E3
+    kappa = math.tan(config.cone_half_angle) * math.cos(math.pi / config.cone_facets)
+    dirs = [math.cos(th) * s1 + math.sin(th) * s2
+            for th in 2 * math.pi * np.arange(config.cone_facets) / config.cone_facets]
+    rows, lo, hi = [], [], []
+    for k in range(times.size):
+        rows.append(s3 @ A[k])
+        lo.append(config.alpha - s3 @ gz)
+        hi.append((1.0 + config.q) * config.alpha - s3 @ gz)
+        for d in dirs:
+            w = d - kappa * s3
+            rows.append(w @ A[k])
+            lo.append(-np.inf)
+            hi.append(-(w @ gz))
+    return np.array(rows), np.array(lo), np.array(hi)

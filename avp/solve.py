@@ -1,0 +1,144 @@
+"""Solve a :class:`~avp.qp.PerchingQp` through qpsolvers and judge the answer.
+
+Back-end exceptions are re-raised as :class:`~avp.errors.SolverError`; "no solution" is an
+outcome, not an exception, so the planner can drop the FoV rows and retry (16). A returned point
+is accepted only if it is finite and its KKT residuals are within tolerance.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from enum import Enum
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+import qpsolvers
+import scipy.sparse
+
+from .config import PlannerConfig, QpForm
+from .errors import InfeasibleError, SolverError
+from .qp.assemble import PerchingQp
+
+Array = npt.NDArray[np.float64]
+
+__all__ = ["QpStatus", "QpOutcome", "solve_perching_qp", "SOLVER_DEFAULTS", "available_solvers"]
+
+SOLVER_DEFAULTS: dict[str, dict[str, Any]] = {
+    # OSQP's defaults (1e-3) leave coefficient errors near 3.5e-2: far too coarse for contact.
+    "osqp": {"eps_abs": 1e-9, "eps_rel": 1e-9, "polishing": True, "max_iter": 200_000, "raise_error": False},
+    "proxqp": {"eps_abs": 1e-9, "eps_rel": 0.0},
+    "daqp": {},
+}
+"""Per-back-end settings avp uses unless ``config.solver_options`` overrides them."""
+
+FEASIBILITY_TOL = 1e-6
+"""Largest accepted inequality violation, relative to ``max(1, |bound|)``."""
+
+
+class QpStatus(Enum):
+    SOLVED = "solved"
+    NO_SOLUTION = "no solution: the back-end reported failure or infeasibility"
+    INACCURATE = "inaccurate: the returned point violates the constraints beyond tolerance"
+
+
+@dataclass(frozen=True)
+class QpOutcome:
+    """What one QP solve produced."""
+
+    status: QpStatus
+    c_hat: Array | None
+    solver: str
+    build_time: float
+    solve_time: float
+    max_violation: float
+    solution: qpsolvers.Solution | None
+
+    @property
+    def ok(self) -> bool:
+        return self.status is QpStatus.SOLVED
+
+
+def available_solvers() -> list[str]:
+    """qpsolvers back-ends installed here."""
+    return list(qpsolvers.available_solvers)
+
+
+def _one_sided(G: Array, lower: Array, upper: Array) -> tuple[Array | None, Array | None]:
+    up = np.isfinite(upper)
+    lo = np.isfinite(lower)
+    if not (up.any() or lo.any()):
+        return None, None
+    return np.vstack([G[up], -G[lo]]), np.concatenate([upper[up], -lower[lo]])
+
+
+def _options(config: PlannerConfig) -> dict[str, Any]:
+    opts = dict(SOLVER_DEFAULTS.get(config.solver, {}))
+    opts.update(dict(config.solver_options))
+    return opts
+
+
+def solve_perching_qp(qp: PerchingQp, config: PlannerConfig, initvals: Array | None = None) -> QpOutcome:
+    """Solve ``qp`` with ``config.solver`` in ``config.qp_form``.
+
+    Raises
+    ------
+    SolverError
+        The back-end is not installed, or raised.
+    InfeasibleError
+        The equality constraints alone are inconsistent.
+    """
+    if config.solver not in qpsolvers.available_solvers:
+        raise SolverError(
+            f"config.solver: QP back-end '{config.solver}' is not installed here; choose one of "
+            f"{sorted(qpsolvers.available_solvers)} or `pip install qpsolvers[{config.solver}]`"
+        )
+    t_build = time.perf_counter()
+    G_full, lo_full, hi_full = qp.stacked_inequalities()
+    if config.qp_form is QpForm.REDUCED:
+        red = qp.reduce()
+        Gs, hs = _one_sided(red.G, red.lower, red.upper)
+        problem = qpsolvers.Problem(P=red.H, q=red.g, G=Gs, h=hs)
+        init = None
+        if initvals is not None and initvals.shape == red.c_p.shape:
+            init = red.Z.T @ (initvals - red.c_p)
+    else:
+        red = None
+        A, b = qp.stacked_equalities()
+        Gs, hs = _one_sided(G_full, lo_full, hi_full)
+        problem = qpsolvers.Problem(P=qp.P, q=np.zeros(qp.layout.n_variables), G=Gs, h=hs, A=A, b=b)
+        init = initvals
+    if config.solver not in qpsolvers.dense_solvers:  # sparse-only back-ends (OSQP...)
+        problem = qpsolvers.Problem(*[
+            scipy.sparse.csc_matrix(m) if isinstance(m, np.ndarray) and m.ndim == 2 else m
+            for m in problem.unpack()
+        ])
+    build_time = time.perf_counter() - t_build
+    t_solve = time.perf_counter()
+    try:
+        solution = qpsolvers.solve_problem(problem, solver=config.solver, initvals=init, **_options(config))
+    except InfeasibleError:
+        raise
+    except Exception as exc:  # qpsolvers/back-end errors must not leak (one hierarchy)
+        raise SolverError(f"QP back-end '{config.solver}' failed: {exc}") from exc
+    solve_time = time.perf_counter() - t_solve
+    x = solution.x if solution.found else None
+    if x is None or not np.all(np.isfinite(x)):
+        return QpOutcome(QpStatus.NO_SOLUTION, None, config.solver, build_time, solve_time, np.inf, solution)
+    c_hat = red.lift(x) if red is not None else np.asarray(x, dtype=float)
+    violation = _max_violation(qp, c_hat, G_full, lo_full, hi_full)
+    status = QpStatus.SOLVED if violation <= FEASIBILITY_TOL else QpStatus.INACCURATE
+    return QpOutcome(status, c_hat, config.solver, build_time, solve_time, violation, solution)
+
+
+def _max_violation(qp: PerchingQp, c_hat: Array, G: Array, lo: Array, hi: Array) -> float:
+    """Largest relative violation of the equalities and inequalities at ``c_hat``."""
+    A, b = qp.stacked_equalities()
+    viol = [np.abs(A @ c_hat - b) / np.maximum(1.0, np.abs(b))]
+    if G.shape[0]:
+        Gc = G @ c_hat
+        with np.errstate(invalid="ignore"):
+            viol.append(np.where(np.isfinite(hi), (Gc - hi) / np.maximum(1.0, np.abs(hi)), 0.0))
+            viol.append(np.where(np.isfinite(lo), (lo - Gc) / np.maximum(1.0, np.abs(lo)), 0.0))
+    return float(max(0.0, max(float(np.max(v)) if v.size else 0.0 for v in viol)))

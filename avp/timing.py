@@ -1,0 +1,36 @@
+"""Time allocation: the initial segment durations of a plan (rule in
+:class:`~avp.config.TimeAllocation`) and validation of user-given durations."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from .config import PlannerConfig
+from .errors import ConfigError
+from .types import PerchTarget, State
+
+Array = npt.NDArray[np.float64]
+
+
+def initial_durations(state: State, target: PerchTarget, config: PlannerConfig) -> Array:
+    """Equal segments summing to ``config.time_allocation.total(distance, speed)``."""
+    distance = float(np.linalg.norm(target.point - state.position))
+    speed = float(np.linalg.norm(state.velocity))
+    total = config.time_allocation.total(distance, speed)
+    return np.full(config.n_segments, total / config.n_segments)
+
+
+def check_durations(durations: Any, config: PlannerConfig) -> Array:
+    """User-given durations as a float array of length ``n_segments``, all finite and > 0."""
+    try:
+        T = np.array(durations, dtype=float).reshape(-1)
+    except (TypeError, ValueError) as exc:
+        raise ConfigError("durations", f"expected {config.n_segments} numbers, got {durations!r}") from exc
+    if T.shape != (config.n_segments,):
+        raise ConfigError("durations", f"expected {config.n_segments} values (config.n_segments), got {T.size}")
+    if not np.all(np.isfinite(T)) or np.any(T <= 0.0):
+        raise ConfigError("durations", f"every segment duration must be finite and > 0 s, got {T.tolist()}")
+    return T

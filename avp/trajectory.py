@@ -1,0 +1,205 @@
+"""Piecewise-polynomial trajectory on the flat outputs (x, y, z, yaw), eq. (3).
+
+Coefficients have shape ``(segments, 4, degree + 1)`` in ascending powers of local time
+``t - t_i`` (physical units); evaluation runs in the Rust kernel ``avp._avp_rust.eval_spline``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from enum import IntEnum
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from . import _avp_rust, frames
+from .errors import ConfigError
+
+__all__ = ["Derivative", "FlatOutput", "Trajectory", "RotorpyTrajectory"]
+
+Array = npt.NDArray[np.float64]
+
+TIME_TOL = 1e-9
+"""Times this far outside ``[t0, tf]`` (s) are accepted and evaluated at the end points."""
+
+
+class Derivative(IntEnum):
+    """Derivative orders of the flat outputs (as mav_trajectory_generation's derivative_order)."""
+
+    POSITION = 0
+    VELOCITY = 1
+    ACCELERATION = 2
+    JERK = 3
+    SNAP = 4
+
+
+@dataclass(frozen=True)
+class FlatOutput:
+    """Flat outputs and derivatives at one or many times (leading shape of ``t``)."""
+
+    t: Array
+    position: Array
+    velocity: Array
+    acceleration: Array
+    jerk: Array
+    snap: Array
+    yaw: Array
+    yaw_rate: Array
+    yaw_acceleration: Array
+
+
+class Trajectory:
+    """A spline of ``S`` segments over the knots ``t0 < t1 < ... < tS``.
+
+    Parameters
+    ----------
+    coefficients:
+        ``(S, 4, N + 1)`` ascending-power coefficients of x, y, z, yaw per segment.
+    knots:
+        ``(S + 1,)`` absolute times (s).
+    g:
+        Gravity used by the flatness map (m/s^2).
+    """
+
+    def __init__(self, coefficients: npt.ArrayLike, knots: npt.ArrayLike, g: float = frames.GRAVITY) -> None:
+        c = np.ascontiguousarray(np.array(coefficients, dtype=float))
+        k = np.ascontiguousarray(np.array(knots, dtype=float))
+        if c.ndim != 3 or c.shape[1] != 4:
+            raise ConfigError("coefficients", f"expected shape (segments, 4, degree + 1), got {c.shape}")
+        if k.shape != (c.shape[0] + 1,):
+            raise ConfigError("knots", f"expected shape ({c.shape[0] + 1},), got {k.shape}")
+        if not (np.all(np.isfinite(c)) and np.all(np.isfinite(k))):
+            raise ConfigError("coefficients", "contains NaN or inf; a trajectory must be finite")
+        if np.any(np.diff(k) <= 0):
+            raise ConfigError("knots", "must be strictly increasing")
+        c.setflags(write=False)
+        k.setflags(write=False)
+        self._c = c
+        self._k = k
+        self.g = float(g)
+
+    # -- structure -------------------------------------------------------------------------
+    @property
+    def coefficients(self) -> Array:
+        """Read-only ``(S, 4, N + 1)`` coefficients, ascending powers of ``t - t_i``."""
+        return self._c
+
+    @property
+    def knots(self) -> Array:
+        """Read-only knot times (s)."""
+        return self._k
+
+    @property
+    def durations(self) -> Array:
+        """Segment durations (s)."""
+        return np.diff(self._k)
+
+    @property
+    def t0(self) -> float:
+        return float(self._k[0])
+
+    @property
+    def tf(self) -> float:
+        return float(self._k[-1])
+
+    @property
+    def duration(self) -> float:
+        return self.tf - self.t0
+
+    @property
+    def n_segments(self) -> int:
+        return int(self._c.shape[0])
+
+    @property
+    def degree(self) -> int:
+        return int(self._c.shape[2] - 1)
+
+    def __repr__(self) -> str:
+        return f"Trajectory(segments={self.n_segments}, degree={self.degree}, t=[{self.t0:.3f}, {self.tf:.3f}] s)"
+
+    # -- evaluation ------------------------------------------------------------------------
+    def _times(self, t: Any) -> tuple[Array, tuple[int, ...]]:
+        arr = np.asarray(t, dtype=float)
+        if not np.all(np.isfinite(arr)):
+            raise ConfigError("t", "contains NaN or inf")
+        if arr.size and (arr.min() < self.t0 - TIME_TOL or arr.max() > self.tf + TIME_TOL):
+            raise ConfigError(
+                "t", f"times must lie in [{self.t0}, {self.tf}] s, got [{arr.min()}, {arr.max()}]"
+            )
+        flat = np.ascontiguousarray(np.clip(arr.reshape(-1), self.t0, self.tf))
+        return flat, arr.shape
+
+    def derivatives(self, t: Any, orders: Any = (0, 1, 2, 3, 4)) -> Array:
+        """All four flat outputs for each order: shape ``(len(orders), *shape(t), 4)``."""
+        flat, shape = self._times(t)
+        orders_list = [int(o) for o in orders]
+        if any(o < 0 for o in orders_list):
+            raise ConfigError("order", "derivative orders must be >= 0")
+        out = _avp_rust.eval_spline(self._c, self._k, flat, orders_list)
+        return out.reshape((len(orders_list), *shape, 4))
+
+    def evaluate(self, t: Any, order: int = 0) -> Array:
+        """``order``-th derivative of (x, y, z, yaw): shape ``(*shape(t), 4)``."""
+        return self.derivatives(t, (order,))[0]
+
+    def __call__(self, t: Any, order: int = 0) -> Array:
+        """``order``-th derivative of the position (W): shape ``(*shape(t), 3)``."""
+        return self.evaluate(t, order)[..., :3]
+
+    def yaw(self, t: Any, order: int = 0) -> Array:
+        """``order``-th derivative of yaw (rad, rad/s, ...): shape ``shape(t)``."""
+        return self.evaluate(t, order)[..., 3]
+
+    def flat_output(self, t: Any) -> FlatOutput:
+        """Position to snap and yaw to yaw acceleration at ``t`` (one kernel call)."""
+        d = self.derivatives(t)
+        return FlatOutput(
+            t=np.asarray(t, dtype=float), position=d[0, ..., :3], velocity=d[1, ..., :3],
+            acceleration=d[2, ..., :3], jerk=d[3, ..., :3], snap=d[4, ..., :3],
+            yaw=d[0, ..., 3], yaw_rate=d[1, ..., 3], yaw_acceleration=d[2, ..., 3],
+        )
+
+    # -- flatness map ----------------------------------------------------------------------
+    def attitude(self, t: Any) -> Array:
+        """``R_WB(t)`` from (11), (13): shape ``(*shape(t), 3, 3)``."""
+        d = self.derivatives(t, (0, 2))
+        return frames.attitude(d[1, ..., :3], d[0, ..., 3], self.g)
+
+    def thrust(self, t: Any, mass: float | None = None) -> Array:
+        """Thrust (10): mass-normalised (m/s^2), or in newtons when ``mass`` (kg) is given."""
+        f = frames.thrust_magnitude(self(t, 2), self.g)
+        return f if mass is None else mass * f
+
+    def body_rates(self, t: Any) -> Array:
+        """Body angular velocity (rad/s, B frame), (22) and the yaw term of (13)."""
+        d = self.derivatives(t, (0, 1, 2, 3))
+        return frames.body_rates(d[2, ..., :3], d[3, ..., :3], d[0, ..., 3], d[1, ..., 3], self.g)
+
+    def sample(self, dt: float) -> Array:
+        """Times ``t0, t0 + dt, ...`` up to and including ``tf``."""
+        n = int(np.ceil(self.duration / dt - 1e-9))
+        return np.minimum(self.t0 + dt * np.arange(n + 1), self.tf)
+
+    def to_rotorpy(self) -> "RotorpyTrajectory":
+        """Adapter with rotorpy's trajectory protocol ``update(t) -> flat_output dict``."""
+        return RotorpyTrajectory(self)
+
+
+class RotorpyTrajectory:
+    """rotorpy trajectory protocol: ``update(t)`` with keys ``x, x_dot, x_ddot, x_dddot,
+    x_ddddot, yaw, yaw_dot, yaw_ddot``. Time is relative to the plan's start (rotorpy starts at
+    0) and held at the end points outside the plan."""
+
+    def __init__(self, trajectory: Trajectory) -> None:
+        self.trajectory = trajectory
+
+    def update(self, t: float) -> dict[str, Any]:
+        tr = self.trajectory
+        tt = min(max(tr.t0 + float(t), tr.t0), tr.tf)
+        d = tr.derivatives(tt)
+        return {
+            "x": d[0, :3], "x_dot": d[1, :3], "x_ddot": d[2, :3], "x_dddot": d[3, :3],
+            "x_ddddot": d[4, :3], "yaw": float(d[0, 3]), "yaw_dot": float(d[1, 3]),
+            "yaw_ddot": float(d[2, 3]),
+        }

@@ -1,0 +1,159 @@
+"""Public value types at the planner boundary: the vehicle :class:`State` and the
+:class:`PerchTarget` with its frame S (DESIGN.md "Frames and conventions").
+
+All vectors are in the world frame W (z up) unless a name says otherwise; SI units.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from . import _validate as v
+from .errors import ConfigError
+
+__all__ = ["State", "PerchTarget"]
+
+Array = npt.NDArray[np.float64]
+_ZERO3 = (0.0, 0.0, 0.0)
+
+
+@dataclass(frozen=True)
+class State:
+    """Flat-output state of the vehicle at ``time``: the initial condition of a plan.
+
+    Parameters
+    ----------
+    position, velocity, acceleration, jerk:
+        ``x`` and its derivatives in W (m, m/s, m/s^2, m/s^3).
+    yaw, yaw_rate:
+        ``psi`` (rad) and its rate (rad/s), the fourth flat output.
+    time:
+        Absolute time of this state (s); a plan starts here.
+    """
+
+    position: Array
+    velocity: Array = field(default_factory=lambda: np.zeros(3))
+    acceleration: Array = field(default_factory=lambda: np.zeros(3))
+    jerk: Array = field(default_factory=lambda: np.zeros(3))
+    yaw: float = 0.0
+    yaw_rate: float = 0.0
+    time: float = 0.0
+
+    def __post_init__(self) -> None:
+        for name in ("position", "velocity", "acceleration", "jerk"):
+            object.__setattr__(self, name, v.frozen_array(f"state.{name}", getattr(self, name), (3,)))
+        for name in ("yaw", "yaw_rate", "time"):
+            object.__setattr__(self, name, v.finite_float(f"state.{name}", getattr(self, name)))
+
+    @classmethod
+    def hover(cls, position: Any, yaw: float = 0.0, time: float = 0.0) -> "State":
+        """At rest at ``position`` with heading ``yaw``."""
+        return cls(position=position, yaw=yaw, time=time)
+
+    def derivatives(self) -> Array:
+        """Rows: position, velocity, acceleration, jerk (shape ``(4, 3)``)."""
+        return np.stack([self.position, self.velocity, self.acceleration, self.jerk])
+
+
+@dataclass(frozen=True)
+class PerchTarget:
+    """A perch pad: its centre ``point`` and orientation ``R_WS = [s1 s2 s3]``.
+
+    ``s3`` is the pad's outward normal on the side the vehicle arrives from (at contact
+    ``b3 = s3``), ``s1`` the up-slope tangent, ``s2 = s3 x s1`` (always horizontal unless the
+    pad is level). Incline is the angle between ``s3`` and ``e3``: 0 floor, 90 deg wall,
+    180 deg ceiling.
+
+    The target is static; :meth:`at` is the hook a moving target (roadmap, seed 004) overrides.
+    """
+
+    point: Array
+    R_WS: Array
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "point", v.frozen_array("target.point", self.point, (3,)))
+        object.__setattr__(self, "R_WS", v.rotation("target.R_WS", self.R_WS))
+
+    # -- constructors ---------------------------------------------------------------------
+    @classmethod
+    def from_normal(
+        cls,
+        point: Any,
+        normal: Any,
+        up_slope: Any | None = None,
+        approach_heading: float | None = None,
+    ) -> "PerchTarget":
+        """Build S from the outward ``normal`` (``s3``).
+
+        ``s1`` is ``up_slope`` (projected onto the pad plane) when given, else the projection
+        of ``e3`` onto the pad plane; for a level pad (floor or ceiling), where that
+        projection vanishes, it is the horizontal ``approach_heading`` (rad, direction the
+        vehicle flies in; default 0 = +x).
+        """
+        s3 = v.unit_vector("target.normal", normal)
+        if up_slope is not None:
+            raw = v.unit_vector("target.up_slope", up_slope)
+            field_name = "target.up_slope"
+        else:
+            raw = np.array([0.0, 0.0, 1.0])
+            field_name = "target.normal"
+        s1 = raw - np.dot(raw, s3) * s3
+        if np.linalg.norm(s1) < 1e-9:
+            if up_slope is not None:
+                raise ConfigError(field_name, "is parallel to the normal; pass a tangent direction")
+            heading = 0.0 if approach_heading is None else v.finite_float("target.approach_heading", approach_heading)
+            h = np.array([math.cos(heading), math.sin(heading), 0.0])
+            s1 = h - np.dot(h, s3) * s3
+        s1 = s1 / np.linalg.norm(s1)
+        s2 = np.cross(s3, s1)
+        return cls(point=point, R_WS=np.column_stack([s1, s2, s3]))
+
+    @classmethod
+    def from_incline(cls, point: Any, incline: float, heading: float = 0.0) -> "PerchTarget":
+        """A pad inclined by ``incline`` (rad, 0 floor .. pi/2 wall .. pi ceiling) that faces a
+        vehicle flying horizontally along ``heading`` (rad): ``s3 = cos(i) e3 - sin(i) h``."""
+        inc = v.finite_float("target.incline", incline)
+        if not 0.0 <= inc <= math.pi:
+            raise ConfigError("target.incline", f"must be in [0, pi] rad (0 floor, pi ceiling), got {inc}")
+        hd = v.finite_float("target.heading", heading)
+        h = np.array([math.cos(hd), math.sin(hd), 0.0])
+        s3 = math.cos(inc) * np.array([0.0, 0.0, 1.0]) - math.sin(inc) * h
+        return cls.from_normal(point, s3, approach_heading=hd)
+
+    # -- frame axes -----------------------------------------------------------------------
+    @property
+    def s1(self) -> Array:
+        """Up-slope unit tangent (W)."""
+        return self.R_WS[:, 0]
+
+    @property
+    def s2(self) -> Array:
+        """``s3 x s1`` (W)."""
+        return self.R_WS[:, 1]
+
+    @property
+    def s3(self) -> Array:
+        """Outward unit normal (W)."""
+        return self.R_WS[:, 2]
+
+    @property
+    def incline(self) -> float:
+        """Angle between ``s3`` and ``e3`` (rad)."""
+        return float(math.acos(max(-1.0, min(1.0, float(self.R_WS[2, 2])))))
+
+    def at(self, time: float) -> "PerchTarget":
+        """Pose at ``time``; a static target returns itself."""
+        return self
+
+    def to_world(self, v_S: Any) -> Array:
+        """Vector in S coordinates to W."""
+        return self.R_WS @ np.asarray(v_S, dtype=float)
+
+    def to_target_frame(self, v_W: Any) -> Array:
+        """Vector in W to S coordinates."""
+        return self.R_WS.T @ np.asarray(v_W, dtype=float)
