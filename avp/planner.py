@@ -102,12 +102,53 @@ def _check_inputs(state: Any, target: Any, config: Any) -> PlannerConfig:
     return config
 
 
+@dataclass
+class _Attempt:
+    """One QP solve at fixed durations (internal)."""
+
+    outcome: QpOutcome | None
+    trajectory: Trajectory | None
+    fov_dropped: bool
+    build: float
+    solve: float
+
+
+def _solve_at(
+    state: State,
+    target: PerchTarget,
+    cfg: PlannerConfig,
+    T: Array,
+    log: list[str],
+    previous: Trajectory | None = None,
+) -> _Attempt:
+    """Build and solve the perching QP for durations ``T``.
+
+    Field-of-view rows (8)-(9) and the fallback (16) plug in here: see :mod:`avp.perception`.
+    """
+    t0 = time.perf_counter()
+    qp = build_perching_qp(state, target, cfg, T)
+    build = time.perf_counter() - t0
+    try:
+        outcome = solve_perching_qp(qp, cfg)
+    except InfeasibleError as exc:
+        log.append(str(exc))
+        return _Attempt(None, None, False, build, 0.0)
+    log.append(f"QP {cfg.solver}: {outcome.status.value} (max violation {outcome.max_violation:.1e})")
+    traj = None
+    if outcome.ok and outcome.c_hat is not None:
+        coeffs = qp.layout.to_physical(outcome.c_hat, T)
+        knots = state.time + np.concatenate([[0.0], np.cumsum(T)])
+        traj = Trajectory(coeffs, knots, g=cfg.g)
+    return _Attempt(outcome, traj, False, build + outcome.build_time, outcome.solve_time)
+
+
 def plan_detailed(
     state: State,
     target: PerchTarget,
     config: PlannerConfig | None = None,
     *,
     durations: Any = None,
+    previous: Trajectory | None = None,
 ) -> PlanResult:
     """Plan a perch and report what happened; raises only for bad input or a missing solver.
 
@@ -121,33 +162,24 @@ def plan_detailed(
         :class:`PlannerConfig` (paper defaults when ``None``).
     durations:
         Segment durations (s) overriding the allocation rule.
+    previous:
+        The committed plan when replanning (linearisation point of the FoV rows (8)).
     """
     t_start = time.perf_counter()
     cfg = _check_inputs(state, target, config)
     T = check_durations(durations, cfg) if durations is not None else initial_durations(state, target, cfg)
     log: list[str] = [f"durations {np.round(T, 4).tolist()} s ({'given' if durations is not None else 'allocated'})"]
-    qp = build_perching_qp(state, target, cfg, T)
-    t_built = time.perf_counter()
-    try:
-        outcome = solve_perching_qp(qp, cfg)
-    except InfeasibleError as exc:
-        log.append(str(exc))
-        return PlanResult(PlanStatus.INFEASIBLE, None, T, None, tuple(log),
-                          PlanTimings(build=t_built - t_start, total=time.perf_counter() - t_start))
-    log.append(f"QP {cfg.solver}: {outcome.status.value} (max violation {outcome.max_violation:.1e})")
-    timings = PlanTimings(
-        build=(t_built - t_start) + outcome.build_time,
-        solve=outcome.solve_time,
-        total=time.perf_counter() - t_start,
-    )
-    if not outcome.ok or outcome.c_hat is None:
-        status = PlanStatus.INFEASIBLE if outcome.solution is not None and not outcome.solution.found else PlanStatus.SOLVER_FAILED
-        return PlanResult(status, None, T, outcome, tuple(log), timings)
-    coeffs = qp.layout.to_physical(outcome.c_hat, T)
-    knots = state.time + np.concatenate([[0.0], np.cumsum(T)])
-    traj = Trajectory(coeffs, knots, g=cfg.g)
-    timings = PlanTimings(build=timings.build, solve=timings.solve, total=time.perf_counter() - t_start)
-    return PlanResult(PlanStatus.SOLVED, traj, T, outcome, tuple(log), timings)
+    attempt = _solve_at(state, target, cfg, T, log, previous)
+    timings = PlanTimings(build=attempt.build, solve=attempt.solve, total=time.perf_counter() - t_start)
+    outcome = attempt.outcome
+    if attempt.trajectory is None:
+        if outcome is None or (outcome.solution is not None and not outcome.solution.found):
+            status = PlanStatus.INFEASIBLE
+        else:
+            status = PlanStatus.SOLVER_FAILED
+        return PlanResult(status, None, T, outcome, tuple(log), timings, attempt.fov_dropped)
+    status = PlanStatus.SOLVED_WITHOUT_FOV if attempt.fov_dropped else PlanStatus.SOLVED
+    return PlanResult(status, attempt.trajectory, T, outcome, tuple(log), timings, attempt.fov_dropped)
 
 
 def plan(

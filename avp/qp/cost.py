@@ -33,8 +33,9 @@ def gram(degree: int, order: int) -> Array:
 def cost_matrix(layout: DecisionLayout, durations: Array, position_order: int, yaw_order: int) -> Array:
     """Block-diagonal Hessian ``P`` with ``c_hat^T P c_hat`` proportional to the cost (4).
 
-    Each axis block is scaled by ``T_total^(2j - 1)`` so entries stay O(1) whatever the
-    durations; the minimiser is unchanged (the axes are separate sums).
+    Each axis block is scaled by ``T_total^(2j - 1)`` and the whole matrix to a unit largest
+    diagonal entry, so entries stay O(1) whatever the durations; the minimiser is unchanged (the
+    axes are separate sums).
     """
     S, n = layout.n_segments, layout.n_coeffs
     T = np.asarray(durations, dtype=float)
@@ -47,4 +48,4 @@ def cost_matrix(layout: DecisionLayout, durations: Array, position_order: int, y
         for seg in range(S):
             s = layout.start(axis, seg)
             P[s : s + n, s : s + n] = w[seg] * G
-    return P
+    return P / float(np.max(np.diag(P)))

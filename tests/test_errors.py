@@ -1,0 +1,135 @@
+"""Bad input raises a typed AvpError subclass that names the field."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+import avp
+from scenarios import standard
+
+
+def field_of(exc_info: pytest.ExceptionInfo[avp.ConfigError]) -> str:
+    return exc_info.value.field
+
+
+@pytest.mark.parametrize(
+    "kwargs, field",
+    [
+        ({"position": [0, 0]}, "state.position"),
+        ({"position": [0, 0, np.nan]}, "state.position"),
+        ({"position": [0, 0, 1], "velocity": [np.inf, 0, 0]}, "state.velocity"),
+        ({"position": [0, 0, 1], "yaw": float("nan")}, "state.yaw"),
+        ({"position": "abc"}, "state.position"),
+    ],
+)
+def test_state_validation(kwargs, field) -> None:
+    with pytest.raises(avp.ConfigError) as exc:
+        avp.State(**kwargs)
+    assert field_of(exc) == field
+    assert isinstance(exc.value, avp.AvpError) and isinstance(exc.value, ValueError)
+
+
+def test_target_rotation_must_be_orthonormal_and_proper() -> None:
+    with pytest.raises(avp.ConfigError, match="orthonormal") as exc:
+        avp.PerchTarget([0, 0, 0], np.diag([1.0, 2.0, 1.0]))
+    assert field_of(exc) == "target.R_WS"
+    with pytest.raises(avp.ConfigError, match="determinant"):
+        avp.PerchTarget([0, 0, 0], np.diag([1.0, 1.0, -1.0]))
+    with pytest.raises(avp.ConfigError) as exc:
+        avp.PerchTarget.from_normal([0, 0, 0], [0, 0, 0])
+    assert field_of(exc) == "target.normal"
+    with pytest.raises(avp.ConfigError) as exc:
+        avp.PerchTarget.from_incline([0, 0, 0], math.radians(200))
+    assert field_of(exc) == "target.incline"
+
+
+def test_from_incline_geometry() -> None:
+    for inc in np.radians([0, 30, 60, 90, 135, 180]):
+        t = avp.PerchTarget.from_incline([1, 2, 3], inc, heading=0.3)
+        assert math.isclose(t.incline, inc, abs_tol=1e-9)
+        assert abs(t.s2[2]) < 1e-12  # s2 horizontal
+        assert np.allclose(t.R_WS.T @ t.R_WS, np.eye(3))
+        h = np.array([math.cos(0.3), math.sin(0.3), 0])
+        assert t.s3 @ h <= 1e-12  # faces the approaching vehicle
+        if 0 < inc < math.pi:
+            assert t.s1[2] > 0  # up-slope
+
+
+@pytest.mark.parametrize(
+    "kwargs, field",
+    [
+        ({"thrust_min": 5.0, "thrust_max": 4.0}, "limits.thrust_min"),
+        ({"thrust_min": 4.0, "thrust_max": 4.0}, "limits.thrust_min"),
+        ({"mass": 0.0}, "limits.mass"),
+        ({"thrust_max": float("nan")}, "limits.thrust_max"),
+        ({"body_rate_max": -1.0}, "limits.body_rate_max"),
+    ],
+)
+def test_limits_validation(kwargs, field) -> None:
+    with pytest.raises(avp.ConfigError) as exc:
+        avp.VehicleLimits(**kwargs)
+    assert field_of(exc) == field
+
+
+@pytest.mark.parametrize(
+    "kwargs, field",
+    [
+        ({"n_segments": 0}, "config.n_segments"),
+        ({"degree": 5}, "config.degree"),
+        ({"alpha": -1.0}, "config.alpha"),
+        ({"dt": 0.0}, "config.dt"),
+        ({"alpha": 50.0}, "config.alpha"),  # above thrust_max / mass
+        ({"pre_impact": "paper"}, "config.pre_impact"),
+    ],
+)
+def test_config_validation(kwargs, field) -> None:
+    with pytest.raises(avp.ConfigError) as exc:
+        avp.PlannerConfig(**kwargs)
+    assert field_of(exc) == field
+
+
+def test_target_at_start_point_is_rejected() -> None:
+    sc = standard(90, 3.5)
+    with pytest.raises(avp.ConfigError, match="away from the vehicle") as exc:
+        avp.plan(avp.State.hover(sc.target.point), sc.target)
+    assert field_of(exc) == "target.point"
+
+
+@pytest.mark.parametrize("durations", [[0.5, -0.1, 0.5], [0.5, 0.5], [0.5, np.nan, 0.5], [0.0, 1, 1]])
+def test_bad_durations(durations) -> None:
+    sc = standard(90, 3.5)
+    with pytest.raises(avp.ConfigError) as exc:
+        avp.plan(sc.state, sc.target, durations=durations)
+    assert field_of(exc) == "durations"
+
+
+def test_unknown_solver_is_a_solver_error() -> None:
+    sc = standard(90, 3.5)
+    with pytest.raises(avp.SolverError, match="not installed"):
+        avp.plan(sc.state, sc.target, avp.PlannerConfig(solver="no_such_solver"))
+
+
+def test_wrong_argument_types() -> None:
+    sc = standard(90, 3.5)
+    with pytest.raises(avp.ConfigError) as exc:
+        avp.plan([0, 0, 0], sc.target)  # type: ignore[arg-type]
+    assert field_of(exc) == "state"
+    with pytest.raises(avp.ConfigError) as exc:
+        avp.plan(sc.state, sc.target, {"alpha": 4})  # type: ignore[arg-type]
+    assert field_of(exc) == "config"
+
+
+def test_infeasible_is_a_result_and_plan_raises_with_it() -> None:
+    """One segment of degree 7 cannot meet 4 initial + 3 terminal position/velocity/acceleration
+    conditions per axis plus the band: reported, and plan() raises with the result attached."""
+    sc = standard(90, 3.5)
+    config = avp.PlannerConfig(n_segments=1, degree=7, band_min_width=0.0)
+    result = avp.plan_detailed(sc.state, sc.target, config)
+    assert not result.ok and result.trajectory is None
+    assert result.status in (avp.PlanStatus.INFEASIBLE, avp.PlanStatus.SOLVER_FAILED)
+    with pytest.raises(avp.PlanningError) as exc:
+        avp.plan(sc.state, sc.target, config)
+    assert exc.value.result is not None and exc.value.result.status is result.status

@@ -1,0 +1,170 @@
+"""Planner properties on the paper's standard scenarios and on random ones (hypothesis)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import qpsolvers
+from hypothesis import given
+from hypothesis import strategies as st
+
+import avp
+from avp.qp.perching import band_times, terminal_acceleration
+from scenarios import Scenario, standard, standard_grid
+
+SOLVERS = [
+    pytest.param(s, marks=pytest.mark.skipif(s not in qpsolvers.available_solvers, reason=f"{s} not installed"))
+    for s in ("daqp", "proxqp", "osqp")
+]
+
+POS_TOL = 1e-3  # m
+ANGLE_TOL = math.radians(0.5)
+VEL_TOL = 1e-3  # m/s
+
+
+def check_contact(traj: avp.Trajectory, target: avp.PerchTarget, config: avp.PlannerConfig) -> None:
+    """Terminal constraints: position, b3 = s3 (12), requested velocity components in S."""
+    tf = traj.tf
+    assert np.linalg.norm(traj(tf) - target.point) < POS_TOL
+    b3 = traj.attitude(tf)[:, 2]
+    assert math.acos(min(1.0, float(b3 @ target.s3))) < ANGLE_TOL
+    v_S = target.to_target_frame(traj(tf, 1))
+    for got, want in zip(v_S, config.contact_velocity.components(target.incline)):
+        if want is not None:
+            assert abs(got - want) < VEL_TOL
+
+
+def check_continuity(traj: avp.Trajectory, max_order: int = 4) -> None:
+    """Left and right limits agree up to snap at every interior knot."""
+    c = traj.coefficients
+    for i, T in enumerate(traj.durations[:-1]):
+        for r in range(max_order + 1):
+            left = np.array([np.polynomial.polynomial.polyval(T, np.polynomial.polynomial.polyder(c[i, a], r) if r else c[i, a]) for a in range(4)])
+            right = traj.evaluate(traj.knots[i + 1], r)
+            assert np.allclose(left, right, rtol=1e-7, atol=1e-7 * max(1.0, np.abs(left).max())), (i, r)
+
+
+def check_band(traj: avp.Trajectory, target: avp.PerchTarget, config: avp.PlannerConfig) -> None:
+    """Band (14) at its sample times, with the configured width floor."""
+    c0 = terminal_acceleration(target, config.alpha, config.g)
+    lo = np.minimum(c0, (1 + config.q) * c0)
+    hi = np.maximum(c0, (1 + config.q) * c0)
+    pad = np.maximum(0.0, config.band_min_width - (hi - lo)) / 2
+    times = traj.t0 + band_times(config, traj.duration)
+    a = traj(times, 2)
+    assert np.all(a >= lo - pad - 1e-6) and np.all(a <= hi + pad + 1e-6)
+
+
+@pytest.mark.parametrize("solver", SOLVERS)
+@pytest.mark.parametrize("scenario", standard_grid(), ids=lambda s: s.name)
+def test_standard_scenarios_meet_perching_constraints(scenario: Scenario, solver: str) -> None:
+    config = avp.PlannerConfig(solver=solver)
+    result = avp.plan_detailed(scenario.state, scenario.target, config)
+    assert result.status is avp.PlanStatus.SOLVED, result.log
+    traj = result.trajectory
+    assert traj is not None and np.isclose(traj.t0, scenario.state.time)
+    check_contact(traj, scenario.target, config)
+    check_continuity(traj)
+    check_band(traj, scenario.target, config)
+    # starts where the vehicle is
+    assert np.allclose(traj.derivatives(traj.t0, (0, 1, 2, 3))[:, :3], scenario.state.derivatives(), atol=1e-9)
+
+
+@pytest.mark.parametrize("mode", list(avp.PreImpactMode))
+def test_pre_impact_modes_keep_thrust_axis_near_normal(mode: avp.PreImpactMode) -> None:
+    """In the last t_k the thrust axis is within the cone (CONE) or the box (PAPER) of s3."""
+    sc = standard(60, 3.5)
+    config = avp.PlannerConfig(pre_impact=mode)
+    traj = avp.plan(sc.state, sc.target, config)
+    check_contact(traj, sc.target, config)
+    times = traj.t0 + band_times(config, traj.duration)
+    f = traj(times, 2) + np.array([0, 0, config.g])
+    if mode is avp.PreImpactMode.CONE:
+        along = f @ sc.target.s3
+        assert np.all(along >= config.alpha - 1e-6) and np.all(along <= (1 + config.q) * config.alpha + 1e-6)
+        tilt = np.arccos(np.clip(along / np.linalg.norm(f, axis=1), -1, 1))
+        assert np.all(tilt <= config.cone_half_angle + 1e-6)
+    elif mode is avp.PreImpactMode.PAPER:
+        check_band(traj, sc.target, config)
+
+
+def test_paper_mode_zero_width_band_pins_component() -> None:
+    """band_min_width = 0 reproduces the paper's equality rows where c0 has a zero component."""
+    sc = standard(90, 3.5)
+    config = avp.PlannerConfig(band_min_width=0.0)
+    traj = avp.plan(sc.state, sc.target, config)
+    times = traj.t0 + band_times(config, traj.duration)
+    assert np.allclose(traj(times, 2)[:, 1], 0.0, atol=1e-6)  # c0_y = 0 on this wall
+
+
+def test_user_durations_are_used() -> None:
+    sc = standard(90, 3.5)
+    traj = avp.plan(sc.state, sc.target, durations=[0.5, 0.6, 0.7])
+    assert np.allclose(traj.durations, [0.5, 0.6, 0.7])
+
+
+def test_free_velocity_components_are_not_constrained() -> None:
+    sc = standard(90, 3.5)
+    config = avp.PlannerConfig(contact_velocity=avp.ContactVelocity(normal=-0.3, slope=None, lateral=None))
+    traj = avp.plan(sc.state, sc.target, config)
+    check_contact(traj, sc.target, config)
+    fixed = avp.plan(sc.state, sc.target)
+    v_free = sc.target.to_target_frame(traj(traj.tf, 1))
+    assert abs(v_free[0] - (-2.0)) > 1e-3  # the slide is chosen by the optimiser, not pinned
+
+
+def test_reduced_and_full_forms_agree() -> None:
+    sc = standard(60, 3.5)
+    red = avp.plan(sc.state, sc.target, avp.PlannerConfig(solver="proxqp"))
+    full = avp.plan(sc.state, sc.target, avp.PlannerConfig(solver="proxqp", qp_form=avp.QpForm.FULL))
+    t = red.sample(0.01)
+    assert np.max(np.abs(red(t) - full(t))) < 1e-4
+
+
+@st.composite
+def random_problem(draw: st.DrawFn) -> tuple[avp.State, avp.PerchTarget]:
+    incline = draw(st.floats(0.0, math.pi / 2))
+    heading = draw(st.floats(-math.pi, math.pi))
+    distance = draw(st.floats(1.0, 8.0))
+    lateral = draw(st.floats(-1.0, 1.0))
+    height = draw(st.floats(-1.0, 1.5))
+    pad = np.array([0.0, 0.0, 2.0])
+    target = avp.PerchTarget.from_incline(pad, incline, heading)
+    h = np.array([math.cos(heading), math.sin(heading), 0.0])
+    start = pad - distance * h + lateral * target.s2 + np.array([0.0, 0.0, height])
+    moving = draw(st.booleans())
+    vel = np.zeros(3)
+    if moving:
+        direction = draw(st.tuples(*[st.floats(-1, 1)] * 3)).__iter__()
+        d = np.array(list(direction))
+        if np.linalg.norm(d) > 1e-3:
+            vel = draw(st.floats(0.0, 2.0)) * d / np.linalg.norm(d)
+    yaw = heading + draw(st.floats(-0.8, 0.8))
+    return avp.State(position=start, velocity=vel, yaw=yaw), target
+
+
+@given(random_problem())
+def test_random_problems_meet_every_equality(problem: tuple[avp.State, avp.PerchTarget]) -> None:
+    state, target = problem
+    config = avp.PlannerConfig()
+    try:
+        result = avp.plan_detailed(state, target, config)
+    except avp.ConfigError as exc:  # only the documented "target at the start" rejection
+        assert exc.field == "target.point"
+        return
+    if not result.ok:  # a documented, reported outcome, never a crash or a NaN trajectory
+        assert result.status in (avp.PlanStatus.INFEASIBLE, avp.PlanStatus.SOLVER_FAILED)
+        assert result.trajectory is None
+        return
+    traj = result.trajectory
+    assert traj is not None
+    assert np.all(np.isfinite(traj.coefficients))
+    check_contact(traj, target, config)
+    check_continuity(traj)
+    d0 = traj.derivatives(traj.t0, (0, 1, 2, 3))
+    assert np.allclose(d0[:, :3], state.derivatives(), atol=1e-8)
+    assert abs(d0[0, 3] - state.yaw) < 1e-9 and abs(d0[1, 3] - state.yaw_rate) < 1e-9
+    # terminal yaw (13): R_WB(tf) equals R_WS, not only b3 = s3
+    assert avp.frames.rotation_error_angle(traj.attitude(traj.tf), target.R_WS) < ANGLE_TOL

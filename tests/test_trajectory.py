@@ -1,0 +1,117 @@
+"""Trajectory evaluation (Rust kernel vs NumPy oracle) and the flatness map (10), (11), (13), (22)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+from hypothesis.extra import numpy as hnp
+
+import avp
+from avp import _avp_rust, frames
+from oracles import eval_spline_reference
+from scenarios import standard
+
+
+@st.composite
+def random_spline(draw: st.DrawFn) -> tuple[np.ndarray, np.ndarray]:
+    S = draw(st.integers(1, 5))
+    C = draw(st.integers(1, 11))
+    A = draw(st.integers(1, 4))
+    coeffs = draw(hnp.arrays(float, (S, A, C), elements=st.floats(-100, 100)))
+    durations = draw(hnp.arrays(float, (S,), elements=st.floats(0.05, 3.0)))
+    knots = draw(st.floats(-5, 5)) + np.concatenate([[0.0], np.cumsum(durations)])
+    return coeffs, knots
+
+
+@given(random_spline(), st.integers(0, 6), st.lists(st.floats(0, 1), min_size=1, max_size=20))
+def test_rust_eval_matches_numpy_reference(spline, order, fractions) -> None:
+    coeffs, knots = spline
+    times = knots[0] + np.array(fractions) * (knots[-1] - knots[0])
+    got = _avp_rust.eval_spline(coeffs, knots, times, [order])[0]
+    want = eval_spline_reference(coeffs, knots, times, order)
+    scale = np.max(np.abs(coeffs)) * max(1.0, knots[-1] - knots[0]) ** coeffs.shape[2] * 10 ** order
+    assert np.allclose(got, want, rtol=1e-10, atol=1e-12 * scale)
+
+
+def test_rust_kernel_rejects_bad_input_with_value_error() -> None:
+    c = np.zeros((2, 4, 3))
+    with pytest.raises(ValueError, match="knots"):
+        _avp_rust.eval_spline(c, np.array([0.0, 1.0]), np.array([0.5]), [0])
+    with pytest.raises(ValueError, match="strictly increasing"):
+        _avp_rust.eval_spline(c, np.array([0.0, 1.0, 1.0]), np.array([0.5]), [0])
+    with pytest.raises(ValueError, match="NaN"):
+        _avp_rust.eval_spline(c, np.array([0.0, 1.0, 2.0]), np.array([np.nan]), [0])
+    with pytest.raises(ValueError, match="order"):
+        _avp_rust.eval_spline(c, np.array([0.0, 1.0, 2.0]), np.array([0.5]), [1000])
+
+
+@pytest.fixture(scope="module")
+def wall_plan() -> avp.Trajectory:
+    sc = standard(90, 3.5)
+    return avp.plan(sc.state, sc.target)
+
+
+def test_shapes_and_domain(wall_plan: avp.Trajectory) -> None:
+    tr = wall_plan
+    assert tr(tr.t0).shape == (3,)
+    assert tr(np.zeros((2, 5)) + tr.t0, 2).shape == (2, 5, 3)
+    assert tr.yaw(np.array([tr.t0, tr.tf])).shape == (2,)
+    assert tr.attitude(tr.sample(0.1)).shape == (tr.sample(0.1).size, 3, 3)
+    assert tr.coefficients.shape == (3, 4, 8) and not tr.coefficients.flags.writeable
+    with pytest.raises(avp.ConfigError, match="t"):
+        tr(tr.tf + 0.1)
+
+
+def test_attitude_is_a_rotation_with_b3_along_thrust(wall_plan: avp.Trajectory) -> None:
+    t = wall_plan.sample(0.01)
+    R = wall_plan.attitude(t)
+    assert np.allclose(np.einsum("nji,njk->nik", R, R), np.eye(3), atol=1e-12)
+    assert np.allclose(np.linalg.det(R), 1.0)
+    f = wall_plan(t, 2) + np.array([0, 0, frames.GRAVITY])
+    assert np.allclose(R[:, :, 2], f / np.linalg.norm(f, axis=1, keepdims=True))
+    assert np.allclose(wall_plan.thrust(t, mass=0.5), 0.5 * np.linalg.norm(f, axis=1))
+
+
+def test_body_rates_match_finite_differences_of_attitude(wall_plan: avp.Trajectory) -> None:
+    """hat(Omega) = R^T dR/dt (13), checked by central differences."""
+    h = 1e-5
+    t = np.linspace(wall_plan.t0 + 0.01, wall_plan.tf - 0.01, 40)
+    R = wall_plan.attitude(t)
+    dR = (wall_plan.attitude(t + h) - wall_plan.attitude(t - h)) / (2 * h)
+    W = np.einsum("nji,njk->nik", R, dR)
+    omega_fd = np.stack([W[:, 2, 1], W[:, 0, 2], W[:, 1, 0]], axis=1)
+    assert np.allclose(wall_plan.body_rates(t), omega_fd, atol=1e-5)
+
+
+@given(st.floats(-3, 3), st.floats(-3, 3), st.floats(-5, 5), st.floats(-math.pi, math.pi), st.floats(-2, 2))
+def test_body_rates_on_random_flat_states(ax, ay, az, yaw, yaw_rate) -> None:
+    """The flatness map's body rates equal the finite-difference rates of R(a(t), psi(t)) for a
+    locally linear a(t) and psi(t)."""
+    a = np.array([ax, ay, az])
+    j = np.array([0.7, -0.4, 1.1])
+    h = 1e-6
+    R0 = frames.attitude(a - h * j, yaw - h * yaw_rate)
+    R1 = frames.attitude(a + h * j, yaw + h * yaw_rate)
+    R = frames.attitude(a, yaw)
+    W = R.T @ (R1 - R0) / (2 * h)
+    omega_fd = np.array([W[2, 1], W[0, 2], W[1, 0]])
+    assert np.allclose(frames.body_rates(a, j, yaw, yaw_rate), omega_fd, atol=1e-4)
+
+
+def test_rotorpy_adapter(wall_plan: avp.Trajectory) -> None:
+    out = wall_plan.to_rotorpy().update(0.3)
+    assert set(out) == {"x", "x_dot", "x_ddot", "x_dddot", "x_ddddot", "yaw", "yaw_dot", "yaw_ddot"}
+    assert np.allclose(out["x_ddot"], wall_plan(wall_plan.t0 + 0.3, 2))
+    end = wall_plan.to_rotorpy().update(100.0)  # held at the end point
+    assert np.allclose(end["x"], wall_plan(wall_plan.tf))
+
+
+def test_trajectory_rejects_nan_coefficients() -> None:
+    c = np.zeros((1, 4, 3))
+    c[0, 0, 1] = np.nan
+    with pytest.raises(avp.ConfigError, match="NaN"):
+        avp.Trajectory(c, [0.0, 1.0])
