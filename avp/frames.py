@@ -41,6 +41,13 @@ def thrust_magnitude(acc: npt.ArrayLike, g: float = GRAVITY) -> Array:
     return np.linalg.norm(thrust_vector(acc, g), axis=-1)
 
 
+def _cross(u: Array, v: Array) -> Array:
+    """``u x v`` over the last axis (np.cross costs ~30 us per call on single vectors)."""
+    u0, u1, u2 = u[..., 0], u[..., 1], u[..., 2]
+    v0, v1, v2 = v[..., 0], v[..., 1], v[..., 2]
+    return np.stack([u1 * v2 - u2 * v1, u2 * v0 - u0 * v2, u0 * v1 - u1 * v0], axis=-1)
+
+
 def _b2_des(yaw: Array) -> Array:
     return np.stack([-np.sin(yaw), np.cos(yaw), np.zeros_like(yaw)], axis=-1)
 
@@ -54,9 +61,9 @@ def attitude(acc: npt.ArrayLike, yaw: npt.ArrayLike, g: float = GRAVITY) -> Arra
     f = thrust_vector(acc, g)
     yaw_arr = np.asarray(yaw, dtype=float)
     b3 = f / np.linalg.norm(f, axis=-1, keepdims=True)
-    v = np.cross(_b2_des(yaw_arr), b3)
+    v = _cross(_b2_des(yaw_arr), b3)
     b1 = v / np.linalg.norm(v, axis=-1, keepdims=True)
-    b2 = np.cross(b3, b1)
+    b2 = _cross(b3, b1)
     return np.stack([b1, b2, b3], axis=-1)
 
 
@@ -84,11 +91,11 @@ def body_rates(
     b2d_dot = yaw_rate_arr[..., None] * np.stack(
         [-np.cos(yaw_arr), -np.sin(yaw_arr), np.zeros_like(yaw_arr)], axis=-1
     )
-    v = np.cross(b2d, b3)
+    v = _cross(b2d, b3)
     vn = np.linalg.norm(v, axis=-1, keepdims=True)
     b1 = v / vn
-    b2 = np.cross(b3, b1)
-    v_dot = np.cross(b2d_dot, b3) + np.cross(b2d, b3_dot)
+    b2 = _cross(b3, b1)
+    v_dot = _cross(b2d_dot, b3) + _cross(b2d, b3_dot)
     w1 = -np.sum(b2 * j, axis=-1) / fn[..., 0]
     w2 = np.sum(b1 * j, axis=-1) / fn[..., 0]
     w3 = np.sum(b2 * v_dot, axis=-1) / vn[..., 0]

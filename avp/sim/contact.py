@@ -1,0 +1,158 @@
+"""Contact with the perch pad and the success criterion of a perch.
+
+The pad is a finite square (or disc) of half-size ``half_size`` centred at ``p_W`` in the plane
+through it with normal ``s3`` (``R_WS = [s1 s2 s3]``, ``s3`` pointing to the side the vehicle
+arrives from). Contact happens when the centre of mass reaches the pad plane, i.e. the signed
+distance ``(p_W - c) . s3`` goes from positive to ``<= 0`` between two simulation steps; the
+crossing is located by linear interpolation inside the step (steps are <= 2 ms).
+
+Reported at contact: the point in S coordinates, the angle between ``b3`` and ``s3`` (at contact
+the paper requires ``b3 = s3``, (12)), the normal speed ``-v . s3`` (positive into the pad) and
+the tangential velocity ``(v . s1, v . s2)``.
+
+Success (our choice; the paper gives no numbers): the point is inside the pad, the attitude error
+is at most 15 deg, the normal speed is in ``[0.05, 1.0] m/s`` (the plan asks for 0.3 m/s: enough to
+engage Velcro, slow enough not to bounce) and the tangential speed is at most 3 m/s (the plan
+slides 2 m/s down the slope).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, Literal
+
+import numpy as np
+
+from ..errors import ConfigError
+from ._so3 import Array, as_rotation, as_vector, project_so3
+from .vehicle import RigidBodyState
+
+__all__ = ["PerchPad", "SuccessCriteria", "Contact", "detect_contact"]
+
+
+@dataclass(frozen=True, eq=False)
+class PerchPad:
+    """A finite pad: centre ``p_W`` (m), rotation ``R_WS``, half-size (m) and shape."""
+
+    p_W: Any
+    R_WS: Any
+    half_size: float = 0.15
+    shape: Literal["square", "disc"] = "square"
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "p_W", as_vector("pad.p_W", self.p_W))
+        object.__setattr__(self, "R_WS", as_rotation("pad.R_WS", self.R_WS))
+        if not (np.isfinite(self.half_size) and self.half_size > 0):
+            raise ConfigError("pad.half_size", f"must be a positive length, not {self.half_size}")
+        if self.shape not in ("square", "disc"):
+            raise ConfigError("pad.shape", f"expected 'square' or 'disc', got {self.shape!r}")
+
+    def signed_distance(self, p_W: Array) -> float:
+        """Distance (m) of ``p_W`` from the pad plane along ``s3`` (> 0 on the approach side)."""
+        return float((np.asarray(p_W) - self.p_W) @ self.R_WS[:, 2])
+
+    def contains(self, p_S: Array) -> bool:
+        """Whether the in-plane coordinates ``p_S[:2]`` lie on the pad."""
+        if self.shape == "square":
+            return bool(max(abs(p_S[0]), abs(p_S[1])) <= self.half_size)
+        return bool(np.hypot(p_S[0], p_S[1]) <= self.half_size)
+
+
+@dataclass(frozen=True)
+class SuccessCriteria:
+    """Thresholds of a successful perch (module docstring): angles in rad, speeds in m/s."""
+
+    max_attitude_error: float = float(np.deg2rad(15.0))
+    normal_speed_min: float = 0.05
+    normal_speed_max: float = 1.0
+    max_tangential_speed: float = 3.0
+
+
+@dataclass(frozen=True, eq=False)
+class Contact:
+    """The vehicle reaching the pad plane.
+
+    Attributes
+    ----------
+    t:
+        Time of the crossing (s).
+    p_S:
+        Contact point in S coordinates (m); ``p_S[2]`` is 0 up to rounding.
+    p_W, v_W, R_WB:
+        Interpolated vehicle state at the crossing.
+    attitude_error:
+        Angle between ``b3`` and ``s3`` (rad).
+    normal_speed:
+        ``-v . s3`` (m/s), positive into the pad.
+    v_tangential_S:
+        ``(v . s1, v . s2)`` (m/s).
+    inside:
+        Whether the point lies on the pad.
+    failures:
+        Names of the violated criteria (empty on success).
+    """
+
+    t: float
+    p_S: Array
+    p_W: Array
+    v_W: Array
+    R_WB: Array
+    attitude_error: float
+    normal_speed: float
+    v_tangential_S: Array
+    inside: bool
+    failures: tuple[str, ...] = field(default=())
+
+    @property
+    def success(self) -> bool:
+        """True when every success criterion holds."""
+        return not self.failures
+
+
+def detect_contact(
+    prev: RigidBodyState,
+    new: RigidBodyState,
+    pad: PerchPad,
+    t_prev: float,
+    t_new: float,
+    criteria: SuccessCriteria = SuccessCriteria(),
+) -> Contact | None:
+    """The contact if the centre of mass crossed the pad plane between ``prev`` and ``new``.
+
+    Returns None unless the signed distance goes from ``> 0`` to ``<= 0`` in this step.
+    """
+    d0, d1 = pad.signed_distance(prev.p_W), pad.signed_distance(new.p_W)
+    if not (d0 > 0.0 >= d1):
+        return None
+    lam = d0 / (d0 - d1)
+    p_W = prev.p_W + lam * (new.p_W - prev.p_W)
+    v_W = prev.v_W + lam * (new.v_W - prev.v_W)
+    R_WB = project_so3(prev.R_WB + lam * (new.R_WB - prev.R_WB))
+    R_WS = pad.R_WS
+    p_S = R_WS.T @ (p_W - pad.p_W)
+    v_S = R_WS.T @ v_W
+    att = float(np.arccos(np.clip(R_WB[:, 2] @ R_WS[:, 2], -1.0, 1.0)))
+    inside = pad.contains(p_S)
+    v_n = float(-v_S[2])
+    v_t = v_S[:2].copy()
+    failures = []
+    if not inside:
+        failures.append("outside_pad")
+    if att > criteria.max_attitude_error:
+        failures.append("attitude")
+    if not criteria.normal_speed_min <= v_n <= criteria.normal_speed_max:
+        failures.append("normal_speed")
+    if float(np.hypot(v_t[0], v_t[1])) > criteria.max_tangential_speed:
+        failures.append("tangential_speed")
+    return Contact(
+        t=float(t_prev + lam * (t_new - t_prev)),
+        p_S=p_S,
+        p_W=p_W,
+        v_W=v_W,
+        R_WB=R_WB,
+        attitude_error=att,
+        normal_speed=v_n,
+        v_tangential_S=v_t,
+        inside=inside,
+        failures=tuple(failures),
+    )

@@ -1,0 +1,120 @@
+"""Vehicle + controller in closed loop for one stretch of time: the inner loop of a simulation.
+
+:func:`fly` runs the controller (2) at ``1/dt`` Hz (default 500 Hz) on odometry (optionally noisy)
+and advances the dynamics (1) by one RK4 step per control step with the command held. A ``stop``
+hook, called after each step with the previous and new true states, ends the stretch early (e.g.
+:func:`~avp.sim.contact.detect_contact`). A closed-loop runner then only has to call :func:`fly`
+once per camera frame or replanning period, feed the camera and estimator, and replan.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, Callable
+
+import numpy as np
+
+from ..errors import ConfigError
+from ._so3 import Array
+from .controller import ControllerGains, FlatReferenceLike, control
+from .odometry import OdometryNoise, noisy_odometry
+from .vehicle import RigidBodyState, VehicleParams, step
+
+__all__ = ["DT_CONTROL", "Trace", "FlightResult", "fly"]
+
+DT_CONTROL = 0.002
+"""Default control and integration step (s): 500 Hz."""
+
+StopHook = Callable[[RigidBodyState, RigidBodyState, float, float], Any]
+
+
+@dataclass(frozen=True, eq=False)
+class Trace:
+    """Per-step log of a stretch: true state at the end of each step (``t``) and the command
+    (``thrust``, ``moment_B``, desired attitude) held during that step."""
+
+    t: Array
+    p_W: Array
+    v_W: Array
+    R_WB: Array
+    omega_B: Array
+    thrust: Array
+    moment_B: Array
+    R_WB_des: Array
+
+
+@dataclass(frozen=True, eq=False)
+class FlightResult:
+    """End of a stretch: true ``state`` at time ``t`` (s), the stop hook's ``event`` (or None)."""
+
+    state: RigidBodyState
+    t: float
+    event: Any = None
+    trace: Trace | None = None
+
+
+def fly(
+    state: RigidBodyState,
+    reference: Callable[[float], FlatReferenceLike],
+    t0: float,
+    duration: float,
+    params: VehicleParams | None = None,
+    gains: ControllerGains = ControllerGains(),
+    *,
+    dt: float = DT_CONTROL,
+    odometry: OdometryNoise | None = None,
+    rng: np.random.Generator | None = None,
+    stop: StopHook | None = None,
+    record: bool = False,
+) -> FlightResult:
+    """Fly ``reference`` from ``state`` at ``t0`` for ``duration`` s (rounded to steps of ``dt``).
+
+    Parameters
+    ----------
+    state:
+        True state at ``t0``.
+    reference:
+        ``t -> FlatReference`` (or any object with its fields) evaluated at each control step.
+    t0, duration:
+        Start time and length of the stretch (s).
+    params, gains:
+        Vehicle and controller.
+    dt:
+        Control and integration step (s); at most 2 ms (>= 500 Hz).
+    odometry, rng:
+        Odometry noise on what the controller sees, drawn from ``rng`` (required with noise).
+    stop:
+        ``stop(prev, new, t_prev, t_new)``; a non-None return ends the stretch at ``t_new`` and
+        is returned as ``event``.
+    record:
+        Keep a :class:`Trace` of every step.
+    """
+    if params is None:
+        params = VehicleParams()
+    if not 0.0 < dt <= 0.002 + 1e-12:
+        raise ConfigError("dt", f"must be in (0, 0.002] s (>= 500 Hz), got {dt}")
+    if odometry is not None and rng is None:
+        raise ConfigError("rng", "odometry noise needs an explicit np.random.Generator")
+    n_steps = max(int(round(duration / dt)), 0)
+    log: dict[str, list[Any]] = {k: [] for k in Trace.__dataclass_fields__}
+    t, event = float(t0), None
+    for k in range(n_steps):
+        seen = state if odometry is None else noisy_odometry(state, odometry, rng)  # type: ignore
+        cmd = control(seen, reference(t), params, gains)
+        new = step(state, cmd.thrust, cmd.moment_B, dt, params)
+        t_new = float(t0) + (k + 1) * dt
+        if record:
+            for key, val in (
+                ("t", t_new), ("p_W", new.p_W), ("v_W", new.v_W), ("R_WB", new.R_WB),
+                ("omega_B", new.omega_B), ("thrust", cmd.thrust), ("moment_B", cmd.moment_B),
+                ("R_WB_des", cmd.R_WB_des),
+            ):
+                log[key].append(val)
+        event = stop(state, new, t, t_new) if stop is not None else None
+        state, t = new, t_new
+        if event is not None:
+            break
+    trace = None
+    if record:
+        trace = Trace(**{k: np.array(v, dtype=float) for k, v in log.items()})
+    return FlightResult(state=state, t=t, event=event, trace=trace)

@@ -1,0 +1,105 @@
+"""Camera of avp.sim.camera: FoV cone (7), 10 Hz frames, distance-dependent noise (Fig. 9)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from avp.frames import rotation_error_angle
+from avp.sim import Camera, CameraParams, OdometryNoise, RigidBodyState, in_fov, noisy_odometry
+from avp.sim._so3 import expm_so3
+
+WALL = np.array([[0.0, 0.0, 1.0], [0.0, 1.0, 0.0], [-1.0, 0.0, 0.0]]).T  # s1=e3, s2=e2, s3=-e1
+ORIGIN = RigidBodyState(np.zeros(3))  # level, b1 = e1: the front camera looks along +x
+
+
+def at_angle(deg, dist=3.0):
+    a = np.deg2rad(deg)
+    return np.array([np.cos(a), np.sin(a), 0.0]) * dist
+
+
+def test_sees_in_front_not_behind_and_not_outside_the_cone():
+    cam = Camera()
+    assert cam.visible(ORIGIN, at_angle(0), WALL)
+    assert cam.visible(ORIGIN, at_angle(30), WALL)
+    assert not cam.visible(ORIGIN, at_angle(40), WALL)
+    assert not cam.visible(ORIGIN, at_angle(180), WALL)
+    assert not cam.visible(ORIGIN, at_angle(0, dist=12.0), WALL)  # beyond max_range
+    # the one-sided cone, vectorised: the target straight behind is rejected
+    e_c = np.array([1.0, 0.0, 0.0])
+    np.testing.assert_array_equal(
+        in_fov(np.array([at_angle(0), at_angle(180), at_angle(34)]), np.zeros(3), e_c, 0.61),
+        [True, False, True],
+    )
+
+
+def test_camera_turns_with_the_body_and_mounting():
+    pitched_down = RigidBodyState(np.zeros(3), R_WB=expm_so3(np.array([0.0, np.pi / 2, 0.0])))
+    below = np.array([0.0, 0.0, -2.0])
+    assert Camera().visible(pitched_down, below, WALL)  # b1 points down after +90 deg pitch
+    assert not Camera().visible(ORIGIN, below, WALL)
+    down_cam = CameraParams(R_BC=np.diag([1.0, -1.0, -1.0]))  # optical axis along -b3
+    assert Camera(down_cam).visible(ORIGIN, below, WALL)
+
+
+def test_incidence_limit_hides_a_pad_seen_from_behind():
+    cam = Camera(CameraParams(max_incidence=np.deg2rad(80)))
+    assert cam.visible(ORIGIN, at_angle(0), WALL)  # s3 = -e1 faces the camera
+    assert not cam.visible(ORIGIN, at_angle(0), WALL @ np.diag([-1.0, 1.0, -1.0]))
+
+
+def test_frames_arrive_at_10_hz_only_while_visible():
+    cam, rng = Camera(), np.random.default_rng(0)
+    meas = [cam.measure(k * 0.002, ORIGIN, at_angle(0), WALL, rng) for k in range(1000)]
+    times = [m.t for m in meas if m is not None]
+    assert len(times) == 20
+    np.testing.assert_allclose(np.diff(times), 0.1, atol=1e-9)
+    cam.reset()
+    assert all(cam.measure(k * 0.002, ORIGIN, at_angle(90), WALL, rng) is None for k in range(1000))
+
+
+def _errors(dist, n=1500, seed=1):
+    cam, rng = Camera(), np.random.default_rng(seed)
+    target = at_angle(10, dist)
+    pos, ang = [], []
+    for k in range(n):
+        m = cam.measure(0.1 * k, ORIGIN, target, WALL, rng)
+        pos.append(m.p_W - target)
+        ang.append(rotation_error_angle(m.R_WS, WALL))
+    return np.array(pos), np.array(ang), cam.params
+
+
+@pytest.mark.parametrize("dist", [1.5, 7.5])
+def test_noise_matches_the_documented_model(dist):
+    pos, ang, cp = _errors(dist)
+    np.testing.assert_allclose(pos.std(axis=0), cp.sigma_position(dist), rtol=0.1)
+    # a rotation vector with iid N(0, s^2) axes has E|delta| = s sqrt(8/pi)
+    assert ang.mean() == pytest.approx(cp.sigma_angle(dist) * np.sqrt(8 / np.pi), rel=0.1)
+
+
+def test_noise_grows_with_distance_like_fig_9():
+    near, ang_near, _ = _errors(1.5)
+    far, ang_far, _ = _errors(7.5)
+    e_near, e_far = np.linalg.norm(near, axis=1).mean(), np.linalg.norm(far, axis=1).mean()
+    assert 0.02 < e_near < 0.06  # a few cm at 1-2 m
+    assert 0.2 < e_far < 0.6  # tens of cm at 7-8 m
+    assert ang_far.mean() > 5 * ang_near.mean()
+
+
+def test_measurement_uses_the_believed_vehicle_pose():
+    cam = Camera(CameraParams(sigma0_pos=0.0, sigma0_ang=0.0))
+    believed = RigidBodyState(np.array([0.1, -0.2, 0.05]))
+    m = cam.measure(0.0, ORIGIN, at_angle(0), WALL, np.random.default_rng(0), believed=believed)
+    np.testing.assert_allclose(m.p_W, at_angle(0) + believed.p_W, atol=1e-12)
+    np.testing.assert_allclose(m.R_WS, WALL, atol=1e-12)
+    assert m.distance == pytest.approx(3.0)
+
+
+def test_measurements_are_deterministic_per_seed():
+    def run(seed):
+        rng, cam = np.random.default_rng(seed), Camera()
+        odo = noisy_odometry(ORIGIN, OdometryNoise(), rng)
+        return cam.measure(0.0, ORIGIN, at_angle(5), WALL, rng, believed=odo).p_W
+
+    np.testing.assert_array_equal(run(3), run(3))
+    assert not np.array_equal(run(3), run(4))

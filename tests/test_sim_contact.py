@@ -1,0 +1,77 @@
+"""Contact detection and success criterion of avp.sim.contact."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from avp.errors import ConfigError
+from avp.sim import FlatReference, PerchPad, RigidBodyState, detect_contact, fly
+from avp.sim._so3 import expm_so3
+
+WALL = np.array([[0.0, 0.0, 1.0], [0.0, 1.0, 0.0], [-1.0, 0.0, 0.0]]).T  # s1=e3, s2=e2, s3=-e1
+PAD = PerchPad(p_W=[5.0, 0.0, 2.0], R_WS=WALL, half_size=0.15)
+
+
+def crossing(tilt_deg=10.0, v=(0.3, 0.0, -2.0), y=0.06, z=1.88):
+    """States 1 cm either side of the wall plane x = 5, the crossing half way (at t = 1.001 s)."""
+    R = WALL @ expm_so3(np.deg2rad([0.0, tilt_deg, 0.0]))  # b3 tilted by tilt_deg about s2
+    dp = 0.01 * np.array(v) / v[0]
+    mid = np.array([5.0, y, z])
+    return RigidBodyState(mid - dp, v, R), RigidBodyState(mid + dp, v, R)
+
+
+def test_constructed_crossing_reports_point_angles_and_speeds():
+    prev, new = crossing()
+    c = detect_contact(prev, new, PAD, 1.0, 1.002)
+    assert c.t == pytest.approx(1.001)
+    np.testing.assert_allclose(c.p_S, [-0.12, 0.06, 0.0], atol=1e-12)  # (z - 2, y, 0)
+    assert np.rad2deg(c.attitude_error) == pytest.approx(10.0)
+    assert c.normal_speed == pytest.approx(0.3)
+    np.testing.assert_allclose(c.v_tangential_S, [-2.0, 0.0], atol=1e-12)  # 2 m/s down the slope
+    assert c.inside and c.success and c.failures == ()
+
+
+@pytest.mark.parametrize(
+    "kwargs, failure",
+    [
+        (dict(y=0.2), "outside_pad"),
+        (dict(tilt_deg=20.0), "attitude"),
+        (dict(v=(1.5, 0.0, -2.0)), "normal_speed"),
+        (dict(v=(0.3, 0.0, -3.5)), "tangential_speed"),
+    ],
+)
+def test_each_criterion_can_fail(kwargs, failure):
+    c = detect_contact(*crossing(**kwargs), PAD, 1.0, 1.002)
+    assert c is not None and not c.success and c.failures == (failure,)
+
+
+def test_no_contact_without_a_crossing_from_the_front():
+    prev, new = crossing()
+    assert detect_contact(prev, prev, PAD, 0.0, 0.002) is None  # still in front
+    assert detect_contact(new, prev, PAD, 0.0, 0.002) is None  # coming out from behind
+
+
+def test_disc_pad_and_bad_pad():
+    disc = PerchPad(p_W=[5.0, 0.0, 2.0], R_WS=WALL, half_size=0.15, shape="disc")
+    c = detect_contact(*crossing(y=0.12, z=1.88), disc, 0.0, 0.002)  # corner of the square
+    assert not c.inside and c.failures == ("outside_pad",)
+    with pytest.raises(ConfigError, match="pad.R_WS"):
+        PerchPad(p_W=np.zeros(3), R_WS=np.ones((3, 3)))
+
+
+def test_fly_stops_at_contact_on_a_floor_pad():
+    floor = PerchPad(p_W=np.zeros(3), R_WS=np.eye(3))
+
+    def descend(t):  # 0.5 m/s straight down through the pad (the start is on the reference)
+        z = np.zeros(3)
+        return FlatReference([0.0, 0.0, 0.5 - 0.5 * t], [0.0, 0.0, -0.5], z, z, z)
+
+    start = RigidBodyState(np.array([0.0, 0.0, 0.5]), v_W=[0.0, 0.0, -0.5])
+    hook = lambda a, b, ta, tb: detect_contact(a, b, floor, ta, tb)  # noqa: E731
+    res = fly(start, descend, 0.0, 3.0, stop=hook)
+    c = res.event
+    assert c is not None and res.t < 1.01
+    assert c.t == pytest.approx(1.0, abs=1e-3)
+    assert c.normal_speed == pytest.approx(0.5, abs=1e-3) and c.attitude_error < 1e-6
+    assert c.success
