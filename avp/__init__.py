@@ -36,12 +36,36 @@ __all__ = [
     "__version__",
 ]
 
-from .config import ContactVelocity, PlannerConfig, PreImpactMode, QpForm, TimeAllocation, VehicleLimits
+from .camera import Camera, FovConfig, FovPointPolicy
+from .metrics import Visibility, visibility
+from .bounds import Bound, BoundReport, Certificate
+from .config import (
+    BoundsPolicy,
+    ContactVelocity,
+    PlannerConfig,
+    PreImpactMode,
+    QpForm,
+    Relaxation,
+    TimeAllocation,
+    TimeSearch,
+    VehicleLimits,
+)
 from .planner import PlanResult, PlanStatus, PlanTimings, plan, plan_detailed
 from .trajectory import Derivative, FlatOutput, Trajectory
 from .types import PerchTarget, State
 
 __all__ += [
+    "Camera",
+    "FovConfig",
+    "FovPointPolicy",
+    "Visibility",
+    "visibility",
+    "Bound",
+    "BoundReport",
+    "BoundsPolicy",
+    "Certificate",
+    "Relaxation",
+    "TimeSearch",
     "ContactVelocity",
     "Derivative",
     "FlatOutput",

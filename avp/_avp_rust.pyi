@@ -17,3 +17,63 @@ def eval_spline(
     ``[knots[0], knots[-1]]`` extrapolate the first/last segment. Raises ``ValueError`` on bad
     shapes, non-finite values or non-increasing knots.
     """
+
+def anticipate(
+    coeffs: npt.NDArray[np.float64],
+    knots: npt.NDArray[np.float64],
+    odometry: npt.NDArray[np.float64],
+    t_rp: float,
+    t_ex: float,
+) -> npt.NDArray[np.float64]:
+    """Anticipated state (6): ``x_n^(k) + P^(k)(t_ex) - P^(k)(t_rp)``, shape ``(5, axes)``.
+
+    ``odometry`` has shape ``(5, axes)`` (orders 0..4). Both times must lie in the plan's domain
+    with ``t_ex >= t_rp``; otherwise ``ValueError``.
+    """
+
+# --- bound certificates (sturm.rs, exact.rs, certify.rs, bounds.rs) ---------------------------
+
+BOUND_NAMES: list[str]
+
+def sturm_count(coeffs: npt.NDArray[np.float64], a: float, b: float) -> int:
+    """Exact number of distinct real roots of ``sum coeffs[k] x^k`` in the closed ``[a, b]``.
+
+    Interval-arithmetic Sturm sequence, exact big-integer fallback when unsure. Raises
+    ``ValueError`` on NaN/inf, ``a > b``, degree > 40 or the zero polynomial.
+    """
+
+def certify_below(
+    coeffs: npt.NDArray[np.float64], a: float, b: float, exact: bool = True
+) -> tuple[int, float]:
+    """Algorithm 1: ``(code, t)``; 0 = ``F < 0`` on ``[a, b]`` proven, 1 = ``F >= 0`` somewhere
+    (near ``t``), 2 = unknown (only with ``exact=False``)."""
+
+def certify_below_many(
+    coeffs: npt.NDArray[np.float64], a: float, b: float, exact: bool = True
+) -> tuple[npt.NDArray[np.int8], npt.NDArray[np.float64], npt.NDArray[np.bool_]]:
+    """:func:`certify_below` on every row of ``coeffs`` (n, C): ``(codes, t, decided_fast)``."""
+
+def certify_spline(
+    coeffs: npt.NDArray[np.float64],
+    knots: npt.NDArray[np.float64],
+    limits: npt.NDArray[np.float64],
+    g: float = 9.81,
+    exact: bool = True,
+) -> tuple[npt.NDArray[np.int8], npt.NDArray[np.float64]]:
+    """Bound certificates of a (S, 4, C) spline: ``(codes (5, S), t (5, S))``.
+
+    ``limits`` = ``[thrust_max, thrust_min, thrust_rate_max, tilt_rate_max, body_rate_max]``
+    (mass-normalised, ``inf`` = not checked); codes 0 within, 1 violated, 2 unknown,
+    3 not checked; ``t`` the estimated absolute time of a violation (NaN otherwise).
+    """
+
+def bound_polynomial(
+    coeffs: npt.NDArray[np.float64],
+    knots: npt.NDArray[np.float64],
+    segment: int,
+    bound: int,
+    limit: float,
+    g: float = 9.81,
+) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+    """Rigorous enclosure ``(lo, hi)`` of the checked polynomial of row ``bound`` on ``segment``
+    in ``u = (t - knots[i]) / (knots[i+1] - knots[i])``."""

@@ -75,14 +75,44 @@ def demo(args: argparse.Namespace) -> int:
     return 0
 
 
+def _simulate_parser(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+    p = sub.add_parser("simulate", help="closed-loop trials: one-shot planning vs AVP replanning")
+    p.add_argument("--trials", type=int, default=5, help="seeded trials per distance and mode (default 5)")
+    p.add_argument("--incline-deg", type=float, default=90.0, help="pad incline (default 90: wall)")
+    p.add_argument("--distance", type=float, nargs="+", default=[4.5, 7.5], help="stand-off(s) in m (default 4.5 7.5)")
+    p.add_argument("--lateral", type=float, default=0.0, help="start offset along s2 (m)")
+    p.add_argument("--height", type=float, default=None, help="start height above the pad (m)")
+    p.add_argument("--seed", type=int, default=0, help="first seed (default 0)")
+    p.add_argument("--output-dir", default="avp_simulation", help="directory for the plots")
+    p.add_argument("--no-plot", action="store_true", help="skip the plots")
+
+
+def simulate(args: argparse.Namespace) -> int:
+    from .sim.evaluate import compare  # the core never imports avp.sim at import time
+
+    if args.trials < 1:
+        print("avp: error: --trials must be >= 1", file=sys.stderr)
+        return 2
+    comp = compare(args.trials, inclines=[math.radians(args.incline_deg)], distances=args.distance,
+                   lateral_offsets=[args.lateral], height_offsets=[args.height], seed=args.seed)
+    print(comp.report())
+    if not args.no_plot:
+        for path in comp.plot(args.output_dir):
+            print(f"plot: {path}")
+    return 0
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="avp", description="Active visual perching planner")
     sub = parser.add_subparsers(dest="command", required=True)
     _demo_parser(sub)
+    _simulate_parser(sub)
     args = parser.parse_args(argv)
     try:
         if args.command == "demo":
             return demo(args)
+        if args.command == "simulate":
+            return simulate(args)
     except AvpError as exc:
         print(f"avp: error: {exc}", file=sys.stderr)
         return 2

@@ -16,6 +16,7 @@ import numpy as np
 
 from . import _validate as v
 from .errors import ConfigError
+from .camera import FovConfig
 from .frames import GRAVITY
 
 __all__ = [
@@ -25,6 +26,9 @@ __all__ = [
     "ContactVelocity",
     "TimeAllocation",
     "PlannerConfig",
+    "BoundsPolicy",
+    "TimeSearch",
+    "Relaxation",
 ]
 
 
@@ -47,14 +51,20 @@ class QpForm(Enum):
 class VehicleLimits:
     """Vehicle mass and actuator limits, checked by the bound certificates (15), (21)-(29).
 
-    ``thrust_rate_max`` and ``body_rate_max`` may be ``inf`` (not checked).
+    ``thrust_rate_max`` bounds ``|d tau/dt|`` through ``m |j|`` (21); ``tilt_rate_max`` bounds
+    ``sqrt(w1^2 + w2^2)`` exactly through ``|j|^2 <= w^2 |a + g e3|^2`` (22) (equal to the body
+    rate for a yaw-free, roll-free manoeuvre); ``body_rate_max`` bounds ``|w|`` including the yaw
+    term, conservatively, under the roll assumption (25). The rate limits may be ``inf`` (not
+    checked). Defaults: 0.5 kg, thrust in [0.5, 2 g] m/s^2 mass-normalised, tilt rate 10 rad/s
+    (without a rate limit a relaxed plan can be "certified" while flipping at 100+ rad/s).
     """
 
     mass: float = 0.5
     thrust_min: float = 0.5 * 0.5  # N, 0.5 m/s^2 mass-normalised
     thrust_max: float = 0.5 * 2.0 * GRAVITY  # N, 2 g
     thrust_rate_max: float = math.inf  # N/s
-    body_rate_max: float = math.inf  # rad/s
+    tilt_rate_max: float = 10.0  # rad/s, on sqrt(w1^2 + w2^2)
+    body_rate_max: float = math.inf  # rad/s, on |w| including yaw (assumption (25))
 
     def __post_init__(self) -> None:
         v.positive_float("limits.mass", self.mass)
@@ -67,6 +77,7 @@ class VehicleLimits:
                 f"({self.thrust_min} N) must be below limits.thrust_max ({self.thrust_max} N)",
             )
         v.positive_float("limits.thrust_rate_max", self.thrust_rate_max, allow_inf=True)
+        v.positive_float("limits.tilt_rate_max", self.tilt_rate_max, allow_inf=True)
         v.positive_float("limits.body_rate_max", self.body_rate_max, allow_inf=True)
 
     @property
@@ -113,13 +124,14 @@ class ContactVelocity:
 class TimeAllocation:
     """Initial duration rule: ``T = t_attitude + sqrt(2 d / a_nominal) + |v0| / a_nominal``.
 
-    ``d`` is the start-to-target distance. With the defaults this gives 1.0 / 1.4 / 1.8 s at
-    1.5 / 3.5 / 7.5 m from rest, the thrust-feasible totals a reference prototype found at 2 g on a
-    90 deg wall (DESIGN.md); the initial speed term adds the time to bleed off ``|v0|``. Segments
-    share the total equally.
+    ``d`` is the start-to-target distance; the speed term adds the time to bleed off ``|v0|``.
+    Segments share the total equally. With the defaults: 1.3 / 1.9 / 2.65 s at 1.5 / 3.5 / 7.5 m
+    from rest. Shorter totals pitch the vehicle past the camera's half-angle at launch (target
+    visibility 36-40 % at a_nominal = 4.6 m/s^2), longer ones make the min-snap path dip far
+    below a wall target (1.6 m at 3 s); ``docs/decisions.md`` has the measurements.
     """
 
-    nominal_acceleration: float = 4.6
+    nominal_acceleration: float = 2.5
     attitude_time: float = 0.2
     min_duration: float = 0.4
 
@@ -132,6 +144,64 @@ class TimeAllocation:
     def total(self, distance: float, speed: float) -> float:
         a = self.nominal_acceleration
         return max(self.min_duration, self.attitude_time + math.sqrt(2.0 * distance / a) + speed / a)
+
+
+class TimeSearch(Enum):
+    """How durations change when a bound is violated (Sec. V-C)."""
+
+    PAPER = "paper: lengthen every segment by a factor until the bounds hold (capped)"
+    BIDIRECTIONAL = "bidirectional: try longer and shorter totals alternately (feasibility is not monotone in T)"
+
+
+class Relaxation(Enum):
+    """What the planner may relax, in order, when no duration gives certified bounds."""
+
+    ALPHA_RANGE = "contact thrust alpha becomes a decision variable inside the thrust limits"
+    FREE_SLIDE = "the slide along the slope (v.s1) is left free"
+    CONE_BAND = "pre-impact band (14) replaced by the tilt cone"
+    NO_BAND = "pre-impact band (14) dropped"
+
+
+@dataclass(frozen=True)
+class BoundsPolicy:
+    """Certification of the actuator bounds and what to change when they fail (Alg. 1).
+
+    Parameters
+    ----------
+    certify:
+        Certify the vehicle limits on the whole trajectory after each solve.
+    time_search:
+        :class:`TimeSearch`.
+    factors:
+        BIDIRECTIONAL: total-duration factors tried in order.
+    growth, max_steps:
+        PAPER: factor per step and the cap on steps.
+    relaxations:
+        Tried in order, cumulatively, each with the time search, when no duration works.
+    """
+
+    certify: bool = True
+    time_search: TimeSearch = TimeSearch.BIDIRECTIONAL
+    factors: tuple[float, ...] = (1.15, 0.87, 1.3, 0.77, 1.5, 0.67, 1.75, 2.0, 2.5, 3.0)
+    growth: float = 1.2
+    max_steps: int = 10
+    relaxations: tuple[Relaxation, ...] = (
+        Relaxation.FREE_SLIDE, Relaxation.CONE_BAND, Relaxation.NO_BAND, Relaxation.ALPHA_RANGE,
+    )
+
+    def __post_init__(self) -> None:
+        if any(not (math.isfinite(f) and f > 0) for f in self.factors):
+            raise ConfigError("bounds.factors", "every factor must be finite and > 0")
+        if not (math.isfinite(self.growth) and self.growth > 1.0):
+            raise ConfigError("bounds.growth", f"must be > 1, got {self.growth}")
+        if self.max_steps < 0:
+            raise ConfigError("bounds.max_steps", "must be >= 0")
+
+    def schedule(self) -> tuple[float, ...]:
+        """Duration factors to try after the first solve, in order."""
+        if self.time_search is TimeSearch.PAPER:
+            return tuple(self.growth ** (k + 1) for k in range(self.max_steps))
+        return self.factors
 
 
 @dataclass(frozen=True)
@@ -148,6 +218,9 @@ class PlannerConfig:
         Highest derivative continuous at interior knots (4 = snap).
     alpha:
         Mass-normalised thrust at contact (m/s^2) in (12): ``a(t_f) = alpha s3 - g e3``.
+    alpha_range:
+        If given, ``(lo, hi)``: the contact thrust is a decision variable in that range (the
+        terminal acceleration is only required to be along ``s3``), as seed 004 does.
     q, t_k, dt:
         Pre-impact band (14): width ``q``, window ``t_k`` before contact sampled every ``dt``.
     band_min_width:
@@ -156,10 +229,14 @@ class PlannerConfig:
     cone_half_angle, cone_facets:
         CONE mode: tilt cone of ``a + g e3`` about ``s3`` (rad), inner polyhedral approximation.
     min_distance:
-        A target closer than this to the start (m) is rejected.
+        A target closer than this (m) to a start at rest is rejected.
     solver, qp_form, solver_options:
         qpsolvers back-end name (``"daqp"``, ``"proxqp"``, ``"osqp"``...), how the QP is
         passed, and extra keyword arguments merged over avp's per-solver tolerances.
+    fov:
+        :class:`~avp.camera.FovConfig`: FoV rows (7)-(9), SQP steps and the fallback (16).
+    bounds:
+        :class:`BoundsPolicy`: certification of the limits, time search, relaxations.
     """
 
     n_segments: int = 3
@@ -168,6 +245,7 @@ class PlannerConfig:
     yaw_cost_order: int = 3
     continuity_order: int = 4
     alpha: float = 4.0
+    alpha_range: tuple[float, float] | None = None
     q: float = 0.1
     t_k: float = 0.15
     dt: float = 0.01
@@ -183,6 +261,8 @@ class PlannerConfig:
     solver: str = "daqp"
     qp_form: QpForm = QpForm.REDUCED
     solver_options: tuple[tuple[str, Any], ...] = ()
+    fov: FovConfig = field(default_factory=FovConfig)
+    bounds: BoundsPolicy = field(default_factory=BoundsPolicy)
 
     def __post_init__(self) -> None:
         for name, lo in (("n_segments", 1), ("degree", 1), ("position_cost_order", 1),
@@ -215,10 +295,19 @@ class PlannerConfig:
             raise ConfigError("config.qp_form", f"must be a QpForm, got {self.qp_form!r}")
         if not isinstance(self.solver, str):
             raise ConfigError("config.solver", f"must be a qpsolvers solver name, got {self.solver!r}")
-        if self.alpha > self.limits.accel_max:
+        if self.alpha_range is not None:
+            lo, hi = (float(x) for x in self.alpha_range)
+            if not (math.isfinite(lo) and math.isfinite(hi) and 0.0 < lo <= hi):
+                raise ConfigError("config.alpha_range", f"must be (lo, hi) with 0 < lo <= hi, got {self.alpha_range}")
+            object.__setattr__(self, "alpha_range", (lo, hi))
+        if not isinstance(self.bounds, BoundsPolicy):
+            raise ConfigError("config.bounds", f"must be a BoundsPolicy, got {self.bounds!r}")
+        if not self.limits.accel_min < self.alpha < self.limits.accel_max:
             raise ConfigError(
                 "config.alpha",
-                f"contact thrust {self.alpha} m/s^2 exceeds limits.thrust_max/mass = {self.limits.accel_max:.2f} m/s^2",
+                f"contact thrust {self.alpha} m/s^2 must lie strictly inside the thrust limits "
+                f"({self.limits.accel_min:.2f}, {self.limits.accel_max:.2f}) m/s^2 (limits / mass): "
+                "the bound certificate would fail at contact; change alpha or the limits",
             )
 
     @property

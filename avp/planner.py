@@ -4,16 +4,18 @@
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from enum import Enum
 from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 
-from .config import PlannerConfig
-from .errors import ConfigError, InfeasibleError, PlanningError, SolverError
+from .config import PlannerConfig, PreImpactMode, Relaxation
+from .bounds import BoundReport, certify_spline
+from .errors import BoundsNotCertifiedError, ConfigError, InfeasibleError, PlanningError, SolverError
 from .qp.assemble import build_perching_qp
+from .qp.layout import DecisionLayout, layout_for
 from .solve import QpOutcome, solve_perching_qp
 from .timing import check_durations, initial_durations
 from .trajectory import Trajectory
@@ -22,6 +24,11 @@ from .types import PerchTarget, State
 __all__ = ["PlanStatus", "PlanTimings", "PlanResult", "plan", "plan_detailed"]
 
 Array = npt.NDArray[np.float64]
+
+STILL_SPEED = 0.1
+"""A start closer than ``config.min_distance`` to the target is rejected only when slower than
+this (m/s): a vehicle at rest on the target has nothing to plan, while a replan from a moving
+vehicle just before contact is well posed."""
 
 
 class PlanStatus(Enum):
@@ -66,6 +73,14 @@ class PlanResult:
         Human-readable record of what the planner did, in order.
     timings:
         :class:`PlanTimings`.
+    fov_dropped:
+        The FoV rows were dropped as incompatible (16).
+    duration_scale_steps:
+        QP re-solves made by the time search and relaxations after the first one.
+    bounds:
+        The :class:`~avp.bounds.BoundReport` of the returned (or last) trajectory.
+    relaxations:
+        What was relaxed to obtain certified bounds (:class:`~avp.config.Relaxation`).
     """
 
     status: PlanStatus
@@ -76,7 +91,8 @@ class PlanResult:
     timings: PlanTimings = field(default_factory=PlanTimings)
     fov_dropped: bool = False
     duration_scale_steps: int = 0
-    bounds: Any = None
+    bounds: BoundReport | None = None
+    relaxations: tuple[Relaxation, ...] = ()
 
     @property
     def ok(self) -> bool:
@@ -93,11 +109,11 @@ def _check_inputs(state: Any, target: Any, config: Any) -> PlannerConfig:
     if not isinstance(config, PlannerConfig):
         raise ConfigError("config", f"expected avp.PlannerConfig, got {type(config).__name__}")
     distance = float(np.linalg.norm(target.point - state.position))
-    if distance < config.min_distance:
+    if distance < config.min_distance and float(np.linalg.norm(state.velocity)) < STILL_SPEED:
         raise ConfigError(
             "target.point",
-            f"is {distance:.3f} m from the start state (config.min_distance = {config.min_distance} m); "
-            "a perch needs a target away from the vehicle",
+            f"is {distance:.3f} m from a start state at rest (config.min_distance = "
+            f"{config.min_distance} m); a perch needs a target away from the vehicle",
         )
     return config
 
@@ -120,16 +136,21 @@ def _solve_at(
     T: Array,
     log: list[str],
     previous: Trajectory | None = None,
+    initvals: Array | None = None,
 ) -> _Attempt:
     """Build and solve the perching QP for durations ``T``.
 
     Field-of-view rows (8)-(9) and the fallback (16) plug in here: see :mod:`avp.perception`.
     """
+    if cfg.fov.enabled:  # FoV rows (8)-(9), SQP step, fallback (16): avp.perception
+        from .perception import solve_with_fov
+        r = solve_with_fov(state, target, cfg, T, log, previous)
+        return _Attempt(r.outcome, r.trajectory, r.fov_dropped, r.build, r.solve)
     t0 = time.perf_counter()
     qp = build_perching_qp(state, target, cfg, T)
     build = time.perf_counter() - t0
     try:
-        outcome = solve_perching_qp(qp, cfg)
+        outcome = solve_perching_qp(qp, cfg, initvals)
     except InfeasibleError as exc:
         log.append(str(exc))
         return _Attempt(None, None, False, build, 0.0)
@@ -142,6 +163,43 @@ def _solve_at(
     return _Attempt(outcome, traj, False, build + outcome.build_time, outcome.solve_time)
 
 
+def _certify(traj: Trajectory, cfg: PlannerConfig) -> BoundReport:
+    """Algorithm 1 on every bound and segment (Rust), with the limits mass-normalised."""
+    lim = cfg.limits
+    return certify_spline(
+        traj.coefficients, traj.knots,
+        thrust_min=lim.accel_min, thrust_max=lim.accel_max,
+        thrust_rate_max=lim.thrust_rate_max / lim.mass,
+        tilt_rate_max=lim.tilt_rate_max, body_rate_max=lim.body_rate_max, g=cfg.g,
+    )
+
+
+def _relax(cfg: PlannerConfig, relaxation: Relaxation) -> PlannerConfig:
+    """``cfg`` with one more :class:`Relaxation` applied."""
+    if relaxation is Relaxation.ALPHA_RANGE:
+        # Around the nominal alpha (min-snap otherwise drives it to an extreme) and strictly
+        # inside the thrust limits (a touching bound counts as violated).
+        lo, hi = cfg.limits.accel_min, cfg.limits.accel_max
+        margin = 0.05 * (hi - lo)
+        return replace(cfg, alpha_range=(max(lo + margin, 0.5 * cfg.alpha), min(hi - margin, 2.0 * cfg.alpha)))
+    if relaxation is Relaxation.FREE_SLIDE:
+        return replace(cfg, contact_velocity=replace(cfg.contact_velocity, slope=None))
+    if relaxation is Relaxation.CONE_BAND:
+        return replace(cfg, pre_impact=PreImpactMode.CONE)
+    return replace(cfg, pre_impact=PreImpactMode.OFF)
+
+
+def _fit_initvals(warm: Trajectory, layout: DecisionLayout, knots: Array) -> Array:
+    """Least-squares projection of ``warm`` onto the spline space of ``knots`` (normalised
+    coefficients): an initial guess for back-ends that take one."""
+    u = layout.fit_nodes
+    out = np.empty((4, layout.n_segments, layout.n_coeffs))
+    for i in range(layout.n_segments):
+        t = np.clip(knots[i] + u * (knots[i + 1] - knots[i]), warm.t0, warm.tf)
+        out[:, i, :] = (layout.fit_pinv @ warm.evaluate(t)).T
+    return out.reshape(-1)
+
+
 def plan_detailed(
     state: State,
     target: PerchTarget,
@@ -149,8 +207,13 @@ def plan_detailed(
     *,
     durations: Any = None,
     previous: Trajectory | None = None,
+    warm_start: Trajectory | None = None,
 ) -> PlanResult:
     """Plan a perch and report what happened; raises only for bad input or a missing solver.
+
+    Solves the perching QP (5), certifies the vehicle limits on the whole trajectory (Alg. 1,
+    Rust), and when a bound fails searches the total duration (``config.bounds``), then relaxes
+    the problem step by step (:class:`~avp.config.Relaxation`), recording each change in ``log``.
 
     Parameters
     ----------
@@ -164,22 +227,80 @@ def plan_detailed(
         Segment durations (s) overriding the allocation rule.
     previous:
         The committed plan when replanning (linearisation point of the FoV rows (8)).
+    warm_start:
+        A plan whose shape seeds the back-end's initial guess (ProxQP, OSQP; DAQP ignores it).
     """
     t_start = time.perf_counter()
     cfg = _check_inputs(state, target, config)
-    T = check_durations(durations, cfg) if durations is not None else initial_durations(state, target, cfg)
-    log: list[str] = [f"durations {np.round(T, 4).tolist()} s ({'given' if durations is not None else 'allocated'})"]
-    attempt = _solve_at(state, target, cfg, T, log, previous)
-    timings = PlanTimings(build=attempt.build, solve=attempt.solve, total=time.perf_counter() - t_start)
-    outcome = attempt.outcome
-    if attempt.trajectory is None:
-        if outcome is None or (outcome.solution is not None and not outcome.solution.found):
-            status = PlanStatus.INFEASIBLE
-        else:
-            status = PlanStatus.SOLVER_FAILED
-        return PlanResult(status, None, T, outcome, tuple(log), timings, attempt.fov_dropped)
-    status = PlanStatus.SOLVED_WITHOUT_FOV if attempt.fov_dropped else PlanStatus.SOLVED
-    return PlanResult(status, attempt.trajectory, T, outcome, tuple(log), timings, attempt.fov_dropped)
+    T0 = check_durations(durations, cfg) if durations is not None else initial_durations(state, target, cfg)
+    log: list[str] = [f"durations {np.round(T0, 4).tolist()} s ({'given' if durations is not None else 'allocated'})"]
+    build = solve = certify = 0.0
+    attempts = 0
+    relaxed: list[Relaxation] = []
+    last: _Attempt | None = None
+    report: BoundReport | None = None
+
+    def timings() -> PlanTimings:
+        return PlanTimings(build, solve, certify, time.perf_counter() - t_start)
+
+    def finish(status: PlanStatus, attempt: _Attempt | None, T: Array) -> PlanResult:
+        return PlanResult(
+            status, attempt.trajectory if attempt else None, T, attempt.outcome if attempt else None,
+            tuple(log), timings(), bool(attempt and attempt.fov_dropped), max(attempts - 1, 0),
+            report, tuple(relaxed),
+        )
+
+    schedule = (1.0,) + (cfg.bounds.schedule() if cfg.bounds.certify else ())
+    stages: list[Relaxation | None] = [None]
+    if cfg.bounds.certify:
+        stages += list(cfg.bounds.relaxations)
+    stage_cfg = cfg
+    for stage in stages:
+        if stage is not None:
+            stage_cfg = _relax(stage_cfg, stage)
+            relaxed.append(stage)
+            log.append(f"relaxing: {stage.value}")
+        for factor in schedule:
+            T = T0 * factor
+            if factor != 1.0 or stage is not None:
+                log.append(f"durations x{factor:g}: total {T.sum():.3f} s")
+            initvals = None
+            if warm_start is not None:
+                knots = state.time + np.concatenate([[0.0], np.cumsum(T)])
+                initvals = _fit_initvals(warm_start, layout_for(cfg.n_segments, cfg.degree), knots)
+            attempt = _solve_at(state, target, stage_cfg, T, log, previous, initvals)
+            attempts += 1
+            build += attempt.build
+            solve += attempt.solve
+            if attempt.trajectory is None:
+                if last is None or last.trajectory is None:
+                    last = attempt
+                if not cfg.bounds.certify:
+                    status = PlanStatus.INFEASIBLE if _infeasible(attempt) else PlanStatus.SOLVER_FAILED
+                    return finish(status, attempt, T)
+                continue
+            last = attempt
+            if not cfg.bounds.certify:
+                return finish(PlanStatus.SOLVED_WITHOUT_FOV if attempt.fov_dropped else PlanStatus.SOLVED, attempt, T)
+            t_cert = time.perf_counter()
+            report = _certify(attempt.trajectory, cfg)
+            certify += time.perf_counter() - t_cert
+            if report.certified:
+                log.append("bounds certified (Algorithm 1, exact)")
+                status = PlanStatus.SOLVED_WITHOUT_FOV if attempt.fov_dropped else PlanStatus.SOLVED
+                return finish(status, attempt, T)
+            log.append("bounds: " + "; ".join(str(x) for x in report.violations[:3])
+                       + ("; undecided: " + str(report.unknown) if report.unknown else ""))
+    T_last = last.trajectory.durations if last is not None and last.trajectory is not None else T0
+    if last is None or last.trajectory is None:
+        return finish(PlanStatus.INFEASIBLE if last is None or _infeasible(last) else PlanStatus.SOLVER_FAILED, last, T0)
+    log.append(f"no duration in the search and no relaxation gave certified bounds ({attempts} solves)")
+    return finish(PlanStatus.BOUNDS_NOT_CERTIFIED, last, T_last)
+
+
+def _infeasible(attempt: _Attempt) -> bool:
+    o = attempt.outcome
+    return o is None or (o.solution is not None and not o.solution.found)
 
 
 def plan(
@@ -206,4 +327,6 @@ def plan(
         raise InfeasibleError(message, result)
     if result.status is PlanStatus.SOLVER_FAILED:
         raise SolverError(message, result)
+    if result.status is PlanStatus.BOUNDS_NOT_CERTIFIED:
+        raise BoundsNotCertifiedError(message, result)
     raise PlanningError(message, result)

@@ -11,7 +11,7 @@ raises for a planning or solver failure: the :class:`ReplanStep` says what happe
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from enum import Enum
 
 import numpy as np
@@ -62,6 +62,11 @@ class ReplanConfig:
         higher orders come from the committed plan, so commands stay continuous (6).
     warm_start:
         Pass the committed plan as initial guess to back-ends that accept one.
+    search_on_replan:
+        Let replans run the duration search and relaxations of ``config.bounds``. Off by
+        default: a replan keeps the committed contact time and, if its bounds do not certify,
+        the committed plan is kept (in closed loop the search made the contact time drift and
+        let relaxed plans through; it also cost up to 55 solves per step).
     """
 
     latency: float = 0.02
@@ -71,6 +76,7 @@ class ReplanConfig:
     deadline: float | None = None
     measured_orders: int = 2
     warm_start: bool = True
+    search_on_replan: bool = False
 
     def __post_init__(self) -> None:
         v.positive_float("replan.latency", self.latency)
@@ -146,6 +152,11 @@ class Replanner:
             raise ConfigError("target", f"expected avp.PerchTarget, got {type(target).__name__}")
         self.config = config if config is not None else PlannerConfig()
         self.replan = replan if replan is not None else ReplanConfig()
+        self._replan_config = self.config
+        if not self.replan.search_on_replan:
+            self._replan_config = replace(
+                self.config, bounds=replace(self.config.bounds, factors=(), max_steps=0, relaxations=())
+            )
         self.target = target
         self.trajectory: Trajectory | None = trajectory
         self._previous: Trajectory | None = None
@@ -191,7 +202,7 @@ class Replanner:
         state = State(position=odometry.position, velocity=odometry.velocity,
                       acceleration=odometry.acceleration, jerk=odometry.jerk,
                       yaw=odometry.yaw, yaw_rate=odometry.yaw_rate, time=t)
-        result, elapsed, error = self._plan(state, None, None)
+        result, elapsed, error = self._plan(state, None, None, self.config)
         if result is None or not result.ok:
             reason = error or (result.status.value if result else "planning failed")
             return ReplanStep(t, ReplanAction.NO_PLAN, None, reason, t, state, result, elapsed)
@@ -211,7 +222,7 @@ class Replanner:
                               "the committed plan has not started yet", t_ex)
         start = anticipate(committed, odometry, t, t_ex, self.replan.measured_orders)
         durations = np.full(self.config.n_segments, remaining / self.config.n_segments)
-        result, elapsed, error = self._plan(start, durations, committed)
+        result, elapsed, error = self._plan(start, durations, committed, self._replan_config)
         if error is not None or result is None:
             return ReplanStep(t, ReplanAction.KEPT_PREVIOUS, committed, error or "planning failed", t_ex, start, result, elapsed)
         if not result.ok:
@@ -225,12 +236,12 @@ class Replanner:
         return ReplanStep(t, ReplanAction.REPLANNED, self.trajectory, "ok", t_ex, start, result, elapsed)
 
     def _plan(
-        self, state: State, durations: Array | None, previous: Trajectory | None
+        self, state: State, durations: Array | None, previous: Trajectory | None, config: PlannerConfig
     ) -> tuple[PlanResult | None, float, str | None]:
         t0 = time.perf_counter()
         try:
             result = plan_detailed(
-                state, self.target, self.config, durations=durations, previous=previous,
+                state, self.target, config, durations=durations, previous=previous,
                 warm_start=previous if self.replan.warm_start else None,
             )
         except AvpError as exc:  # never raise for a planning or solver failure

@@ -122,14 +122,30 @@ def test_wrong_argument_types() -> None:
     assert field_of(exc) == "config"
 
 
+def _pinned_band_config(**kw) -> avp.PlannerConfig:
+    """One degree-7 segment whose band (14) has zero width (q = 0, no floor): the degree-5
+    acceleration must equal c0 at 15 samples, hence everywhere, contradicting a(t0) = 0."""
+    return avp.PlannerConfig(n_segments=1, q=0.0, band_min_width=0.0, **kw)
+
+
 def test_infeasible_is_a_result_and_plan_raises_with_it() -> None:
-    """One segment of degree 7 cannot meet 4 initial + 3 terminal position/velocity/acceleration
-    conditions per axis plus the band: reported, and plan() raises with the result attached."""
     sc = standard(90, 3.5)
-    config = avp.PlannerConfig(n_segments=1, degree=7, band_min_width=0.0)
+    config = _pinned_band_config(bounds=avp.BoundsPolicy(relaxations=()))
     result = avp.plan_detailed(sc.state, sc.target, config)
     assert not result.ok and result.trajectory is None
-    assert result.status in (avp.PlanStatus.INFEASIBLE, avp.PlanStatus.SOLVER_FAILED)
-    with pytest.raises(avp.PlanningError) as exc:
+    assert result.status is avp.PlanStatus.INFEASIBLE
+    with pytest.raises(avp.InfeasibleError) as exc:
         avp.plan(sc.state, sc.target, config)
     assert exc.value.result is not None and exc.value.result.status is result.status
+
+
+def test_relaxations_are_applied_in_order_and_reported() -> None:
+    """The same problem becomes feasible once the band is widened (alpha range) or dropped;
+    the result lists the relaxations, a prefix of the policy's order, and the log says why."""
+    sc = standard(90, 3.5)
+    result = avp.plan_detailed(sc.state, sc.target, _pinned_band_config())
+    assert result.status is avp.PlanStatus.SOLVED
+    order = avp.BoundsPolicy().relaxations
+    assert 1 <= len(result.relaxations) and result.relaxations == order[: len(result.relaxations)]
+    for relaxation in result.relaxations:
+        assert f"relaxing: {relaxation.value}" in result.log

@@ -62,7 +62,10 @@ def check_band(traj: avp.Trajectory, target: avp.PerchTarget, config: avp.Planne
 def test_standard_scenarios_meet_perching_constraints(scenario: Scenario, solver: str) -> None:
     config = avp.PlannerConfig(solver=solver)
     result = avp.plan_detailed(scenario.state, scenario.target, config)
-    assert result.status is avp.PlanStatus.SOLVED, result.log
+    # OSQP may stop at the iteration cap of the FoV attempt and fall back (16): still a perch
+    allowed = {avp.PlanStatus.SOLVED} if solver == "daqp" else {avp.PlanStatus.SOLVED, avp.PlanStatus.SOLVED_WITHOUT_FOV}
+    assert result.status in allowed, result.log
+    assert result.bounds is not None and result.bounds.certified
     traj = result.trajectory
     assert traj is not None and np.isclose(traj.t0, scenario.state.time)
     check_contact(traj, scenario.target, config)

@@ -21,7 +21,7 @@ from ..types import PerchTarget, State
 from .boundary import continuity_rows, initial_state_rows
 from .cost import cost_matrix
 from .layout import DecisionLayout, layout_for
-from .perching import pre_impact_rows, terminal_rows
+from .perching import pre_impact_rows, terminal_rows, terminal_thrust_rows
 
 Array = npt.NDArray[np.float64]
 
@@ -152,4 +152,7 @@ def build_perching_qp(
     )
     G, lo, hi = pre_impact_rows(layout, knots_rel, target, config)
     ineq = (ConstraintBlock("pre-impact band (14)", G, lo, hi),) if G.shape[0] else ()
+    Ga, la, ha = terminal_thrust_rows(layout, knots_rel, target, config)
+    if Ga.shape[0]:
+        ineq += (ConstraintBlock("contact thrust range (12)", Ga, la, ha),)
     return PerchingQp(layout=layout, durations=T, t0=state.time, P=P, equalities=eq, inequalities=ineq)

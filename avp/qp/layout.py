@@ -64,6 +64,17 @@ class DecisionLayout:
         powers = np.where(k >= order, k - order, 0)
         return self.falling[order] * np.where(k >= order, uu**powers, 0.0)
 
+    @cached_property
+    def fit_nodes(self) -> Array:
+        """Normalised times used to project a trajectory onto one segment (warm starts)."""
+        return np.linspace(0.0, 1.0, 2 * self.n_coeffs)
+
+    @cached_property
+    def fit_pinv(self) -> Array:
+        """Pseudo-inverse of the Vandermonde matrix at :attr:`fit_nodes` (ascending powers)."""
+        V = self.fit_nodes[:, None] ** np.arange(self.n_coeffs)[None, :]
+        return np.linalg.pinv(V)
+
     def columns(self, axis: int | npt.NDArray[np.intp], segment: int | npt.NDArray[np.intp]) -> npt.NDArray[np.intp]:
         """Column indices of the coefficients of ``(axis, segment)`` (broadcast, last axis ``k``)."""
         start = (np.asarray(axis) * self.n_segments + np.asarray(segment)) * self.n_coeffs

@@ -46,10 +46,16 @@ def terminal_rows(
     A = vector_rows(layout, knots_rel, 2, tf)[0]
     for axis in range(3):
         rows.append(P[axis]); rhs.append(target.point[axis]); names.append(f"terminal position {'xyz'[axis]}")
-    c0 = terminal_acceleration(target, config.alpha, config.g)
-    for axis in range(3):
-        rows.append(A[axis] * t_scale**2); rhs.append(c0[axis] * t_scale**2)
-        names.append(f"terminal acceleration (12) {'xyz'[axis]}")
+    if config.alpha_range is None:
+        c0 = terminal_acceleration(target, config.alpha, config.g)
+        for axis in range(3):
+            rows.append(A[axis] * t_scale**2); rhs.append(c0[axis] * t_scale**2)
+            names.append(f"terminal acceleration (12) {'xyz'[axis]}")
+    else:  # (12) with alpha free: a(tf) + g e3 has no component along s1, s2
+        for label, direction in (("s1", target.s1), ("s2", target.s2)):
+            rows.append((direction @ A) * t_scale**2)
+            rhs.append(-config.g * direction[2] * t_scale**2)
+            names.append(f"terminal thrust along s3 (12): no {label} component")
     for label, direction, value in zip(
         ("s1", "s2", "s3"), target.R_WS.T, config.contact_velocity.components(target.incline)
     ):
@@ -61,6 +67,19 @@ def terminal_rows(
     rhs.append(terminal_yaw(target, yaw_start))
     names.append("terminal yaw (13)")
     return np.array(rows), np.array(rhs), names
+
+
+def terminal_thrust_rows(
+    layout: DecisionLayout, knots_rel: Array, target: PerchTarget, config: PlannerConfig
+) -> tuple[Array, Array, Array]:
+    """With ``alpha_range = (lo, hi)``: ``lo <= s3 . (a(t_f) + g e3) <= hi`` (empty otherwise)."""
+    if config.alpha_range is None:
+        n = layout.n_variables
+        return np.zeros((0, n)), np.zeros(0), np.zeros(0)
+    A = vector_rows(layout, knots_rel, 2, float(knots_rel[-1]))[0]
+    lo, hi = config.alpha_range
+    gs3 = config.g * target.s3[2]
+    return (target.s3 @ A)[None, :], np.array([lo - gs3]), np.array([hi - gs3])
 
 
 def band_times(config: PlannerConfig, tf: float) -> Array:
@@ -78,7 +97,8 @@ def pre_impact_rows(
     """Pre-impact band (14): rows ``G`` with ``lower <= G c_hat <= upper``.
 
     PAPER: per component, ``a_i(t)`` between ``c0_i`` and ``(1+q) c0_i`` (min/max, since a
-    negative component flips the order), widened symmetrically to ``band_min_width``.
+    negative component flips the order), widened symmetrically to ``band_min_width``. With an
+    ``alpha_range`` the box spans ``c0(lo)`` to ``(1+q) c0(hi)``.
     CONE: ``f = a + g e3`` has ``alpha <= f.s3 <= (1+q) alpha`` and lies in a polyhedral cone
     of half-angle ``cone_half_angle`` about ``s3`` (inner approximation with ``cone_facets``
     faces, so the true tilt never exceeds the angle).
@@ -90,10 +110,12 @@ def pre_impact_rows(
     if times.size == 0:
         return np.zeros((0, n)), np.zeros(0), np.zeros(0)
     A = vector_rows(layout, knots_rel, 2, times)  # (m, 3, n)
-    c0 = terminal_acceleration(target, config.alpha, config.g)
+    alpha_lo, alpha_hi = config.alpha_range if config.alpha_range is not None else (config.alpha, config.alpha)
     if config.pre_impact is PreImpactMode.PAPER:
-        lo = np.minimum(c0, (1.0 + config.q) * c0)
-        hi = np.maximum(c0, (1.0 + config.q) * c0)
+        c_lo = terminal_acceleration(target, alpha_lo, config.g)
+        c_hi = (1.0 + config.q) * terminal_acceleration(target, alpha_hi, config.g)
+        lo = np.minimum(c_lo, c_hi)
+        hi = np.maximum(c_lo, c_hi)
         pad = np.maximum(0.0, config.band_min_width - (hi - lo)) / 2.0
         lo, hi = lo - pad, hi + pad
         G = A.reshape(-1, n)
@@ -107,8 +129,8 @@ def pre_impact_rows(
     rows, lo, hi = [], [], []
     for k in range(times.size):
         rows.append(s3 @ A[k])
-        lo.append(config.alpha - s3 @ gz)
-        hi.append((1.0 + config.q) * config.alpha - s3 @ gz)
+        lo.append(alpha_lo - s3 @ gz)
+        hi.append((1.0 + config.q) * alpha_hi - s3 @ gz)
         for d in dirs:
             w = d - kappa * s3
             rows.append(w @ A[k])

@@ -11,11 +11,18 @@
 #![deny(unsafe_code)]
 #![warn(clippy::all)]
 
+pub mod anticipation;
+pub mod bounds;
+pub mod certify;
 pub mod error;
+pub mod exact;
 pub mod poly;
 pub mod spline;
+pub mod sturm;
 
 #[cfg(feature = "python")]
 mod python;
+#[cfg(feature = "python")]
+mod python_bounds;
 
 pub use error::{Error, Result};

@@ -1,7 +1,10 @@
 //! Thin PyO3 wrappers: convert NumPy arrays to slices, call a kernel, convert back. Every
 //! kernel error becomes `ValueError`; kernels return `Result` and do not panic on input paths.
 #![allow(clippy::useless_conversion)]
-use numpy::{IntoPyArray, PyArray3, PyReadonlyArray1, PyReadonlyArray3, PyUntypedArrayMethods};
+use numpy::{
+    IntoPyArray, PyArray2, PyArray3, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3,
+    PyUntypedArrayMethods,
+};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 
@@ -48,9 +51,42 @@ fn eval_spline_py<'py>(
     Ok(arr.into_pyarray(py))
 }
 
+/// Anticipated flat state (6) at `t_ex` from odometry at `t_rp` and the committed plan.
+///
+/// `odometry` has shape `(5, axes)` (orders 0..4); returns the same shape.
+#[pyfunction(name = "anticipate")]
+fn anticipate_py<'py>(
+    py: Python<'py>,
+    coeffs: PyReadonlyArray3<'py, f64>,
+    knots: PyReadonlyArray1<'py, f64>,
+    odometry: PyReadonlyArray2<'py, f64>,
+    t_rp: f64,
+    t_ex: f64,
+) -> PyResult<Bound<'py, PyArray2<f64>>> {
+    let shape = coeffs.shape();
+    let shape = (shape[0], shape[1], shape[2]);
+    let c = contiguous("coeffs", coeffs.as_slice())?;
+    let k = contiguous("knots", knots.as_slice())?;
+    let odo_shape = odometry.shape().to_vec();
+    if odo_shape != [crate::anticipation::ORDERS, shape.1] {
+        return Err(PyValueError::new_err(format!(
+            "odometry: expected shape ({}, {}), got {:?}",
+            crate::anticipation::ORDERS, shape.1, odo_shape
+        )));
+    }
+    let o = contiguous("odometry", odometry.as_slice())?;
+    let view = SplineView::new(c, shape, k).map_err(to_py_err)?;
+    let out = crate::anticipation::anticipate(&view, o, t_rp, t_ex).map_err(to_py_err)?;
+    let arr = numpy::ndarray::Array2::from_shape_vec((crate::anticipation::ORDERS, shape.1), out)
+        .map_err(|e| PyValueError::new_err(format!("internal shape error: {e}")))?;
+    Ok(arr.into_pyarray(py))
+}
+
 #[pymodule]
 pub fn _avp_rust(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     m.add_function(wrap_pyfunction!(eval_spline_py, m)?)?;
+    m.add_function(wrap_pyfunction!(anticipate_py, m)?)?;
+    crate::python_bounds::register(m)?;
     Ok(())
 }

@@ -1,0 +1,228 @@
+"""Sound global bound certificates of a flat-output spline (Sec. V-C, Algorithm 1, Appendix B).
+
+Every checked quantity is a polynomial ``F`` per segment that must be negative on the whole
+segment; the Rust core (``avp._avp_rust.certify_spline``) proves ``F < 0`` (:attr:`Certificate.
+WITHIN`) or ``F >= 0`` somewhere (:attr:`Certificate.VIOLATED`, a root that only touches zero
+counts as a violation), using a floating-point fast path with rigorous error bounds and an exact
+big-integer Sturm fallback, so a ``WITHIN`` verdict is never wrong. All limits are
+**mass-normalised** (thrust / mass in m/s^2, thrust rate / mass in m/s^3, rates in rad/s); the
+planner converts from newtons. See ``docs/bounds.md`` for the derivations and error analysis.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from enum import Enum
+
+import numpy as np
+import numpy.typing as npt
+
+from . import _avp_rust
+from .errors import ConfigError
+
+__all__ = ["Bound", "BoundReport", "Certificate", "Violation", "certify_spline"]
+
+
+class Certificate(Enum):
+    """Verdict of one bound on one segment (Algorithm 1, made tri-state and sound)."""
+
+    WITHIN = "within"
+    """``F(t) < 0`` on the whole segment: proven."""
+    VIOLATED = "violated"
+    """``F(t) >= 0`` somewhere on the segment: proven (touching counts)."""
+    UNKNOWN = "unknown"
+    """Not decided (only when the exact fallback is disabled)."""
+    NOT_CHECKED = "not checked"
+    """The limit is ``inf``: the bound was skipped."""
+
+
+_CODES = (Certificate.WITHIN, Certificate.VIOLATED, Certificate.UNKNOWN, Certificate.NOT_CHECKED)
+
+
+class Bound(Enum):
+    """The checked bounds, in the row order of the kernel output."""
+
+    THRUST_MAX = "thrust_max"
+    """``||a + g e3|| < f_max``, eq. (15)."""
+    THRUST_MIN = "thrust_min"
+    """``||a + g e3|| > f_min``, eq. (15)."""
+    THRUST_RATE = "thrust_rate"
+    """``||j|| < fdot_max``, sufficient for ``|d||f||/dt| < fdot_max``, eqs. (19)-(21)."""
+    TILT_RATE = "tilt_rate"
+    """``||j||^2 - w_max^2 ||f||^2 < 0``, sufficient for ``w1^2 + w2^2 < w_max^2``, eq. (22)."""
+    BODY_RATE = "body_rate"
+    """``3||j||^2 + (4 psidot^2 - w_max^2)||f||^2 < 0``, sufficient for ``||w|| < w_max`` when the
+    roll stays within ``|phi| <= pi/4`` (assumption (25)); replaces the paper's (26)-(29)."""
+
+
+_BOUNDS = tuple(Bound)
+
+
+@dataclass(frozen=True)
+class Violation:
+    """One proven violation: the bound, the segment and an estimate of the time (s)."""
+
+    bound: Bound
+    segment: int
+    t: float
+
+    def __str__(self) -> str:
+        return f"{self.bound.value} violated on segment {self.segment} near t = {self.t:.4g} s"
+
+
+@dataclass(frozen=True)
+class BoundReport:
+    """Per bound and per segment verdicts of :func:`certify_spline`.
+
+    Attributes
+    ----------
+    verdicts:
+        ``verdicts[bound][segment]`` is a :class:`Certificate`.
+    times:
+        ``times[bound][segment]``: estimated absolute time (s) of a violation, NaN otherwise.
+    limits:
+        The mass-normalised limits checked (``inf`` = not checked).
+    """
+
+    verdicts: dict[Bound, tuple[Certificate, ...]]
+    times: dict[Bound, tuple[float, ...]]
+    limits: dict[Bound, float]
+
+    @property
+    def n_segments(self) -> int:
+        return len(next(iter(self.verdicts.values()), ()))
+
+    @property
+    def certified(self) -> bool:
+        """True when every checked bound is WITHIN on every segment."""
+        return all(
+            v is Certificate.WITHIN
+            for verdicts in self.verdicts.values()
+            for v in verdicts
+            if v is not Certificate.NOT_CHECKED
+        )
+
+    @property
+    def violations(self) -> list[Violation]:
+        """Every proven violation, bound by bound, in segment order."""
+        return [
+            Violation(bound, seg, self.times[bound][seg])
+            for bound, verdicts in self.verdicts.items()
+            for seg, v in enumerate(verdicts)
+            if v is Certificate.VIOLATED
+        ]
+
+    @property
+    def unknown(self) -> list[tuple[Bound, int]]:
+        """``(bound, segment)`` pairs left undecided."""
+        return [
+            (bound, seg)
+            for bound, verdicts in self.verdicts.items()
+            for seg, v in enumerate(verdicts)
+            if v is Certificate.UNKNOWN
+        ]
+
+    def summary(self) -> str:
+        """A readable multi-line summary."""
+        head = "certified" if self.certified else "NOT certified"
+        lines = [f"bound certificate over {self.n_segments} segment(s): {head}"]
+        for bound, verdicts in self.verdicts.items():
+            if all(v is Certificate.NOT_CHECKED for v in verdicts):
+                lines.append(f"  {bound.value:<12} not checked")
+                continue
+            cells = ", ".join(v.value for v in verdicts)
+            lines.append(f"  {bound.value:<12} limit {self.limits[bound]:.6g}: {cells}")
+        lines.extend(f"  - {v}" for v in self.violations)
+        return "\n".join(lines)
+
+    def __str__(self) -> str:
+        return self.summary()
+
+
+def _limit(name: str, value: float) -> float:
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise ConfigError(name, f"must be a number, got {value!r}") from None
+    if math.isnan(v) or v < 0.0:
+        raise ConfigError(name, f"must be >= 0 (or inf to skip the bound), got {value!r}")
+    return v
+
+
+def certify_spline(
+    coeffs: npt.ArrayLike,
+    knots: npt.ArrayLike,
+    *,
+    thrust_min: float,
+    thrust_max: float,
+    thrust_rate_max: float = math.inf,
+    tilt_rate_max: float = math.inf,
+    body_rate_max: float = math.inf,
+    g: float = 9.81,
+    exact: bool = True,
+) -> BoundReport:
+    """Certifies the actuator bounds of a flat-output spline on every segment (Algorithm 1).
+
+    Parameters
+    ----------
+    coeffs:
+        Shape ``(segments, 4, C)``: axes x, y, z (m) and yaw (rad), ascending powers of
+        ``t - knots[i]``.
+    knots:
+        Shape ``(segments + 1,)``, strictly increasing times (s).
+    thrust_min, thrust_max:
+        Mass-normalised thrust limits (m/s^2) of eq. (15): ``f_min < ||a + g e3|| < f_max``.
+        ``thrust_min = 0`` still checks ``||f|| > 0``; ``inf`` skips a bound.
+    thrust_rate_max:
+        Limit on ``||j||`` (m/s^3), sufficient for the thrust rate, eq. (21).
+    tilt_rate_max:
+        Limit on ``sqrt(w1^2 + w2^2)`` (rad/s) through ``||j||^2 < w^2 ||f||^2``, eq. (22).
+    body_rate_max:
+        Limit on ``||w||`` (rad/s) including the yaw rate, after (24)-(29) under the roll
+        assumption (25) ``|phi| <= pi/4``: ``3||j||^2 + (4 psidot^2 - w^2)||f||^2 < 0``.
+    g:
+        Gravity (m/s^2).
+    exact:
+        Fall back to exact arithmetic when the floating-point path is unsure (default). With
+        ``False`` undecided cells are :attr:`Certificate.UNKNOWN`.
+
+    Returns
+    -------
+    BoundReport
+        ``report.certified`` is True only if every checked bound is proven on every segment.
+
+    Raises
+    ------
+    ConfigError
+        Bad shapes, NaN/inf coefficients, non-increasing knots, negative or NaN limits,
+        ``thrust_min > thrust_max``, or a spline whose checked polynomials exceed degree 40.
+    """
+    limits = {
+        Bound.THRUST_MIN: _limit("thrust_min", thrust_min),
+        Bound.THRUST_MAX: _limit("thrust_max", thrust_max),
+        Bound.THRUST_RATE: _limit("thrust_rate_max", thrust_rate_max),
+        Bound.TILT_RATE: _limit("tilt_rate_max", tilt_rate_max),
+        Bound.BODY_RATE: _limit("body_rate_max", body_rate_max),
+    }
+    if math.isfinite(limits[Bound.THRUST_MIN]) and limits[Bound.THRUST_MIN] > limits[Bound.THRUST_MAX]:
+        raise ConfigError("thrust_min", f"{thrust_min} exceeds thrust_max {thrust_max}")
+    g = float(g)
+    if not math.isfinite(g):
+        raise ConfigError("g", f"must be finite, got {g!r}")
+    c = np.ascontiguousarray(coeffs, dtype=np.float64)
+    k = np.ascontiguousarray(knots, dtype=np.float64)
+    if c.ndim != 3 or c.shape[1] != 4:
+        raise ConfigError("coeffs", f"expected shape (segments, 4, C), got {c.shape}")
+    if k.ndim != 1 or k.shape[0] != c.shape[0] + 1:
+        raise ConfigError("knots", f"expected shape ({c.shape[0] + 1},), got {k.shape}")
+    # The kernel's limits vector and its output rows share one order: Bound (= BOUND_NAMES).
+    row = np.array([limits[b] for b in _BOUNDS], dtype=np.float64)
+    try:
+        codes, times = _avp_rust.certify_spline(c, k, row, g, exact)
+    except ValueError as exc:
+        field = str(exc).split(":", 1)[0] or "coeffs"
+        raise ConfigError(field, str(exc).split(":", 1)[-1].strip()) from exc
+    verdicts = {b: tuple(_CODES[int(x)] for x in codes[i]) for i, b in enumerate(_BOUNDS)}
+    tmap = {b: tuple(float(x) for x in times[i]) for i, b in enumerate(_BOUNDS)}
+    return BoundReport(verdicts=verdicts, times=tmap, limits=limits)

@@ -1,0 +1,82 @@
+"""Evaluation metrics of a plan: target visibility in time and along the path (Tables I, III)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from . import _validate as v
+from .camera import Camera
+from .trajectory import Trajectory
+from .types import PerchTarget
+
+__all__ = ["Visibility", "visibility"]
+
+
+@dataclass(frozen=True)
+class Visibility:
+    """Fractions (0..1) of the manoeuvre with the target inside the camera's FoV.
+
+    Attributes
+    ----------
+    time_fraction:
+        Share of the duration (the paper's "percent of the time", Tables I, III).
+    path_fraction:
+        Share of the path length (arc length) travelled while visible ("percent of distance").
+    first_loss:
+        Time (s, absolute) the target first leaves the FoV, or ``None`` if it never does before
+        contact.
+    """
+
+    time_fraction: float
+    path_fraction: float
+    first_loss: float | None = None
+
+    def __str__(self) -> str:
+        return f"{100 * self.time_fraction:.1f}%/{100 * self.path_fraction:.1f}%"
+
+
+def visibility(
+    trajectory: Trajectory,
+    target: PerchTarget,
+    camera: Camera | None = None,
+    dt: float = 1e-3,
+) -> Visibility:
+    """Fraction of time and of path length with the target point inside ``camera``'s FoV.
+
+    The plan is sampled every ``dt`` (s); the target is visible at a sample when it is inside the
+    one-sided cone (7) (and the image rectangle and range, if the camera sets them) from the
+    position and attitude (11), (13) there. Each interval between samples counts with the mean of
+    its two end flags (trapezoid), weighted by its duration or by its chord length. The contact
+    instant itself (``|n_d| = 0``) is not visible.
+
+    Parameters
+    ----------
+    trajectory:
+        The plan.
+    target:
+        Perch pad; its ``point`` is what the camera must see.
+    camera:
+        :class:`~avp.camera.Camera` (default: front camera, 35 deg half-angle).
+    dt:
+        Sampling step (s).
+    """
+    cam = Camera() if camera is None else camera
+    step = v.positive_float("dt", dt)
+    t = trajectory.sample(step)
+    d = trajectory.derivatives(t, (0, 2))
+    x = d[0, :, :3]
+    R = trajectory.attitude(t)
+    flags = cam.sees(x, R, target.point).astype(float)
+    flags[~np.all(np.isfinite(R.reshape(t.size, -1)), axis=1)] = 0.0
+    w = 0.5 * (flags[1:] + flags[:-1])
+    dtimes = np.diff(t)
+    ds = np.linalg.norm(np.diff(x, axis=0), axis=1)
+    total_t = float(dtimes.sum())
+    total_s = float(ds.sum())
+    tf = float(w @ dtimes / total_t) if total_t > 0 else 0.0
+    pf = float(w @ ds / total_s) if total_s > 0 else tf
+    lost = np.flatnonzero(flags[:-1] < 0.5)
+    first_loss = float(t[lost[0]]) if lost.size else None
+    return Visibility(tf, pf, first_loss)

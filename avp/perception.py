@@ -1,0 +1,235 @@
+"""Perception-aware solve of one perching QP: FoV rows (8)-(9), SQP steps, fallback (16).
+
+Policy (:func:`solve_with_fov`), at fixed segment durations:
+
+* **Replanning** (a ``previous`` plan is given): linearise the cone (7) at ``n_p`` points of the
+  previous plan (mapped by the fraction of the remaining time, which is the same absolute time when
+  the final time did not change), solve the QP with the FoV rows; if that is incompatible (16),
+  solve again without them.
+* **First plan** (no previous plan): solve without FoV rows, linearise around that solution and
+  solve again (an SQP step); repeat, at most ``fov.sqp_iterations`` times, while the visibility
+  (:func:`avp.metrics.visibility` on a 200-sample grid, time + path fraction) improves; a step
+  that does not improve it is discarded (so FoV on never lowers the visibility of a first plan). If the first FoV step is incompatible,
+  the FoV-free solution is returned and the result says the rows were dropped.
+
+Incompatibility (16) is declared when the back-end reports no solution, raises, or returns a point
+whose KKT residuals are out of tolerance: primal violation above
+:data:`avp.solve.FEASIBILITY_TOL` (checked by :func:`~avp.solve.solve_perching_qp`), or dual
+residual / duality gap of the returned ``qpsolvers.Solution`` above :data:`KKT_TOL`. For the FoV
+attempts iterative back-ends (proxqp, osqp) get ``max_iter = fov.fallback_max_iter`` so an
+infeasible problem is declared quickly (docs/perception.md has the measurements).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+import warnings
+from dataclasses import dataclass, replace
+
+import numpy as np
+import numpy.typing as npt
+
+from .config import PlannerConfig
+from .errors import InfeasibleError, SolverError
+from .metrics import visibility
+from .qp.assemble import PerchingQp, build_perching_qp
+from .qp.fov import FovLinearisation, fov_blocks, fov_times
+from .solve import QpOutcome, solve_perching_qp
+from .trajectory import Trajectory
+from .types import PerchTarget, State
+
+Array = npt.NDArray[np.float64]
+
+__all__ = ["FovSolve", "solve_with_fov", "linearise_on", "KKT_TOL", "ITERATIVE_SOLVERS"]
+
+KKT_TOL = 1e-5
+"""Largest accepted dual residual and duality gap (of the unit-diagonal scaled reduced QP)."""
+
+ITERATIVE_SOLVERS = ("proxqp", "osqp", "scs", "clarabel")
+"""Back-ends that accept ``max_iter`` and may iterate to their limit on an infeasible QP."""
+
+_SCORE_GRID = 200
+"""Samples of the coarse visibility grid used to accept an SQP step."""
+
+
+@dataclass(frozen=True)
+class FovSolve:
+    """Result of :func:`solve_with_fov` (the planner wraps it in its attempt record)."""
+
+    outcome: QpOutcome | None
+    trajectory: Trajectory | None
+    fov_dropped: bool
+    build: float
+    solve: float
+    sqp_steps: int = 0
+    linearisation: FovLinearisation | None = None
+
+
+def _trajectory(qp: PerchingQp, outcome: QpOutcome, state: State, T: Array, g: float) -> Trajectory | None:
+    if not outcome.ok or outcome.c_hat is None:
+        return None
+    coeffs = qp.layout.to_physical(outcome.c_hat, T)
+    knots = state.time + np.concatenate([[0.0], np.cumsum(T)])
+    return Trajectory(coeffs, knots, g=g)
+
+
+def linearise_on(
+    qp: PerchingQp, reference: Trajectory, target: PerchTarget, cfg: PlannerConfig
+) -> FovLinearisation:
+    """FoV blocks for ``qp`` linearised on ``reference`` at the ``n_p`` gated times.
+
+    The relative time ``t`` of the new plan (final time ``tf``) maps to the reference's
+    ``t0_new + t (tf_ref - t0_new)/tf``: the same absolute time when both plans end together.
+    """
+    knots = qp.knots_rel
+    tf = float(knots[-1])
+    times = fov_times(0.0, tf, cfg.fov)
+    if times.size == 0:
+        return fov_blocks(qp.layout, knots, times, np.zeros((0, 3)), np.zeros(0), np.zeros((0, 3)),
+                          target.point, cfg.fov, cfg.g)
+    start = max(qp.t0, reference.t0)
+    t_ref = np.clip(qp.t0 + times * (reference.tf - start) / tf, reference.t0, reference.tf)
+    d = reference.derivatives(t_ref, (0, 2))
+    return fov_blocks(qp.layout, knots, times, d[0, :, :3], d[0, :, 3], d[1, :, :3],
+                      target.point, cfg.fov, cfg.g)
+
+
+def _fov_config(cfg: PlannerConfig) -> PlannerConfig:
+    cap = cfg.fov.fallback_max_iter
+    if cap is None or cfg.solver not in ITERATIVE_SOLVERS:
+        return cfg
+    return replace(cfg, solver_options=(("max_iter", int(cap)),) + tuple(cfg.solver_options))
+
+
+def incompatibility(outcome: QpOutcome | None) -> str | None:
+    """Why a FoV-constrained solve counts as incompatible (16), or ``None`` if it is accepted."""
+    if outcome is None:
+        return "no outcome"
+    if not outcome.ok:
+        return f"{outcome.status.value} (max violation {outcome.max_violation:.1e})"
+    sol = outcome.solution
+    if sol is None:
+        return None
+    for name in ("dual_residual", "duality_gap"):
+        try:
+            val = float(getattr(sol, name)())
+        except Exception:  # no multipliers from this back-end: the primal check stands
+            continue
+        if math.isfinite(val) and val > KKT_TOL:
+            return f"KKT {name.replace('_', ' ')} {val:.1e} > {KKT_TOL:.0e}"
+    return None
+
+
+def _score(traj: Trajectory, target: PerchTarget, cfg: PlannerConfig) -> float:
+    vis = visibility(traj, target, cfg.fov.camera, dt=traj.duration / _SCORE_GRID)
+    return vis.time_fraction + vis.path_fraction
+
+
+def solve_with_fov(
+    state: State,
+    target: PerchTarget,
+    cfg: PlannerConfig,
+    T: Array,
+    log: list[str],
+    previous: Trajectory | None = None,
+) -> FovSolve:
+    """Solve the perching QP at durations ``T`` with FoV rows (8)-(9) and the fallback (16).
+
+    Appends one line per QP to ``log``. ``fov_dropped`` is ``True`` when the returned plan was
+    solved without FoV rows because the rows were incompatible (16).
+
+    Raises
+    ------
+    SolverError
+        The back-end is missing or failed on the FoV-free QP.
+    """
+    t0 = time.perf_counter()
+    base = build_perching_qp(state, target, cfg, T)
+    build = time.perf_counter() - t0
+    solve = 0.0
+    fov_cfg = _fov_config(cfg)
+
+    def run(qp: PerchingQp, c: PlannerConfig, label: str, strict: bool) -> tuple[QpOutcome | None, str | None]:
+        nonlocal build, solve
+        try:
+            with warnings.catch_warnings(record=True) as caught:
+                warnings.simplefilter("always" if not strict else "default")
+                out = solve_perching_qp(qp, c)
+            if not strict:  # expected on an incompatible FoV QP (16): log, do not warn
+                log.extend(f"{label}: {w.category.__name__}: {w.message}" for w in caught)
+            else:
+                for w in caught:
+                    warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+        except InfeasibleError as exc:
+            log.append(f"{label}: {exc}")
+            return None, str(exc)
+        except SolverError as exc:
+            if strict:
+                raise
+            log.append(f"{label}: {exc}")
+            return None, str(exc)
+        build += out.build_time
+        solve += out.solve_time
+        return out, None
+
+    def plain(label: str) -> tuple[QpOutcome | None, Trajectory | None]:
+        out, _err = run(base, cfg, label, True)
+        if out is None:
+            return None, None
+        log.append(f"{label} {cfg.solver}: {out.status.value} (max violation {out.max_violation:.1e})")
+        return out, _trajectory(base, out, state, T, cfg.g)
+
+    def with_rows(reference: Trajectory, label: str) -> tuple[QpOutcome | None, Trajectory | None, str | None, FovLinearisation]:
+        nonlocal build
+        tb = time.perf_counter()
+        lin = linearise_on(base, reference, target, cfg)
+        qp = base.with_inequalities(*lin.blocks)
+        build += time.perf_counter() - tb
+        n_vis = int(np.sum(lin.h0 <= 0.0))
+        desc = (f"{label}: {int(lin.placed.sum())}/{lin.times.size} FoV points placed "
+                f"({int(lin.progress.sum())} progress-only, {n_vis} visible at linearisation)")
+        out, err = run(qp, fov_cfg, label, False)
+        why = err if out is None else incompatibility(out)
+        if why is not None:
+            log.append(f"{desc}; incompatible (16): {why}")
+            return out, None, why, lin
+        log.append(f"{desc}; {fov_cfg.solver}: solved (max violation {out.max_violation:.1e})")
+        return out, _trajectory(qp, out, state, T, cfg.g), None, lin
+
+    if previous is not None:
+        probe = fov_times(0.0, float(np.sum(T)), cfg.fov)
+        if probe.size == 0:
+            out, traj = plain("QP (no FoV rows: inside the gate)")
+            return FovSolve(out, traj, False, build, solve)
+        out, traj, why, lin = with_rows(previous, "QP + FoV (linearised on the previous plan)")
+        if why is None:
+            return FovSolve(out, traj, False, build, solve, 1, lin)
+        out, traj = plain("QP without FoV rows (fallback (16))")
+        return FovSolve(out, traj, True, build, solve, 1, lin)
+
+    out0, traj0 = plain("QP (first plan, before FoV)")
+    if traj0 is None or out0 is None:
+        return FovSolve(out0, None, False, build, solve)
+    if fov_times(0.0, float(np.sum(T)), cfg.fov).size == 0:
+        log.append("no FoV points: the gate covers the whole plan")
+        return FovSolve(out0, traj0, False, build, solve)
+    best_out, best_traj = out0, traj0
+    best_score = _score(traj0, target, cfg)
+    best_lin: FovLinearisation | None = None
+    steps = 0
+    for k in range(cfg.fov.sqp_iterations):
+        out, traj, why, lin = with_rows(best_traj, f"SQP step {k + 1}")
+        if why is not None or traj is None or out is None:
+            if k == 0:
+                log.append("FoV rows dropped (16): returning the plan without them")
+                return FovSolve(out0, traj0, True, build, solve, 0, lin)
+            break
+        score = _score(traj, target, cfg)
+        log.append(f"SQP step {k + 1}: visibility time+path {score / 2:.3f} (was {best_score / 2:.3f})")
+        if score <= best_score + 1e-4:
+            if k == 0 and score < best_score - 1e-4:
+                log.append("SQP step 1 lowered the visibility: keeping the first solution")
+            break
+        best_out, best_traj, best_score, best_lin, steps = out, traj, score, lin, k + 1
+    return FovSolve(best_out, best_traj, False, build, solve, steps, best_lin)

@@ -1,0 +1,152 @@
+//! PyO3 wrappers of the Sturm counts and bound certificates (`sturm`, `certify`, `bounds`).
+//! Kernel errors become `ValueError`; batch kernels release the GIL.
+#![allow(clippy::useless_conversion)]
+use numpy::ndarray::Array2;
+use numpy::{IntoPyArray, PyArray1, PyArray2, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3, PyUntypedArrayMethods};
+use pyo3::exceptions::PyValueError;
+use pyo3::prelude::*;
+
+use crate::bounds::{self, BoundKind, Limits, ALL_BOUNDS};
+use crate::certify;
+use crate::python::{contiguous, to_py_err};
+use crate::spline::SplineView;
+use crate::sturm;
+
+/// Exact number of distinct real roots of `sum coeffs[k] x^k` in the closed interval `[a, b]`.
+#[pyfunction(name = "sturm_count")]
+fn sturm_count_py(py: Python<'_>, coeffs: PyReadonlyArray1<'_, f64>, a: f64, b: f64) -> PyResult<usize> {
+    let c = contiguous("coeffs", coeffs.as_slice())?;
+    py.detach(|| sturm::sturm_count(c, a, b)).map_err(to_py_err)
+}
+
+/// Algorithm 1: `(code, t)` with code 0 within (`F < 0` on `[a, b]`), 1 violated at about `t`,
+/// 2 unknown (only with `exact=False`).
+#[pyfunction(name = "certify_below")]
+#[pyo3(signature = (coeffs, a, b, exact = true))]
+fn certify_below_py(
+    py: Python<'_>,
+    coeffs: PyReadonlyArray1<'_, f64>,
+    a: f64,
+    b: f64,
+    exact: bool,
+) -> PyResult<(i8, f64)> {
+    let c = contiguous("coeffs", coeffs.as_slice())?;
+    let cert = py.detach(|| certify::certify_below(c, a, b, exact)).map_err(to_py_err)?;
+    Ok((cert.code(), cert.time()))
+}
+
+/// Algorithm 1 on every row of `coeffs` (shape `(n, C)`) over the same `[a, b]`. Returns
+/// `(codes int8 (n,), t float64 (n,), fast bool (n,))`; `fast` tells whether the floating-point
+/// path decided the row (for unknown-rate statistics).
+#[pyfunction(name = "certify_below_many")]
+#[pyo3(signature = (coeffs, a, b, exact = true))]
+#[allow(clippy::type_complexity)]
+fn certify_below_many_py<'py>(
+    py: Python<'py>,
+    coeffs: PyReadonlyArray2<'py, f64>,
+    a: f64,
+    b: f64,
+    exact: bool,
+) -> PyResult<(Bound<'py, PyArray1<i8>>, Bound<'py, PyArray1<f64>>, Bound<'py, PyArray1<bool>>)> {
+    let shape = coeffs.shape();
+    let (n, m) = (shape[0], shape[1]);
+    let c = contiguous("coeffs", coeffs.as_slice())?;
+    if m == 0 && n > 0 {
+        return Err(PyValueError::new_err("coeffs: needs at least one coefficient per row"));
+    }
+    let out = py
+        .detach(|| -> crate::Result<Vec<(certify::Certificate, bool)>> {
+            if m == 0 {
+                return Ok(Vec::new());
+            }
+            c.chunks_exact(m).map(|row| certify::certify_below_traced(row, a, b, exact)).collect()
+        })
+        .map_err(to_py_err)?;
+    let codes: Vec<i8> = out.iter().map(|(c, _)| c.code()).collect();
+    let times: Vec<f64> = out.iter().map(|(c, _)| c.time()).collect();
+    let fast: Vec<bool> = out.iter().map(|(_, f)| *f).collect();
+    Ok((codes.into_pyarray(py), times.into_pyarray(py), fast.into_pyarray(py)))
+}
+
+/// Certifies the actuator bounds of a flat-output spline (Sec. V-C, Appendix B).
+///
+/// `coeffs` shape `(S, 4, C)` (x, y, z, yaw; ascending powers of `t - knots[i]`), `knots`
+/// shape `(S + 1,)`, `limits` = `[thrust_max, thrust_min, thrust_rate_max, tilt_rate_max,
+/// body_rate_max]` (the row order) mass-normalised (`+inf` = not checked). Returns `(codes int8 (5, S),
+/// t float64 (5, S))` with codes 0 within, 1 violated (at about `t`), 2 unknown, 3 not checked.
+#[pyfunction(name = "certify_spline")]
+#[pyo3(signature = (coeffs, knots, limits, g = 9.81, exact = true))]
+#[allow(clippy::type_complexity)]
+fn certify_spline_py<'py>(
+    py: Python<'py>,
+    coeffs: PyReadonlyArray3<'py, f64>,
+    knots: PyReadonlyArray1<'py, f64>,
+    limits: PyReadonlyArray1<'py, f64>,
+    g: f64,
+    exact: bool,
+) -> PyResult<(Bound<'py, PyArray2<i8>>, Bound<'py, PyArray2<f64>>)> {
+    let shape = coeffs.shape();
+    let shape = (shape[0], shape[1], shape[2]);
+    let c = contiguous("coeffs", coeffs.as_slice())?;
+    let k = contiguous("knots", knots.as_slice())?;
+    let l = contiguous("limits", limits.as_slice())?;
+    let limits = Limits::from_slice(l).map_err(to_py_err)?;
+    let view = SplineView::new(c, shape, k).map_err(to_py_err)?;
+    let verdicts = py.detach(|| bounds::certify_spline(&view, &limits, g, exact)).map_err(to_py_err)?;
+    let n_seg = shape.0;
+    let mut codes = Array2::<i8>::from_elem((ALL_BOUNDS.len(), n_seg), 3);
+    let mut times = Array2::<f64>::from_elem((ALL_BOUNDS.len(), n_seg), f64::NAN);
+    for v in &verdicts {
+        if let Some(cert) = v.certificate {
+            codes[[v.bound as usize, v.segment]] = cert.code();
+            times[[v.bound as usize, v.segment]] = cert.time();
+        }
+    }
+    Ok((codes.into_pyarray(py), times.into_pyarray(py)))
+}
+
+/// The checked polynomial of bound `bound` (row index 0..5) on segment `segment`, in
+/// `u = (t - knots[i]) / (knots[i+1] - knots[i])`, as a rigorous coefficient enclosure
+/// `(lo, hi)` (for tests and diagnostics).
+#[pyfunction(name = "bound_polynomial")]
+#[pyo3(signature = (coeffs, knots, segment, bound, limit, g = 9.81))]
+#[allow(clippy::type_complexity, clippy::too_many_arguments)]
+fn bound_polynomial_py<'py>(
+    py: Python<'py>,
+    coeffs: PyReadonlyArray3<'py, f64>,
+    knots: PyReadonlyArray1<'py, f64>,
+    segment: usize,
+    bound: usize,
+    limit: f64,
+    g: f64,
+) -> PyResult<(Bound<'py, PyArray1<f64>>, Bound<'py, PyArray1<f64>>)> {
+    let shape = coeffs.shape();
+    let shape = (shape[0], shape[1], shape[2]);
+    let c = contiguous("coeffs", coeffs.as_slice())?;
+    let k = contiguous("knots", knots.as_slice())?;
+    let view = SplineView::new(c, shape, k).map_err(to_py_err)?;
+    if shape.1 != 4 {
+        return Err(PyValueError::new_err(format!("coeffs: expected 4 axes (x, y, z, yaw), got {}", shape.1)));
+    }
+    if segment >= shape.0 {
+        return Err(PyValueError::new_err(format!("segment: {segment} out of range for {} segments", shape.0)));
+    }
+    let kind: BoundKind = *ALL_BOUNDS
+        .get(bound)
+        .ok_or_else(|| PyValueError::new_err(format!("bound: index {bound} out of range 0..5")))?;
+    if !(limit.is_finite() && g.is_finite()) {
+        return Err(PyValueError::new_err("limit, g: must be finite"));
+    }
+    let (lo, hi) = bounds::bound_enclosure(&view, segment, kind, limit, g);
+    Ok((lo.into_pyarray(py), hi.into_pyarray(py)))
+}
+
+pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_function(wrap_pyfunction!(sturm_count_py, m)?)?;
+    m.add_function(wrap_pyfunction!(certify_below_py, m)?)?;
+    m.add_function(wrap_pyfunction!(certify_below_many_py, m)?)?;
+    m.add_function(wrap_pyfunction!(certify_spline_py, m)?)?;
+    m.add_function(wrap_pyfunction!(bound_polynomial_py, m)?)?;
+    m.add("BOUND_NAMES", ALL_BOUNDS.iter().map(|k| format!("{k:?}")).collect::<Vec<_>>())?;
+    Ok(())
+}

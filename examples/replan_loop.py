@@ -1,0 +1,35 @@
+"""Your own 30 Hz loop around avp.Replanner: odometry and target estimate in, reference out.
+
+Here a perfect-tracking stand-in replaces the vehicle (odometry = the reference being flown) and
+the target estimate drifts from 10 cm off towards the truth, as a camera's would while approaching.
+"""
+
+import numpy as np
+
+import avp
+from avp.replan import ReplanConfig, Replanner
+
+if __name__ == "__main__":
+    truth = avp.PerchTarget.from_incline([3.5, 0.0, 1.5], np.radians(90.0))
+    guess = avp.PerchTarget(point=truth.point + [0.10, 0.05, -0.08], R_WS=truth.R_WS)
+    replanner = Replanner(guess, replan=ReplanConfig(latency=0.02, deadline=None))
+
+    t, dt = 0.0, 1.0 / 30.0
+    odometry = avp.State.hover([0.0, 0.0, 1.5])
+    while True:
+        blend = min(t / 1.0, 1.0)  # the estimate converges over the first second
+        estimate = avp.PerchTarget(point=(1 - blend) * guess.point + blend * truth.point, R_WS=truth.R_WS)
+        step = replanner.step(t, odometry, estimate)
+        print(f"t={t:5.3f} s  {step.action.name:20s} {step.reason[:40]:40s} "
+              f"solve {step.solve_time * 1e3:5.1f} ms")
+        if step.trajectory is None or t >= step.trajectory.tf:
+            break
+        t = min(t + dt, step.trajectory.tf)
+        ref = replanner.reference(t)  # what the controller tracks now
+        odometry = avp.State(position=ref.position, velocity=ref.velocity, acceleration=ref.acceleration,
+                             jerk=ref.jerk, yaw=float(ref.yaw), yaw_rate=float(ref.yaw_rate), time=t)
+
+    final = replanner.trajectory
+    assert final is not None, "no plan"
+    miss = np.linalg.norm(final(final.tf) - truth.point)
+    print(f"contact at t={final.tf:.3f} s, {miss * 100:.1f} cm from the true pad centre")

@@ -1,0 +1,64 @@
+"""Visibility metric (Tables I, III) on trajectories with known answers."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from avp import Camera, Trajectory, Visibility, visibility
+from avp.errors import ConfigError
+from avp.types import PerchTarget
+
+TARGET_HEIGHT = 1.0
+EDGE = 2.0 - TARGET_HEIGHT / math.tan(math.radians(35.0))  # x where the target leaves the cone
+
+
+def _hover_then_cruise() -> Trajectory:
+    """Hover at the origin for 1 s (yaw 0), then fly along +x at 1 m/s for 4 s (zero acceleration:
+    level attitude, camera along +x)."""
+    c = np.zeros((2, 4, 2))
+    c[1, 0] = [0.0, 1.0]  # x = t - 1 on the second segment
+    return Trajectory(c, [0.0, 1.0, 5.0])
+
+
+def _target(point) -> PerchTarget:
+    return PerchTarget.from_incline(point, math.radians(90.0))
+
+
+def test_known_fractions() -> None:
+    """Target 2 m ahead and 1 m up: visible while 1/(2 - x) <= tan 35 deg, i.e. x <= EDGE."""
+    vis = visibility(_hover_then_cruise(), _target([2.0, 0.0, TARGET_HEIGHT]), dt=1e-3)
+    assert isinstance(vis, Visibility)
+    assert vis.time_fraction == pytest.approx((1.0 + EDGE) / 5.0, abs=2e-3)
+    assert vis.path_fraction == pytest.approx(EDGE / 4.0, abs=2e-3)
+    assert vis.first_loss == pytest.approx(1.0 + EDGE, abs=2e-3)
+
+
+def test_target_behind_is_never_visible() -> None:
+    """The one-sided cone: a target straight behind the camera does not count (DESIGN.md)."""
+    vis = visibility(_hover_then_cruise(), _target([-3.0, 0.0, 0.0]))
+    assert vis.time_fraction == 0.0 and vis.path_fraction == 0.0
+
+
+def test_range_and_rectangular_fov() -> None:
+    target = _target([2.0, 0.0, TARGET_HEIGHT])
+    assert visibility(_hover_then_cruise(), target, Camera(range=1.0)).time_fraction == 0.0
+    # A 40 deg vertical image (20 deg half) loses the target (26.6 deg up at the start) at once.
+    narrow = visibility(_hover_then_cruise(), target, Camera(vertical_fov=math.radians(40.0)))
+    assert narrow.time_fraction == 0.0
+    wide = visibility(_hover_then_cruise(), target, Camera(vertical_fov=math.radians(100.0)))
+    assert wide.time_fraction == pytest.approx((1.0 + EDGE) / 5.0, abs=2e-3)
+
+
+def test_finer_grid_converges() -> None:
+    target = _target([2.0, 0.0, TARGET_HEIGHT])
+    coarse = visibility(_hover_then_cruise(), target, dt=1e-2)
+    fine = visibility(_hover_then_cruise(), target, dt=1e-4)
+    assert abs(coarse.time_fraction - fine.time_fraction) < 5e-3
+
+
+def test_bad_dt() -> None:
+    with pytest.raises(ConfigError, match="dt"):
+        visibility(_hover_then_cruise(), _target([2.0, 0.0, 1.0]), dt=0.0)
