@@ -1,5 +1,7 @@
 """Planning latency: median and p95 of ``avp.plan`` over the standard scenarios per QP back-end,
-and, in the same run, the same QP written with cvxpy and solved by OSQP (baseline).
+and, in the same run, the same QP written with cvxpy and solved by OSQP (baseline). Rows:
+the perching QP alone (FoV rows and certificate off), then the default pipeline stage by stage
+(+ the Sturm certificate of the vehicle limits, + the FoV SQP step).
 
     python benchmarks/bench_plan.py [--repeats 30]
 
@@ -99,13 +101,19 @@ def main() -> None:
     if base is not None:
         print(row("cvxpy + OSQP (build+solve)", base, None))
         print(row("cvxpy + OSQP (solve only)", cached, base_med))
+    # The perching QP alone (issue 2's target): no FoV rows, no certificate.
+    bare = dict(fov=avp.FovConfig(enabled=False), bounds=avp.BoundsPolicy(certify=False))
     for solver in ("daqp", "proxqp", "osqp"):
         if solver not in qpsolvers.available_solvers:
             continue
-        s = time_plan(avp.PlannerConfig(solver=solver), args.repeats)
-        print(row(f"avp.plan [{solver}]", s, base_med))
-    s = time_plan(avp.PlannerConfig(solver="proxqp", qp_form=avp.QpForm.FULL), args.repeats)
-    print(row("avp.plan [proxqp, full QP]", s, base_med))
+        s = time_plan(avp.PlannerConfig(solver=solver, **bare), args.repeats)
+        print(row(f"perching QP [{solver}]", s, base_med))
+    s = time_plan(avp.PlannerConfig(solver="proxqp", qp_form=avp.QpForm.FULL, **bare), args.repeats)
+    print(row("perching QP [proxqp, full]", s, base_med))
+    s = time_plan(avp.PlannerConfig(fov=avp.FovConfig(enabled=False)), args.repeats)
+    print(row("+ certificate [daqp]", s, base_med))
+    s = time_plan(avp.PlannerConfig(), args.repeats)
+    print(row("+ FoV SQP (defaults) [daqp]", s, base_med))
 
 
 if __name__ == "__main__":

@@ -113,6 +113,26 @@ pub fn bernstein_upper(p: &[f64]) -> f64 {
     best
 }
 
+/// Depth of the Bernstein subdivision tried before the Sturm chain (at most `2^depth` pieces).
+const SUBDIVISION_DEPTH: u32 = 4;
+
+/// Proves `p(u) < 0` on `[a, b]` (a sub-interval of `[0, 1]`) by the Bernstein convex-hull bound
+/// of `p` re-parametrised on `[a, b]`, halving pieces whose bound is not negative, `depth` times
+/// at most. Sound: the re-parametrised coefficients are outward-rounded enclosures (their upper
+/// polynomial bounds `p` on the piece, all powers of `u` being >= 0 there) and
+/// [`bernstein_upper`] rounds upwards. `false` means "not proven", never "violated".
+pub fn bernstein_subdivided_negative(p: &[f64], a: f64, b: f64, depth: u32) -> bool {
+    let (_, hi) = unit_enclosure(p, a, b);
+    if bernstein_upper(&hi) < 0.0 {
+        return true;
+    }
+    if depth == 0 || !(eval_enclosure(&hi, 0.0).hi < 0.0) {
+        return false;
+    }
+    let m = 0.5 * (a + b);
+    bernstein_subdivided_negative(p, a, m, depth - 1) && bernstein_subdivided_negative(p, m, b, depth - 1)
+}
+
 /// `u` in `[0, 1]` of the largest of `samples + 1` equally spaced values of `p`.
 pub fn argmax_sample(p: &[f64], samples: usize) -> f64 {
     let mut best = (f64::NEG_INFINITY, 0.0);
@@ -155,7 +175,7 @@ pub fn certify_enclosure(lo: &[f64], hi: &[f64]) -> UnitVerdict {
         return UnitVerdict::Unsure;
     }
     let hi_t = sturm::trim(hi);
-    if hi_t.len() <= 1 || bernstein_upper(hi_t) < 0.0 {
+    if hi_t.len() <= 1 || bernstein_upper(hi_t) < 0.0 || bernstein_subdivided_negative(hi_t, 0.0, 1.0, SUBDIVISION_DEPTH) {
         return UnitVerdict::Within;
     }
     // Cheap proof of a gross violation before building the Sturm chain.
@@ -262,6 +282,18 @@ mod tests {
             assert!(crate::poly::eval(&p, j as f64 / 1000.0) <= ub);
         }
         assert_eq!(BINOM[40][20], 137846528820.0);
+    }
+
+    #[test]
+    fn subdivision_proves_negativity_the_global_hull_cannot() {
+        // p(u) = -0.01 - (u - 0.5)^2 * 0 + 4 u (1 - u) - 1.02: max -0.02 at u = 0.5, yet the
+        // Bernstein coefficients on [0, 1] are [-1.02, 0.98, -1.02] (hull reaches 0.98)
+        let p = [-1.02, 4.0, -4.0];
+        assert!(bernstein_upper(&p) > 0.0);
+        assert!(bernstein_subdivided_negative(&p, 0.0, 1.0, 6));
+        // and it never proves a polynomial that does reach zero
+        let q = [-1.0, 4.0, -4.0]; // max exactly 0 at u = 0.5
+        assert!(!bernstein_subdivided_negative(&q, 0.0, 1.0, 10));
     }
 
     #[test]
