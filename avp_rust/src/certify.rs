@@ -175,12 +175,16 @@ pub fn certify_enclosure(lo: &[f64], hi: &[f64]) -> UnitVerdict {
         return UnitVerdict::Unsure;
     }
     let hi_t = sturm::trim(hi);
-    if hi_t.len() <= 1 || bernstein_upper(hi_t) < 0.0 || bernstein_subdivided_negative(hi_t, 0.0, 1.0, SUBDIVISION_DEPTH) {
+    if hi_t.len() <= 1 || bernstein_upper(hi_t) < 0.0 {
         return UnitVerdict::Within;
     }
-    // Cheap proof of a gross violation before building the Sturm chain.
+    // Cheap proof of a gross violation before anything more expensive.
     if let Some(u) = proven_violation(lo, COARSE) {
         return UnitVerdict::Violated(u);
+    }
+    // Bernstein subdivision: settles clear "within" cases whose chain would be ill-conditioned.
+    if bernstein_subdivided_negative(hi_t, 0.0, 1.0, SUBDIVISION_DEPTH) {
+        return UnitVerdict::Within;
     }
     // Algorithm 1, line 5: no root inside and negative ends => negative everywhere.
     let exact_input = lo == hi;
