@@ -51,6 +51,7 @@ from .config import (
     VehicleLimits,
 )
 from .planner import PlanResult, PlanStatus, PlanTimings, plan, plan_detailed
+from .replan import ReplanAction, ReplanConfig, Replanner, ReplanStep
 from .trajectory import Derivative, FlatOutput, Trajectory
 from .types import PerchTarget, State
 
@@ -82,4 +83,8 @@ __all__ += [
     "VehicleLimits",
     "plan",
     "plan_detailed",
+    "ReplanAction",
+    "ReplanConfig",
+    "ReplanStep",
+    "Replanner",
 ]

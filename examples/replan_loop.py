@@ -7,12 +7,11 @@ the target estimate drifts from 10 cm off towards the truth, as a camera's would
 import numpy as np
 
 import avp
-from avp.replan import ReplanConfig, Replanner
 
 if __name__ == "__main__":
     truth = avp.PerchTarget.from_incline([3.5, 0.0, 1.5], np.radians(90.0))
     guess = avp.PerchTarget(point=truth.point + [0.10, 0.05, -0.08], R_WS=truth.R_WS)
-    replanner = Replanner(guess, replan=ReplanConfig(latency=0.02, deadline=None))
+    replanner = avp.Replanner(guess, replan=avp.ReplanConfig(latency=0.02, deadline=None))
 
     t, dt = 0.0, 1.0 / 30.0
     odometry = avp.State.hover([0.0, 0.0, 1.5])
