@@ -13,12 +13,20 @@ pub const ORDERS: usize = 5;
 ///
 /// `odometry` is laid out the same way (`x_n^(k)` for each axis). Both times must lie in the
 /// committed plan's domain and `t_ex >= t_rp`.
-pub fn anticipate(plan: &SplineView<'_>, odometry: &[f64], t_rp: f64, t_ex: f64) -> Result<Vec<f64>> {
+pub fn anticipate(
+    plan: &SplineView<'_>,
+    odometry: &[f64],
+    t_rp: f64,
+    t_ex: f64,
+) -> Result<Vec<f64>> {
     let a = plan.n_axes();
     if odometry.len() != ORDERS * a {
         return Err(Error::Shape {
             arg: "odometry",
-            detail: format!("expected {ORDERS} x {a} values (orders 0..4 x axes), got {}", odometry.len()),
+            detail: format!(
+                "expected {ORDERS} x {a} values (orders 0..4 x axes), got {}",
+                odometry.len()
+            ),
         });
     }
     check_finite("odometry", odometry)?;
@@ -29,11 +37,16 @@ pub fn anticipate(plan: &SplineView<'_>, odometry: &[f64], t_rp: f64, t_ex: f64)
     if t_rp < t0 || t_ex > tf {
         return Err(Error::Invalid {
             arg: "t_ex",
-            detail: format!("t_rp = {t_rp} and t_ex = {t_ex} must lie in the committed plan [{t0}, {tf}]"),
+            detail: format!(
+                "t_rp = {t_rp} and t_ex = {t_ex} must lie in the committed plan [{t0}, {tf}]"
+            ),
         });
     }
     if t_ex < t_rp {
-        return Err(Error::Invalid { arg: "t_ex", detail: format!("t_ex = {t_ex} is before t_rp = {t_rp}") });
+        return Err(Error::Invalid {
+            arg: "t_ex",
+            detail: format!("t_ex = {t_ex} is before t_rp = {t_rp}"),
+        });
     }
     let mut out = odometry.to_vec();
     let mut at_ex = vec![0.0; a];

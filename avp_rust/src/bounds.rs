@@ -45,8 +45,13 @@ pub enum BoundKind {
 }
 
 /// Every bound, in row order.
-pub const ALL_BOUNDS: [BoundKind; 5] =
-    [BoundKind::ThrustMax, BoundKind::ThrustMin, BoundKind::ThrustRate, BoundKind::TiltRate, BoundKind::BodyRate];
+pub const ALL_BOUNDS: [BoundKind; 5] = [
+    BoundKind::ThrustMax,
+    BoundKind::ThrustMin,
+    BoundKind::ThrustRate,
+    BoundKind::TiltRate,
+    BoundKind::BodyRate,
+];
 
 /// Mass-normalised limits; `+inf` means "not checked".
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -69,15 +74,27 @@ impl Limits {
     /// Each value must be `>= 0` or `+inf` (not checked).
     pub fn from_slice(v: &[f64]) -> Result<Self> {
         if v.len() != ALL_BOUNDS.len() {
-            return Err(Error::Shape { arg: "limits", detail: format!("expected 5 values, got {}", v.len()) });
+            return Err(Error::Shape {
+                arg: "limits",
+                detail: format!("expected 5 values, got {}", v.len()),
+            });
         }
         if v.iter().any(|x| x.is_nan()) {
             return Err(Error::NonFinite { arg: "limits" });
         }
         if let Some(bad) = v.iter().find(|&&x| x < 0.0) {
-            return Err(Error::Invalid { arg: "limits", detail: format!("limit {bad} is negative; use +inf to skip a bound") });
+            return Err(Error::Invalid {
+                arg: "limits",
+                detail: format!("limit {bad} is negative; use +inf to skip a bound"),
+            });
         }
-        Ok(Self { thrust_max: v[0], thrust_min: v[1], thrust_rate_max: v[2], tilt_rate_max: v[3], body_rate_max: v[4] })
+        Ok(Self {
+            thrust_max: v[0],
+            thrust_min: v[1],
+            thrust_rate_max: v[2],
+            tilt_rate_max: v[3],
+            body_rate_max: v[4],
+        })
     }
 
     /// The limit of one bound (`+inf` = not checked).
@@ -193,7 +210,8 @@ fn minus_const<S: Scalar>(p: &[S], c: &S) -> Vec<S> {
 
 /// Squared norm `sum_i v_i²` of a vector of polynomials.
 fn sq_norm<S: Scalar>(v: &[Vec<S>]) -> Vec<S> {
-    v.iter().fold(vec![S::zero()], |acc, p| padd(&acc, &pmul(p, p)))
+    v.iter()
+        .fold(vec![S::zero()], |acc, p| padd(&acc, &pmul(p, p)))
 }
 
 /// Coefficients in `u` of the `order`-th time derivative of `sum c_k tau^k` at `tau = T u`:
@@ -206,7 +224,11 @@ fn scaled_derivative<S: Scalar>(c: &[f64], order: usize, h: &S) -> Vec<S> {
     let mut out = Vec::with_capacity(c.len() - order);
     for m in 0..c.len() - order {
         let k = m + order;
-        out.push(S::from_f64(falling_factorial(k, order)).mul(&S::from_f64(c[k])).mul(&hp));
+        out.push(
+            S::from_f64(falling_factorial(k, order))
+                .mul(&S::from_f64(c[k]))
+                .mul(&hp),
+        );
         hp = hp.mul(h);
     }
     out
@@ -222,11 +244,19 @@ struct SegmentPolys<S> {
 fn segment_polys<S: Scalar>(view: &SplineView<'_>, seg: usize, g: f64) -> SegmentPolys<S> {
     let knots = view.knots();
     let h = S::from_f64(knots[seg + 1]).sub(&S::from_f64(knots[seg]));
-    let mut acc: Vec<Vec<S>> = (0..3).map(|ax| scaled_derivative(view.poly(seg, ax), 2, &h)).collect();
+    let mut acc: Vec<Vec<S>> = (0..3)
+        .map(|ax| scaled_derivative(view.poly(seg, ax), 2, &h))
+        .collect();
     acc[2][0] = acc[2][0].add(&S::from_f64(g)); // f = a + g e3
-    let jerk: Vec<Vec<S>> = (0..3).map(|ax| scaled_derivative(view.poly(seg, ax), 3, &h)).collect();
+    let jerk: Vec<Vec<S>> = (0..3)
+        .map(|ax| scaled_derivative(view.poly(seg, ax), 3, &h))
+        .collect();
     let psid = scaled_derivative(view.poly(seg, 3), 1, &h);
-    SegmentPolys { f2: sq_norm(&acc), j2: sq_norm(&jerk), psid2: pmul(&psid, &psid) }
+    SegmentPolys {
+        f2: sq_norm(&acc),
+        j2: sq_norm(&jerk),
+        psid2: pmul(&psid, &psid),
+    }
 }
 
 /// The checked polynomial `F` of one bound (negative everywhere iff the bound holds).
@@ -263,10 +293,19 @@ pub fn bound_degree(kind: BoundKind, n_coeffs: usize) -> usize {
 
 /// The checked polynomial of one bound on one segment, in `u` on `[0, 1]`, as an interval
 /// enclosure `(lo, hi)` of the exact coefficients.
-pub fn bound_enclosure(view: &SplineView<'_>, seg: usize, kind: BoundKind, limit: f64, g: f64) -> (Vec<f64>, Vec<f64>) {
+pub fn bound_enclosure(
+    view: &SplineView<'_>,
+    seg: usize,
+    kind: BoundKind,
+    limit: f64,
+    g: f64,
+) -> (Vec<f64>, Vec<f64>) {
     let polys = segment_polys::<Iv>(view, seg, g);
     let f = bound_poly(kind, &polys, limit);
-    (f.iter().map(|x| x.lo).collect(), f.iter().map(|x| x.hi).collect())
+    (
+        f.iter().map(|x| x.lo).collect(),
+        f.iter().map(|x| x.hi).collect(),
+    )
 }
 
 fn validate(view: &SplineView<'_>, limits: &Limits, g: f64) -> Result<()> {
@@ -299,13 +338,22 @@ fn validate(view: &SplineView<'_>, limits: &Limits, g: f64) -> Result<()> {
 /// Output order is bound-major (`ALL_BOUNDS` x segments). With `exact = true` every checked
 /// verdict is Within or Violated (never Unknown): undecided fast-path cases are rebuilt and
 /// decided in exact rational arithmetic. Violation times are absolute (`t_i + T u`).
-pub fn certify_spline(view: &SplineView<'_>, limits: &Limits, g: f64, exact: bool) -> Result<Vec<BoundVerdict>> {
+pub fn certify_spline(
+    view: &SplineView<'_>,
+    limits: &Limits,
+    g: f64,
+    exact: bool,
+) -> Result<Vec<BoundVerdict>> {
     validate(view, limits, g)?;
     let n_seg = view.n_segments();
     let mut verdicts: Vec<BoundVerdict> = Vec::with_capacity(ALL_BOUNDS.len() * n_seg);
     for kind in ALL_BOUNDS {
         for segment in 0..n_seg {
-            verdicts.push(BoundVerdict { bound: kind, segment, certificate: None });
+            verdicts.push(BoundVerdict {
+                bound: kind,
+                segment,
+                certificate: None,
+            });
         }
     }
     if !ALL_BOUNDS.iter().any(|&k| limits.checked(k)) {
@@ -326,13 +374,16 @@ pub fn certify_spline(view: &SplineView<'_>, limits: &Limits, g: f64, exact: boo
             let hi: Vec<f64> = f.iter().map(|x| x.hi).collect();
             let mut v = certify_enclosure(&lo, &hi);
             if v == UnitVerdict::Unsure && exact {
-                let ep = exact_polys.get_or_insert_with(|| segment_polys::<BigRational>(view, seg, g));
+                let ep =
+                    exact_polys.get_or_insert_with(|| segment_polys::<BigRational>(view, seg, g));
                 let fe = bound_poly(kind, ep, limit);
                 v = certify_unit_exact(&exact::int_poly_from_rational(&fe));
             }
             let cert = match v {
                 UnitVerdict::Within => Certificate::Within,
-                UnitVerdict::Violated(u) => Certificate::Violated { t: (t0 + (t1 - t0) * u).clamp(t0, t1) },
+                UnitVerdict::Violated(u) => Certificate::Violated {
+                    t: (t0 + (t1 - t0) * u).clamp(t0, t1),
+                },
                 UnitVerdict::Unsure => Certificate::Unknown,
             };
             verdicts[row * n_seg + seg].certificate = Some(cert);
@@ -361,9 +412,18 @@ mod tests {
     }
 
     fn verdict(c: &[f64], knots: &[f64], l: Limits, kind: BoundKind) -> Certificate {
-        let view = SplineView::new(c, (knots.len() - 1, 4, c.len() / 4 / (knots.len() - 1)), knots).unwrap();
+        let view = SplineView::new(
+            c,
+            (knots.len() - 1, 4, c.len() / 4 / (knots.len() - 1)),
+            knots,
+        )
+        .unwrap();
         let v = certify_spline(&view, &l, 9.81, true).unwrap();
-        v.iter().find(|b| b.bound == kind).unwrap().certificate.unwrap()
+        v.iter()
+            .find(|b| b.bound == kind)
+            .unwrap()
+            .certificate
+            .unwrap()
     }
 
     #[test]
@@ -371,11 +431,43 @@ mod tests {
         // hovering: a = 0, so ‖f‖ = g exactly
         let c = spline([&[1.0], &[2.0], &[3.0], &[0.0]], 8);
         let k = [0.0, 1.5];
-        assert_eq!(verdict(&c, &k, limits([9.82, 0.0, INF, INF, INF]), BoundKind::ThrustMax), Certificate::Within);
+        assert_eq!(
+            verdict(
+                &c,
+                &k,
+                limits([9.82, 0.0, INF, INF, INF]),
+                BoundKind::ThrustMax
+            ),
+            Certificate::Within
+        );
         // the limit exactly at g: touching is a violation
-        assert!(matches!(verdict(&c, &k, limits([9.81, 0.0, INF, INF, INF]), BoundKind::ThrustMax), Certificate::Violated { .. }));
-        assert!(matches!(verdict(&c, &k, limits([INF, 9.81, INF, INF, INF]), BoundKind::ThrustMin), Certificate::Violated { .. }));
-        assert_eq!(verdict(&c, &k, limits([INF, 9.80, INF, INF, INF]), BoundKind::ThrustMin), Certificate::Within);
+        assert!(matches!(
+            verdict(
+                &c,
+                &k,
+                limits([9.81, 0.0, INF, INF, INF]),
+                BoundKind::ThrustMax
+            ),
+            Certificate::Violated { .. }
+        ));
+        assert!(matches!(
+            verdict(
+                &c,
+                &k,
+                limits([INF, 9.81, INF, INF, INF]),
+                BoundKind::ThrustMin
+            ),
+            Certificate::Violated { .. }
+        ));
+        assert_eq!(
+            verdict(
+                &c,
+                &k,
+                limits([INF, 9.80, INF, INF, INF]),
+                BoundKind::ThrustMin
+            ),
+            Certificate::Within
+        );
     }
 
     #[test]
@@ -385,17 +477,56 @@ mod tests {
         let c = spline([&[0.0], &[0.0], &[8.0, 12.0, 6.0, 1.0], &[0.0]], 6);
         let k = [2.0, 3.0];
         // max ‖f‖ = 9.81 + 18 = 27.81 at t = 3
-        assert_eq!(verdict(&c, &k, limits([27.82, 0.0, INF, INF, INF]), BoundKind::ThrustMax), Certificate::Within);
-        match verdict(&c, &k, limits([27.0, 0.0, INF, INF, INF]), BoundKind::ThrustMax) {
+        assert_eq!(
+            verdict(
+                &c,
+                &k,
+                limits([27.82, 0.0, INF, INF, INF]),
+                BoundKind::ThrustMax
+            ),
+            Certificate::Within
+        );
+        match verdict(
+            &c,
+            &k,
+            limits([27.0, 0.0, INF, INF, INF]),
+            BoundKind::ThrustMax,
+        ) {
             Certificate::Violated { t } => assert_eq!(t, 3.0),
             other => panic!("{other:?}"),
         }
         // jerk is 6 everywhere: rate bound 6 is touched -> violated, 6.001 within
-        assert!(matches!(verdict(&c, &k, limits([INF, 0.0, 6.0, INF, INF]), BoundKind::ThrustRate), Certificate::Violated { .. }));
-        assert_eq!(verdict(&c, &k, limits([INF, 0.0, 6.001, INF, INF]), BoundKind::ThrustRate), Certificate::Within);
+        assert!(matches!(
+            verdict(
+                &c,
+                &k,
+                limits([INF, 0.0, 6.0, INF, INF]),
+                BoundKind::ThrustRate
+            ),
+            Certificate::Violated { .. }
+        ));
+        assert_eq!(
+            verdict(
+                &c,
+                &k,
+                limits([INF, 0.0, 6.001, INF, INF]),
+                BoundKind::ThrustRate
+            ),
+            Certificate::Within
+        );
         // tilt: ‖j‖/‖f‖ = 6 / (9.81 + 6 t) <= 6 / 21.81 = 0.2751 on [2, 3]
-        assert_eq!(verdict(&c, &k, limits([INF, 0.0, INF, 0.276, INF]), BoundKind::TiltRate), Certificate::Within);
-        assert!(matches!(verdict(&c, &k, limits([INF, 0.0, INF, 0.27, INF]), BoundKind::TiltRate), Certificate::Violated { t } if (t - 2.0).abs() < 0.05));
+        assert_eq!(
+            verdict(
+                &c,
+                &k,
+                limits([INF, 0.0, INF, 0.276, INF]),
+                BoundKind::TiltRate
+            ),
+            Certificate::Within
+        );
+        assert!(
+            matches!(verdict(&c, &k, limits([INF, 0.0, INF, 0.27, INF]), BoundKind::TiltRate), Certificate::Violated { t } if (t - 2.0).abs() < 0.05)
+        );
     }
 
     #[test]
@@ -403,8 +534,24 @@ mod tests {
         // hover with constant yaw rate 0.5 rad/s: bound 3*0 + 4*0.25 = 1 -> |w| bound 1 rad/s
         let c = spline([&[0.0], &[0.0], &[0.0], &[0.0, 0.5]], 8);
         let k = [0.0, 2.0];
-        assert_eq!(verdict(&c, &k, limits([INF, 0.0, INF, INF, 1.001]), BoundKind::BodyRate), Certificate::Within);
-        assert!(matches!(verdict(&c, &k, limits([INF, 0.0, INF, INF, 1.0]), BoundKind::BodyRate), Certificate::Violated { .. }));
+        assert_eq!(
+            verdict(
+                &c,
+                &k,
+                limits([INF, 0.0, INF, INF, 1.001]),
+                BoundKind::BodyRate
+            ),
+            Certificate::Within
+        );
+        assert!(matches!(
+            verdict(
+                &c,
+                &k,
+                limits([INF, 0.0, INF, INF, 1.0]),
+                BoundKind::BodyRate
+            ),
+            Certificate::Violated { .. }
+        ));
     }
 
     #[test]

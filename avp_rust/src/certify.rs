@@ -82,7 +82,9 @@ pub fn eval_enclosure(p: &[f64], u: f64) -> Iv {
     if u == 0.0 {
         return Iv::point(p.first().copied().unwrap_or(0.0));
     }
-    p.iter().rev().fold(Iv::ZERO, |acc, &c| acc.mul_f64(u).add(Iv::point(c)))
+    p.iter()
+        .rev()
+        .fold(Iv::ZERO, |acc, &c| acc.mul_f64(u).add(Iv::point(c)))
 }
 
 /// A rigorous upper bound of `max_{u in [0,1]} p(u)`: the largest Bernstein coefficient
@@ -121,6 +123,7 @@ const SUBDIVISION_DEPTH: u32 = 4;
 /// at most. Sound: the re-parametrised coefficients are outward-rounded enclosures (their upper
 /// polynomial bounds `p` on the piece, all powers of `u` being >= 0 there) and
 /// [`bernstein_upper`] rounds upwards. `false` means "not proven", never "violated".
+#[allow(clippy::neg_cmp_op_on_partial_ord)] // `!(x < 0.0)` is deliberately true for NaN
 pub fn bernstein_subdivided_negative(p: &[f64], a: f64, b: f64, depth: u32) -> bool {
     let (_, hi) = unit_enclosure(p, a, b);
     if bernstein_upper(&hi) < 0.0 {
@@ -130,7 +133,8 @@ pub fn bernstein_subdivided_negative(p: &[f64], a: f64, b: f64, depth: u32) -> b
         return false;
     }
     let m = 0.5 * (a + b);
-    bernstein_subdivided_negative(p, a, m, depth - 1) && bernstein_subdivided_negative(p, m, b, depth - 1)
+    bernstein_subdivided_negative(p, a, m, depth - 1)
+        && bernstein_subdivided_negative(p, m, b, depth - 1)
 }
 
 /// `u` in `[0, 1]` of the largest of `samples + 1` equally spaced values of `p`.
@@ -205,7 +209,9 @@ pub fn certify_unit_exact(p: &IntPoly) -> UnitVerdict {
         UnitExact::Within => UnitVerdict::Within,
         UnitExact::ViolatedAt0 => UnitVerdict::Violated(0.0),
         UnitExact::ViolatedAt1 => UnitVerdict::Violated(1.0),
-        UnitExact::ViolatedInside => UnitVerdict::Violated(argmax_sample(&exact::to_f64_scaled(p), SAMPLES)),
+        UnitExact::ViolatedInside => {
+            UnitVerdict::Violated(argmax_sample(&exact::to_f64_scaled(p), SAMPLES))
+        }
     }
 }
 
@@ -226,13 +232,18 @@ pub fn unit_enclosure(coeffs: &[f64], a: f64, b: f64) -> (Vec<f64>, Vec<f64>) {
         next[0] = next[0].add(Iv::point(c));
         acc = next;
     }
-    (acc.iter().map(|x| x.lo).collect(), acc.iter().map(|x| x.hi).collect())
+    (
+        acc.iter().map(|x| x.lo).collect(),
+        acc.iter().map(|x| x.hi).collect(),
+    )
 }
 
 fn to_time(v: UnitVerdict, a: f64, b: f64) -> Certificate {
     match v {
         UnitVerdict::Within => Certificate::Within,
-        UnitVerdict::Violated(u) => Certificate::Violated { t: (a + (b - a) * u).clamp(a, b) },
+        UnitVerdict::Violated(u) => Certificate::Violated {
+            t: (a + (b - a) * u).clamp(a, b),
+        },
         UnitVerdict::Unsure => Certificate::Unknown,
     }
 }
@@ -248,18 +259,31 @@ pub fn certify_below(coeffs: &[f64], a: f64, b: f64, exact: bool) -> Result<Cert
         let p = exact::int_poly_from_f64(coeffs);
         let r = exact::rational(a);
         let v = exact::eval_hom(&p, r.numer(), r.denom());
-        return Ok(if num_traits::Signed::is_negative(&v) { Certificate::Within } else { Certificate::Violated { t: a } });
+        return Ok(if num_traits::Signed::is_negative(&v) {
+            Certificate::Within
+        } else {
+            Certificate::Violated { t: a }
+        });
     }
     let (lo, hi) = unit_enclosure(coeffs, a, b);
     let fast = certify_enclosure(&lo, &hi);
     if fast != UnitVerdict::Unsure || !exact {
         return Ok(to_time(fast, a, b));
     }
-    Ok(to_time(certify_unit_exact(&exact::unit_shift(coeffs, a, b)), a, b))
+    Ok(to_time(
+        certify_unit_exact(&exact::unit_shift(coeffs, a, b)),
+        a,
+        b,
+    ))
 }
 
 /// Like [`certify_below`] but also reports whether the fast path decided (for statistics).
-pub fn certify_below_traced(coeffs: &[f64], a: f64, b: f64, exact: bool) -> Result<(Certificate, bool)> {
+pub fn certify_below_traced(
+    coeffs: &[f64],
+    a: f64,
+    b: f64,
+    exact: bool,
+) -> Result<(Certificate, bool)> {
     sturm::validate_poly(coeffs)?;
     sturm::validate_interval(a, b)?;
     if a == b {
@@ -271,7 +295,10 @@ pub fn certify_below_traced(coeffs: &[f64], a: f64, b: f64, exact: bool) -> Resu
     if fast != UnitVerdict::Unsure || !exact {
         return Ok((to_time(fast, a, b), fast != UnitVerdict::Unsure));
     }
-    Ok((to_time(certify_unit_exact(&exact::unit_shift(coeffs, a, b)), a, b), false))
+    Ok((
+        to_time(certify_unit_exact(&exact::unit_shift(coeffs, a, b)), a, b),
+        false,
+    ))
 }
 
 #[cfg(test)]
@@ -304,7 +331,10 @@ mod tests {
     fn verdicts_on_simple_cases() {
         // -(t - 0.5)^2 - 0.01 < 0 everywhere
         let inside = [-0.26, 1.0, -1.0];
-        assert_eq!(certify_below(&inside, 0.0, 1.0, true).unwrap(), Certificate::Within);
+        assert_eq!(
+            certify_below(&inside, 0.0, 1.0, true).unwrap(),
+            Certificate::Within
+        );
         // -(t - 0.5)^2 touches zero at 0.5: violated (conservative)
         let touch = [-0.25, 1.0, -1.0];
         let c = certify_below(&touch, 0.0, 1.0, true).unwrap();
@@ -313,12 +343,24 @@ mod tests {
             other => panic!("expected violation, got {other:?}"),
         }
         // the same polynomial is within on [0.6, 2]
-        assert_eq!(certify_below(&touch, 0.6, 2.0, true).unwrap(), Certificate::Within);
+        assert_eq!(
+            certify_below(&touch, 0.6, 2.0, true).unwrap(),
+            Certificate::Within
+        );
         // a positive end
-        assert_eq!(certify_below(&[-1.0, 2.0], 0.0, 1.0, true).unwrap(), Certificate::Violated { t: 1.0 });
+        assert_eq!(
+            certify_below(&[-1.0, 2.0], 0.0, 1.0, true).unwrap(),
+            Certificate::Violated { t: 1.0 }
+        );
         // F = 0 at the end t = 0.5 exactly
-        assert_eq!(certify_below(&[-1.0, 2.0], 0.0, 0.5, true).unwrap(), Certificate::Violated { t: 0.5 });
-        assert_eq!(certify_below(&[-1.0, 2.0], 0.25, 0.25, true).unwrap(), Certificate::Within);
+        assert_eq!(
+            certify_below(&[-1.0, 2.0], 0.0, 0.5, true).unwrap(),
+            Certificate::Violated { t: 0.5 }
+        );
+        assert_eq!(
+            certify_below(&[-1.0, 2.0], 0.25, 0.25, true).unwrap(),
+            Certificate::Within
+        );
         assert!(certify_below(&[0.0; 50], 0.0, 1.0, true).is_ok());
         assert!(certify_below(&[1.0; 50], 0.0, 1.0, true).is_err());
     }
@@ -327,10 +369,19 @@ mod tests {
     fn tangency_is_unsure_on_the_fast_path_and_violated_exactly() {
         let touch = [-0.25, 1.0, -1.0];
         // a double root makes the interval Sturm chain end in an uncertain constant
-        assert_eq!(certify_below(&touch, 0.0, 1.0, false).unwrap(), Certificate::Unknown);
+        assert_eq!(
+            certify_below(&touch, 0.0, 1.0, false).unwrap(),
+            Certificate::Unknown
+        );
         // shifted interval: coefficients round, Sturm on hi is not enough
         let c = certify_below(&touch, 0.125, 0.875, false).unwrap();
-        assert!(matches!(c, Certificate::Unknown | Certificate::Violated { .. }));
-        assert!(matches!(certify_below(&touch, 0.125, 0.875, true).unwrap(), Certificate::Violated { .. }));
+        assert!(matches!(
+            c,
+            Certificate::Unknown | Certificate::Violated { .. }
+        ));
+        assert!(matches!(
+            certify_below(&touch, 0.125, 0.875, true).unwrap(),
+            Certificate::Violated { .. }
+        ));
     }
 }

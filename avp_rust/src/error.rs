@@ -26,11 +26,40 @@ impl fmt::Display for Error {
 
 impl std::error::Error for Error {}
 
+/// Runs a kernel and turns a panic (a bug, never an input path by design) into an error, so the
+/// Python wrappers raise `ValueError` instead of PyO3's `PanicException` (a `BaseException`
+/// that would get past a replanner's `except Exception`).
+pub fn guarded<T>(kernel: impl FnOnce() -> Result<T>) -> Result<T> {
+    std::panic::catch_unwind(std::panic::AssertUnwindSafe(kernel)).unwrap_or_else(|payload| {
+        let what = payload
+            .downcast_ref::<&str>()
+            .map(|s| s.to_string())
+            .or_else(|| payload.downcast_ref::<String>().cloned())
+            .unwrap_or_else(|| "unknown panic".into());
+        Err(Error::Invalid {
+            arg: "kernel",
+            detail: format!("internal error (please report): {what}"),
+        })
+    })
+}
+
 /// Fails with [`Error::NonFinite`] when any value is NaN or infinite.
 pub fn check_finite(arg: &'static str, values: &[f64]) -> Result<()> {
     if values.iter().all(|v| v.is_finite()) {
         Ok(())
     } else {
         Err(Error::NonFinite { arg })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn guarded_turns_a_panic_into_an_error() {
+        let r: Result<()> = guarded(|| panic!("boom"));
+        assert!(matches!(r, Err(Error::Invalid { arg: "kernel", .. })));
+        assert_eq!(guarded(|| Ok(3)), Ok(3));
     }
 }

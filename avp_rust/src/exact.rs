@@ -57,19 +57,35 @@ fn primitive(p: IntPoly) -> IntPoly {
 /// A positive multiple of `sum coeffs[k] x^k` with integer coefficients (exact).
 pub fn int_poly_from_f64(coeffs: &[f64]) -> IntPoly {
     let dec: Vec<(i64, i32)> = coeffs.iter().map(|&c| decode(c)).collect();
-    let emin = dec.iter().filter(|d| d.0 != 0).map(|d| d.1).min().unwrap_or(0);
-    primitive(dec.iter().map(|&(m, e)| BigInt::from(m) << ((e - emin) as usize)).collect())
+    let emin = dec
+        .iter()
+        .filter(|d| d.0 != 0)
+        .map(|d| d.1)
+        .min()
+        .unwrap_or(0);
+    primitive(
+        dec.iter()
+            .map(|&(m, e)| BigInt::from(m) << ((e - emin) as usize))
+            .collect(),
+    )
 }
 
 /// A positive multiple of a rational polynomial with integer coefficients (exact).
 pub fn int_poly_from_rational(coeffs: &[BigRational]) -> IntPoly {
     let l = coeffs.iter().fold(BigInt::one(), |l, c| l.lcm(c.denom()));
-    primitive(coeffs.iter().map(|c| c.numer() * (&l / c.denom())).collect())
+    primitive(
+        coeffs
+            .iter()
+            .map(|c| c.numer() * (&l / c.denom()))
+            .collect(),
+    )
 }
 
 /// `den^n p(num / den)` (same sign as `p(num/den)` for `den > 0`), by homogenised Horner.
 pub fn eval_hom(p: &[BigInt], num: &BigInt, den: &BigInt) -> BigInt {
-    let Some((top, rest)) = p.split_last() else { return BigInt::zero() };
+    let Some((top, rest)) = p.split_last() else {
+        return BigInt::zero();
+    };
     let mut acc = top.clone();
     let mut dpow = BigInt::one();
     for c in rest.iter().rev() {
@@ -91,7 +107,13 @@ fn deflate(p: &[BigInt], num: &BigInt, den: &BigInt) -> IntPoly {
 }
 
 fn derivative(p: &[BigInt]) -> IntPoly {
-    primitive(p.iter().enumerate().skip(1).map(|(k, c)| c * BigInt::from(k)).collect())
+    primitive(
+        p.iter()
+            .enumerate()
+            .skip(1)
+            .map(|(k, c)| c * BigInt::from(k))
+            .collect(),
+    )
 }
 
 /// `c (A - Q B)` with some `c > 0`: pseudo-remainder with positive multipliers.
@@ -139,7 +161,13 @@ fn variations(chain: &[IntPoly], num: &BigInt, den: &BigInt) -> usize {
     let mut last = 0i8;
     for s in chain {
         let v = eval_hom(s, num, den);
-        let sg: i8 = if v.is_positive() { 1 } else if v.is_negative() { -1 } else { 0 };
+        let sg: i8 = if v.is_positive() {
+            1
+        } else if v.is_negative() {
+            -1
+        } else {
+            0
+        };
         if sg != 0 {
             if last != 0 && sg != last {
                 count += 1;
@@ -193,7 +221,9 @@ pub fn unit_shift(coeffs: &[f64], a: f64, b: f64) -> IntPoly {
     let big_h = rh.numer() * (&l / rh.denom());
     // x = (A + H u) / l ; l^n F(x) = sum C_k (A + H u)^k l^(n-k)
     let c = int_poly_from_f64(coeffs);
-    let Some((top, rest)) = c.split_last() else { return Vec::new() };
+    let Some((top, rest)) = c.split_last() else {
+        return Vec::new();
+    };
     let mut acc: IntPoly = vec![top.clone()];
     let mut lpow = BigInt::one();
     for ck in rest.iter().rev() {
@@ -226,7 +256,9 @@ pub enum UnitExact {
 /// Decides `p(u) < 0 for all u in [0, 1]` exactly (Algorithm 1 with `F = p`).
 pub fn certify_unit(p: &[BigInt]) -> UnitExact {
     let p = trim_int(p.to_vec());
-    let Some(p0) = p.first() else { return UnitExact::ViolatedAt0 }; // F == 0
+    let Some(p0) = p.first() else {
+        return UnitExact::ViolatedAt0;
+    }; // F == 0
     if !p0.is_negative() {
         return UnitExact::ViolatedAt0;
     }
@@ -273,7 +305,10 @@ mod tests {
     fn decode_is_exact() {
         for &x in &[0.1, -3.75, 1e-310, 5e300, 0.0, -0.0, 1.0] {
             let (m, e) = decode(x);
-            assert_eq!(m as f64 * 2f64.powi(e.max(-1000)) * 2f64.powi((e - e.max(-1000)).min(0)), x);
+            assert_eq!(
+                m as f64 * 2f64.powi(e.max(-1000)) * 2f64.powi((e - e.max(-1000)).min(0)),
+                x
+            );
             assert_eq!(rational(x).to_f64().unwrap(), x);
         }
         assert_eq!(rational(0.5), BigRational::new(1.into(), 2.into()));

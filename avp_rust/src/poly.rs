@@ -40,7 +40,9 @@ pub fn derivative(coeffs: &[f64], order: usize) -> Vec<f64> {
     if order >= n {
         return vec![0.0];
     }
-    (order..n).map(|k| coeffs[k] * falling_factorial(k, order)).collect()
+    (order..n)
+        .map(|k| coeffs[k] * falling_factorial(k, order))
+        .collect()
 }
 
 #[cfg(test)]
@@ -51,7 +53,11 @@ mod tests {
     fn horner_matches_power_sum() {
         let c = [1.0, -2.0, 0.5, 3.0];
         for &x in &[-1.5f64, 0.0, 0.3, 2.0] {
-            let direct: f64 = c.iter().enumerate().map(|(k, ck)| ck * x.powi(k as i32)).sum();
+            let direct: f64 = c
+                .iter()
+                .enumerate()
+                .map(|(k, ck)| ck * x.powi(k as i32))
+                .sum();
             assert!((eval(&c, x) - direct).abs() < 1e-12);
         }
     }

@@ -8,7 +8,7 @@ use numpy::{
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 
-use crate::error::Error;
+use crate::error::{guarded, Error};
 use crate::spline::{self, SplineView};
 
 pub(crate) fn to_py_err(e: Error) -> PyErr {
@@ -40,12 +40,16 @@ fn eval_spline_py<'py>(
     let k = contiguous("knots", knots.as_slice())?;
     let t = contiguous("times", times.as_slice())?;
     if let Some(&bad) = orders.iter().find(|&&o| o > 64) {
-        return Err(PyValueError::new_err(format!("orders: derivative order {bad} is too large (at most 64)")));
+        return Err(PyValueError::new_err(format!(
+            "orders: derivative order {bad} is too large (at most 64)"
+        )));
     }
     let view = SplineView::new(c, shape, k).map_err(to_py_err)?;
     let n_times = t.len();
     let n_orders = orders.len();
-    let out = py.detach(|| spline::evaluate(&view, t, &orders)).map_err(to_py_err)?;
+    let out = py
+        .detach(|| guarded(|| spline::evaluate(&view, t, &orders)))
+        .map_err(to_py_err)?;
     let arr = numpy::ndarray::Array3::from_shape_vec((n_orders, n_times, shape.1), out)
         .map_err(|e| PyValueError::new_err(format!("internal shape error: {e}")))?;
     Ok(arr.into_pyarray(py))
@@ -71,12 +75,15 @@ fn anticipate_py<'py>(
     if odo_shape != [crate::anticipation::ORDERS, shape.1] {
         return Err(PyValueError::new_err(format!(
             "odometry: expected shape ({}, {}), got {:?}",
-            crate::anticipation::ORDERS, shape.1, odo_shape
+            crate::anticipation::ORDERS,
+            shape.1,
+            odo_shape
         )));
     }
     let o = contiguous("odometry", odometry.as_slice())?;
     let view = SplineView::new(c, shape, k).map_err(to_py_err)?;
-    let out = crate::anticipation::anticipate(&view, o, t_rp, t_ex).map_err(to_py_err)?;
+    let out =
+        guarded(|| crate::anticipation::anticipate(&view, o, t_rp, t_ex)).map_err(to_py_err)?;
     let arr = numpy::ndarray::Array2::from_shape_vec((crate::anticipation::ORDERS, shape.1), out)
         .map_err(|e| PyValueError::new_err(format!("internal shape error: {e}")))?;
     Ok(arr.into_pyarray(py))

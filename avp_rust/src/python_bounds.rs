@@ -2,9 +2,14 @@
 //! Kernel errors become `ValueError`; batch kernels release the GIL.
 #![allow(clippy::useless_conversion)]
 use numpy::ndarray::Array2;
-use numpy::{IntoPyArray, PyArray1, PyArray2, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3, PyUntypedArrayMethods};
+use numpy::{
+    IntoPyArray, PyArray1, PyArray2, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3,
+    PyUntypedArrayMethods,
+};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
+
+use crate::error::guarded;
 
 use crate::bounds::{self, BoundKind, Limits, ALL_BOUNDS};
 use crate::certify;
@@ -14,9 +19,15 @@ use crate::sturm;
 
 /// Exact number of distinct real roots of `sum coeffs[k] x^k` in the closed interval `[a, b]`.
 #[pyfunction(name = "sturm_count")]
-fn sturm_count_py(py: Python<'_>, coeffs: PyReadonlyArray1<'_, f64>, a: f64, b: f64) -> PyResult<usize> {
+fn sturm_count_py(
+    py: Python<'_>,
+    coeffs: PyReadonlyArray1<'_, f64>,
+    a: f64,
+    b: f64,
+) -> PyResult<usize> {
     let c = contiguous("coeffs", coeffs.as_slice())?;
-    py.detach(|| sturm::sturm_count(c, a, b)).map_err(to_py_err)
+    py.detach(|| guarded(|| sturm::sturm_count(c, a, b)))
+        .map_err(to_py_err)
 }
 
 /// Algorithm 1: `(code, t)` with code 0 within (`F < 0` on `[a, b]`), 1 violated at about `t`,
@@ -31,7 +42,9 @@ fn certify_below_py(
     exact: bool,
 ) -> PyResult<(i8, f64)> {
     let c = contiguous("coeffs", coeffs.as_slice())?;
-    let cert = py.detach(|| certify::certify_below(c, a, b, exact)).map_err(to_py_err)?;
+    let cert = py
+        .detach(|| guarded(|| certify::certify_below(c, a, b, exact)))
+        .map_err(to_py_err)?;
     Ok((cert.code(), cert.time()))
 }
 
@@ -47,25 +60,39 @@ fn certify_below_many_py<'py>(
     a: f64,
     b: f64,
     exact: bool,
-) -> PyResult<(Bound<'py, PyArray1<i8>>, Bound<'py, PyArray1<f64>>, Bound<'py, PyArray1<bool>>)> {
+) -> PyResult<(
+    Bound<'py, PyArray1<i8>>,
+    Bound<'py, PyArray1<f64>>,
+    Bound<'py, PyArray1<bool>>,
+)> {
     let shape = coeffs.shape();
     let (n, m) = (shape[0], shape[1]);
     let c = contiguous("coeffs", coeffs.as_slice())?;
     if m == 0 && n > 0 {
-        return Err(PyValueError::new_err("coeffs: needs at least one coefficient per row"));
+        return Err(PyValueError::new_err(
+            "coeffs: needs at least one coefficient per row",
+        ));
     }
     let out = py
-        .detach(|| -> crate::Result<Vec<(certify::Certificate, bool)>> {
-            if m == 0 {
-                return Ok(Vec::new());
-            }
-            c.chunks_exact(m).map(|row| certify::certify_below_traced(row, a, b, exact)).collect()
+        .detach(|| {
+            guarded(|| -> crate::Result<Vec<(certify::Certificate, bool)>> {
+                if m == 0 {
+                    return Ok(Vec::new());
+                }
+                c.chunks_exact(m)
+                    .map(|row| certify::certify_below_traced(row, a, b, exact))
+                    .collect()
+            })
         })
         .map_err(to_py_err)?;
     let codes: Vec<i8> = out.iter().map(|(c, _)| c.code()).collect();
     let times: Vec<f64> = out.iter().map(|(c, _)| c.time()).collect();
     let fast: Vec<bool> = out.iter().map(|(_, f)| *f).collect();
-    Ok((codes.into_pyarray(py), times.into_pyarray(py), fast.into_pyarray(py)))
+    Ok((
+        codes.into_pyarray(py),
+        times.into_pyarray(py),
+        fast.into_pyarray(py),
+    ))
 }
 
 /// Certifies the actuator bounds of a flat-output spline (Sec. V-C, Appendix B).
@@ -92,7 +119,9 @@ fn certify_spline_py<'py>(
     let l = contiguous("limits", limits.as_slice())?;
     let limits = Limits::from_slice(l).map_err(to_py_err)?;
     let view = SplineView::new(c, shape, k).map_err(to_py_err)?;
-    let verdicts = py.detach(|| bounds::certify_spline(&view, &limits, g, exact)).map_err(to_py_err)?;
+    let verdicts = py
+        .detach(|| guarded(|| bounds::certify_spline(&view, &limits, g, exact)))
+        .map_err(to_py_err)?;
     let n_seg = shape.0;
     let mut codes = Array2::<i8>::from_elem((ALL_BOUNDS.len(), n_seg), 3);
     let mut times = Array2::<f64>::from_elem((ALL_BOUNDS.len(), n_seg), f64::NAN);
@@ -126,10 +155,16 @@ fn bound_polynomial_py<'py>(
     let k = contiguous("knots", knots.as_slice())?;
     let view = SplineView::new(c, shape, k).map_err(to_py_err)?;
     if shape.1 != 4 {
-        return Err(PyValueError::new_err(format!("coeffs: expected 4 axes (x, y, z, yaw), got {}", shape.1)));
+        return Err(PyValueError::new_err(format!(
+            "coeffs: expected 4 axes (x, y, z, yaw), got {}",
+            shape.1
+        )));
     }
     if segment >= shape.0 {
-        return Err(PyValueError::new_err(format!("segment: {segment} out of range for {} segments", shape.0)));
+        return Err(PyValueError::new_err(format!(
+            "segment: {segment} out of range for {} segments",
+            shape.0
+        )));
     }
     let kind: BoundKind = *ALL_BOUNDS
         .get(bound)
@@ -137,7 +172,8 @@ fn bound_polynomial_py<'py>(
     if !(limit.is_finite() && g.is_finite()) {
         return Err(PyValueError::new_err("limit, g: must be finite"));
     }
-    let (lo, hi) = bounds::bound_enclosure(&view, segment, kind, limit, g);
+    let (lo, hi) = guarded(|| Ok(bounds::bound_enclosure(&view, segment, kind, limit, g)))
+        .map_err(to_py_err)?;
     Ok((lo.into_pyarray(py), hi.into_pyarray(py)))
 }
 
@@ -147,6 +183,12 @@ pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(certify_below_many_py, m)?)?;
     m.add_function(wrap_pyfunction!(certify_spline_py, m)?)?;
     m.add_function(wrap_pyfunction!(bound_polynomial_py, m)?)?;
-    m.add("BOUND_NAMES", ALL_BOUNDS.iter().map(|k| format!("{k:?}")).collect::<Vec<_>>())?;
+    m.add(
+        "BOUND_NAMES",
+        ALL_BOUNDS
+            .iter()
+            .map(|k| format!("{k:?}"))
+            .collect::<Vec<_>>(),
+    )?;
     Ok(())
 }

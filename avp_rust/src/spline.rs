@@ -16,11 +16,7 @@ pub struct SplineView<'a> {
 impl<'a> SplineView<'a> {
     /// Checks shapes (`coeffs.len() == S * A * C`, `knots.len() == S + 1`), finiteness, and
     /// strictly increasing knots.
-    pub fn new(
-        coeffs: &'a [f64],
-        shape: (usize, usize, usize),
-        knots: &'a [f64],
-    ) -> Result<Self> {
+    pub fn new(coeffs: &'a [f64], shape: (usize, usize, usize), knots: &'a [f64]) -> Result<Self> {
         let (n_segments, n_axes, n_coeffs) = shape;
         if n_segments == 0 || n_axes == 0 || n_coeffs == 0 {
             return Err(Error::Shape {
@@ -37,15 +33,28 @@ impl<'a> SplineView<'a> {
         if knots.len() != n_segments + 1 {
             return Err(Error::Shape {
                 arg: "knots",
-                detail: format!("expected {} knots for {n_segments} segments, got {}", n_segments + 1, knots.len()),
+                detail: format!(
+                    "expected {} knots for {n_segments} segments, got {}",
+                    n_segments + 1,
+                    knots.len()
+                ),
             });
         }
         check_finite("coeffs", coeffs)?;
         check_finite("knots", knots)?;
         if knots.windows(2).any(|w| w[1] <= w[0]) {
-            return Err(Error::Invalid { arg: "knots", detail: "must be strictly increasing".into() });
+            return Err(Error::Invalid {
+                arg: "knots",
+                detail: "must be strictly increasing".into(),
+            });
         }
-        Ok(Self { coeffs, knots, n_segments, n_axes, n_coeffs })
+        Ok(Self {
+            coeffs,
+            knots,
+            n_segments,
+            n_axes,
+            n_coeffs,
+        })
     }
 
     pub fn n_segments(&self) -> usize {
@@ -122,21 +131,33 @@ mod tests {
         assert_eq!(s.segment_of(1.0), 1);
         assert_eq!(s.segment_of(5.0), 1);
         let v = evaluate(&s, &[0.5, 2.0], &[0, 1, 2]).unwrap();
-        assert_eq!(v, vec![1.5, 0.25, 3.0, 4.0, 1.0, 1.0, 1.0, 4.0, 0.0, 2.0, 0.0, 2.0]);
+        assert_eq!(
+            v,
+            vec![1.5, 0.25, 3.0, 4.0, 1.0, 1.0, 1.0, 4.0, 0.0, 2.0, 0.0, 2.0]
+        );
     }
 
     #[test]
     fn rejects_bad_input() {
         let (c, k) = two_segment();
-        assert!(matches!(SplineView::new(&c, (2, 2, 4), &k), Err(Error::Shape { arg: "coeffs", .. })));
-        assert!(matches!(SplineView::new(&c, (2, 2, 3), &k[..2]), Err(Error::Shape { arg: "knots", .. })));
+        assert!(matches!(
+            SplineView::new(&c, (2, 2, 4), &k),
+            Err(Error::Shape { arg: "coeffs", .. })
+        ));
+        assert!(matches!(
+            SplineView::new(&c, (2, 2, 3), &k[..2]),
+            Err(Error::Shape { arg: "knots", .. })
+        ));
         assert!(matches!(
             SplineView::new(&c, (2, 2, 3), &[0.0, 1.0, 1.0]),
             Err(Error::Invalid { arg: "knots", .. })
         ));
         let mut bad = c.clone();
         bad[3] = f64::NAN;
-        assert!(matches!(SplineView::new(&bad, (2, 2, 3), &k), Err(Error::NonFinite { arg: "coeffs" })));
+        assert!(matches!(
+            SplineView::new(&bad, (2, 2, 3), &k),
+            Err(Error::NonFinite { arg: "coeffs" })
+        ));
         let s = SplineView::new(&c, (2, 2, 3), &k).unwrap();
         assert!(evaluate(&s, &[f64::INFINITY], &[0]).is_err());
     }

@@ -52,7 +52,10 @@ pub struct Iv {
 // Named methods (not operator traits) keep every rounding step explicit at the call site.
 #[allow(clippy::should_implement_trait)]
 impl Iv {
-    pub const ENTIRE: Iv = Iv { lo: f64::NEG_INFINITY, hi: f64::INFINITY };
+    pub const ENTIRE: Iv = Iv {
+        lo: f64::NEG_INFINITY,
+        hi: f64::INFINITY,
+    };
     pub const ZERO: Iv = Iv { lo: 0.0, hi: 0.0 };
 
     #[inline]
@@ -65,7 +68,10 @@ impl Iv {
         if lo.is_nan() || hi.is_nan() {
             Iv::ENTIRE
         } else {
-            Iv { lo: next_down(lo), hi: next_up(hi) }
+            Iv {
+                lo: next_down(lo),
+                hi: next_up(hi),
+            }
         }
     }
 
@@ -76,7 +82,10 @@ impl Iv {
 
     #[inline]
     pub fn neg(self) -> Iv {
-        Iv { lo: -self.hi, hi: -self.lo }
+        Iv {
+            lo: -self.hi,
+            hi: -self.lo,
+        }
     }
 
     #[inline]
@@ -86,7 +95,12 @@ impl Iv {
 
     #[inline]
     pub fn mul(self, o: Iv) -> Iv {
-        let (a, b, c, d) = (self.lo * o.lo, self.lo * o.hi, self.hi * o.lo, self.hi * o.hi);
+        let (a, b, c, d) = (
+            self.lo * o.lo,
+            self.lo * o.hi,
+            self.hi * o.lo,
+            self.hi * o.hi,
+        );
         if (a + b + c + d).is_nan() {
             // 0 * inf or inf - inf: give up precision, keep soundness.
             return Iv::ENTIRE;
@@ -112,7 +126,12 @@ impl Iv {
         if !(o.lo > 0.0 || o.hi < 0.0) {
             return Iv::ENTIRE;
         }
-        let (a, b, c, d) = (self.lo / o.lo, self.lo / o.hi, self.hi / o.lo, self.hi / o.hi);
+        let (a, b, c, d) = (
+            self.lo / o.lo,
+            self.lo / o.hi,
+            self.hi / o.lo,
+            self.hi / o.hi,
+        );
         if (a + b + c + d).is_nan() {
             return Iv::ENTIRE;
         }
@@ -155,7 +174,9 @@ pub fn eval_iv(p: &[Iv], x: f64) -> Iv {
     if x == 0.0 {
         return p.first().copied().unwrap_or(Iv::ZERO);
     }
-    p.iter().rev().fold(Iv::ZERO, |acc, &c| acc.mul_f64(x).add(c))
+    p.iter()
+        .rev()
+        .fold(Iv::ZERO, |acc, &c| acc.mul_f64(x).add(c))
 }
 
 /// Coefficients without trailing (highest-power) exact zeros.
@@ -201,7 +222,12 @@ pub fn sturm_chain_iv(p: &[f64]) -> Option<Vec<Vec<Iv>>> {
     let mut chain: Vec<Vec<Iv>> = Vec::with_capacity(n + 1);
     let mut s0: Vec<Iv> = p.iter().map(|&c| Iv::point(c)).collect();
     normalise(&mut s0);
-    let mut s1: Vec<Iv> = p.iter().enumerate().skip(1).map(|(k, &c)| Iv::point(c).mul_f64(k as f64)).collect();
+    let mut s1: Vec<Iv> = p
+        .iter()
+        .enumerate()
+        .skip(1)
+        .map(|(k, &c)| Iv::point(c).mul_f64(k as f64))
+        .collect();
     normalise(&mut s1);
     chain.push(s0);
     chain.push(s1);
@@ -283,7 +309,10 @@ pub fn count_roots_float(p: &[f64], a: f64, b: f64) -> Option<usize> {
 fn check_poly(coeffs: &[f64]) -> Result<()> {
     check_finite("coeffs", coeffs)?;
     if coeffs.is_empty() {
-        return Err(Error::Shape { arg: "coeffs", detail: "needs at least one coefficient".into() });
+        return Err(Error::Shape {
+            arg: "coeffs",
+            detail: "needs at least one coefficient".into(),
+        });
     }
     let deg = trim(coeffs).len().saturating_sub(1);
     if deg > MAX_DEGREE {
@@ -305,7 +334,10 @@ pub(crate) fn validate_interval(a: f64, b: f64) -> Result<()> {
     check_finite("a", &[a])?;
     check_finite("b", &[b])?;
     if a > b {
-        return Err(Error::Invalid { arg: "b", detail: format!("interval end {b} is below its start {a}") });
+        return Err(Error::Invalid {
+            arg: "b",
+            detail: format!("interval end {b} is below its start {a}"),
+        });
     }
     Ok(())
 }
@@ -319,7 +351,10 @@ pub fn sturm_count(coeffs: &[f64], a: f64, b: f64) -> Result<usize> {
     validate_interval(a, b)?;
     let p = trim(coeffs);
     if p.is_empty() {
-        return Err(Error::Invalid { arg: "coeffs", detail: "the zero polynomial has infinitely many roots".into() });
+        return Err(Error::Invalid {
+            arg: "coeffs",
+            detail: "the zero polynomial has infinitely many roots".into(),
+        });
     }
     if a < b {
         if let Some(n) = count_roots_float(p, a, b) {
