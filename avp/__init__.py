@@ -36,9 +36,8 @@ __all__ = [
     "__version__",
 ]
 
-from .camera import Camera, FovConfig, FovPointPolicy
-from .metrics import Visibility, visibility
 from .bounds import Bound, BoundReport, Certificate
+from .camera import Camera, FovConfig, FovPointPolicy
 from .config import (
     BoundsPolicy,
     ContactVelocity,
@@ -50,26 +49,23 @@ from .config import (
     TimeSearch,
     VehicleLimits,
 )
+from .metrics import Visibility, visibility
 from .planner import PlanResult, PlanStatus, PlanTimings, plan, plan_detailed
 from .replan import ReplanAction, ReplanConfig, Replanner, ReplanStep
 from .trajectory import Derivative, FlatOutput, Trajectory
 from .types import PerchTarget, State
 
 __all__ += [
-    "Camera",
-    "FovConfig",
-    "FovPointPolicy",
-    "Visibility",
-    "visibility",
     "Bound",
     "BoundReport",
     "BoundsPolicy",
+    "Camera",
     "Certificate",
-    "Relaxation",
-    "TimeSearch",
     "ContactVelocity",
     "Derivative",
     "FlatOutput",
+    "FovConfig",
+    "FovPointPolicy",
     "PerchTarget",
     "PlanResult",
     "PlanStatus",
@@ -77,14 +73,18 @@ __all__ += [
     "PlannerConfig",
     "PreImpactMode",
     "QpForm",
-    "State",
-    "TimeAllocation",
-    "Trajectory",
-    "VehicleLimits",
-    "plan",
-    "plan_detailed",
+    "Relaxation",
     "ReplanAction",
     "ReplanConfig",
     "ReplanStep",
     "Replanner",
+    "State",
+    "TimeAllocation",
+    "TimeSearch",
+    "Trajectory",
+    "VehicleLimits",
+    "Visibility",
+    "plan",
+    "plan_detailed",
+    "visibility",
 ]

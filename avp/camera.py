@@ -29,7 +29,7 @@ import numpy.typing as npt
 from . import _validate as v
 from .errors import ConfigError
 
-__all__ = ["Camera", "FovConfig", "FovPointPolicy", "FRONT_CAMERA_R_BC"]
+__all__ = ["FRONT_CAMERA_R_BC", "Camera", "FovConfig", "FovPointPolicy"]
 
 Array = npt.NDArray[np.float64]
 

@@ -15,20 +15,20 @@ from typing import Any
 import numpy as np
 
 from . import _validate as v
-from .errors import ConfigError
 from .camera import FovConfig
+from .errors import ConfigError
 from .frames import GRAVITY
 
 __all__ = [
+    "BoundsPolicy",
+    "ContactVelocity",
+    "PlannerConfig",
     "PreImpactMode",
     "QpForm",
-    "VehicleLimits",
-    "ContactVelocity",
-    "TimeAllocation",
-    "PlannerConfig",
-    "BoundsPolicy",
-    "TimeSearch",
     "Relaxation",
+    "TimeAllocation",
+    "TimeSearch",
+    "VehicleLimits",
 ]
 
 

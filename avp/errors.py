@@ -14,11 +14,11 @@ if TYPE_CHECKING:  # pragma: no cover
 
 __all__ = [
     "AvpError",
-    "ConfigError",
-    "PlanningError",
-    "InfeasibleError",
-    "SolverError",
     "BoundsNotCertifiedError",
+    "ConfigError",
+    "InfeasibleError",
+    "PlanningError",
+    "SolverError",
 ]
 
 
@@ -43,7 +43,7 @@ class ConfigError(AvpError, ValueError):
 class PlanningError(AvpError):
     """Planning produced no trajectory; ``result`` holds the diagnostics (a ``PlanResult``)."""
 
-    def __init__(self, message: str, result: "PlanResult | Any | None" = None) -> None:
+    def __init__(self, message: str, result: PlanResult | Any | None = None) -> None:
         self.result = result
         super().__init__(message)
 

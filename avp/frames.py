@@ -14,12 +14,12 @@ import numpy.typing as npt
 
 __all__ = [
     "GRAVITY",
-    "thrust_vector",
-    "thrust_magnitude",
     "attitude",
     "body_rates",
-    "yaw_from_b2",
     "rotation_error_angle",
+    "thrust_magnitude",
+    "thrust_vector",
+    "yaw_from_b2",
 ]
 
 GRAVITY = 9.81

@@ -41,7 +41,7 @@ from .types import PerchTarget, State
 
 Array = npt.NDArray[np.float64]
 
-__all__ = ["FovSolve", "solve_with_fov", "linearise_on", "KKT_TOL", "ITERATIVE_SOLVERS"]
+__all__ = ["ITERATIVE_SOLVERS", "KKT_TOL", "FovSolve", "linearise_on", "solve_with_fov"]
 
 KKT_TOL = 1e-5
 """Largest accepted dual residual and duality gap (of the unit-diagonal scaled reduced QP)."""
@@ -114,7 +114,7 @@ def incompatibility(outcome: QpOutcome | None) -> str | None:
     for name in ("dual_residual", "duality_gap"):
         try:
             val = float(getattr(sol, name)())
-        except Exception:  # no multipliers from this back-end: the primal check stands
+        except (ValueError, TypeError, AttributeError):  # no multipliers: the primal check stands
             continue
         if math.isfinite(val) and val > KKT_TOL:
             return f"KKT {name.replace('_', ' ')} {val:.1e} > {KKT_TOL:.0e}"

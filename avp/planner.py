@@ -11,9 +11,15 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from .config import PlannerConfig, PreImpactMode, Relaxation
 from .bounds import BoundReport, certify_spline
-from .errors import BoundsNotCertifiedError, ConfigError, InfeasibleError, PlanningError, SolverError
+from .config import PlannerConfig, PreImpactMode, Relaxation
+from .errors import (
+    BoundsNotCertifiedError,
+    ConfigError,
+    InfeasibleError,
+    PlanningError,
+    SolverError,
+)
 from .qp.assemble import build_perching_qp
 from .qp.layout import DecisionLayout, layout_for
 from .solve import QpOutcome, solve_perching_qp
@@ -21,7 +27,7 @@ from .timing import check_durations, initial_durations
 from .trajectory import Trajectory
 from .types import PerchTarget, State
 
-__all__ = ["PlanStatus", "PlanTimings", "PlanResult", "plan", "plan_detailed"]
+__all__ = ["PlanResult", "PlanStatus", "PlanTimings", "plan", "plan_detailed"]
 
 Array = npt.NDArray[np.float64]
 

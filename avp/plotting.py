@@ -12,7 +12,7 @@ if TYPE_CHECKING:  # pragma: no cover
     from .types import PerchTarget
 
 
-def plot_perch(trajectory: "Trajectory", target: "PerchTarget", path: str | Path, title: str = "") -> Path:
+def plot_perch(trajectory: Trajectory, target: PerchTarget, path: str | Path, title: str = "") -> Path:
     """3D path with thrust-direction arrows (as the paper's Fig. 13) and time histories of
     position, velocity and acceleration; written as PNG to ``path``."""
     import matplotlib
@@ -39,9 +39,11 @@ def plot_perch(trajectory: "Trajectory", target: "PerchTarget", path: str | Path
     ax.plot(corners[:, 0], corners[:, 1], corners[:, 2], "b-", lw=2, label="pad")
     ax.quiver(*c, *target.s3, length=0.1 * span, color="b")
     mid = 0.5 * (p.max(axis=0) + p.min(axis=0))
-    for setter, m in zip((ax.set_xlim, ax.set_ylim, ax.set_zlim), mid):
+    for setter, m in zip((ax.set_xlim, ax.set_ylim, ax.set_zlim), mid, strict=True):
         setter(m - 0.55 * span, m + 0.55 * span)
-    ax.set_xlabel("x (m)"); ax.set_ylabel("y (m)"); ax.set_zlabel("z (m)")
+    ax.set_xlabel("x (m)")
+    ax.set_ylabel("y (m)")
+    ax.set_zlabel("z (m)")
     ax.legend(loc="upper left", fontsize=8)
     ax.set_title(title or "perching trajectory")
     for row, (vals, name, unit) in enumerate(((p, "position", "m"), (v, "velocity", "m/s"), (a, "acceleration", "m/s$^2$"))):

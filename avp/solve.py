@@ -23,7 +23,7 @@ from .qp.assemble import PerchingQp
 
 Array = npt.NDArray[np.float64]
 
-__all__ = ["QpStatus", "QpOutcome", "solve_perching_qp", "SOLVER_DEFAULTS", "available_solvers"]
+__all__ = ["SOLVER_DEFAULTS", "QpOutcome", "QpStatus", "available_solvers", "solve_perching_qp"]
 
 SOLVER_DEFAULTS: dict[str, dict[str, Any]] = {
     # OSQP's defaults (1e-3) leave coefficient errors near 3.5e-2: far too coarse for contact.

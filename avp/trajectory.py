@@ -16,7 +16,7 @@ import numpy.typing as npt
 from . import _avp_rust, frames
 from .errors import ConfigError
 
-__all__ = ["Derivative", "FlatOutput", "Trajectory", "RotorpyTrajectory"]
+__all__ = ["Derivative", "FlatOutput", "RotorpyTrajectory", "Trajectory"]
 
 Array = npt.NDArray[np.float64]
 
@@ -181,7 +181,7 @@ class Trajectory:
         n = int(np.ceil(self.duration / dt - 1e-9))
         return np.minimum(self.t0 + dt * np.arange(n + 1), self.tf)
 
-    def to_rotorpy(self) -> "RotorpyTrajectory":
+    def to_rotorpy(self) -> RotorpyTrajectory:
         """Adapter with rotorpy's trajectory protocol ``update(t) -> flat_output dict``."""
         return RotorpyTrajectory(self)
 

@@ -16,7 +16,7 @@ import numpy.typing as npt
 from . import _validate as v
 from .errors import ConfigError
 
-__all__ = ["State", "PerchTarget"]
+__all__ = ["PerchTarget", "State"]
 
 Array = npt.NDArray[np.float64]
 _ZERO3 = (0.0, 0.0, 0.0)
@@ -51,7 +51,7 @@ class State:
             object.__setattr__(self, name, v.finite_float(f"state.{name}", getattr(self, name)))
 
     @classmethod
-    def hover(cls, position: Any, yaw: float = 0.0, time: float = 0.0) -> "State":
+    def hover(cls, position: Any, yaw: float = 0.0, time: float = 0.0) -> State:
         """At rest at ``position`` with heading ``yaw``."""
         return cls(position=position, yaw=yaw, time=time)
 
@@ -87,7 +87,7 @@ class PerchTarget:
         normal: Any,
         up_slope: Any | None = None,
         approach_heading: float | None = None,
-    ) -> "PerchTarget":
+    ) -> PerchTarget:
         """Build S from the outward ``normal`` (``s3``).
 
         ``s1`` is ``up_slope`` (projected onto the pad plane) when given, else the projection
@@ -114,7 +114,7 @@ class PerchTarget:
         return cls(point=point, R_WS=np.column_stack([s1, s2, s3]))
 
     @classmethod
-    def from_incline(cls, point: Any, incline: float, heading: float = 0.0) -> "PerchTarget":
+    def from_incline(cls, point: Any, incline: float, heading: float = 0.0) -> PerchTarget:
         """A pad inclined by ``incline`` (rad, 0 floor .. pi/2 wall .. pi ceiling) that faces a
         vehicle flying horizontally along ``heading`` (rad): ``s3 = cos(i) e3 - sin(i) h``."""
         inc = v.finite_float("target.incline", incline)
@@ -146,7 +146,7 @@ class PerchTarget:
         """Angle between ``s3`` and ``e3`` (rad)."""
         return float(math.acos(max(-1.0, min(1.0, float(self.R_WS[2, 2])))))
 
-    def at(self, time: float) -> "PerchTarget":
+    def at(self, time: float) -> PerchTarget:
         """Pose at ``time``; a static target returns itself."""
         return self
 

@@ -62,7 +62,7 @@ def time_cvxpy(repeats: int) -> tuple[np.ndarray, np.ndarray]:
         A, b = qp.stacked_equalities()
         G, lo, hi = qp.stacked_inequalities()
 
-        def build() -> "cp.Problem":
+        def build(qp=qp, A=A, b=b, G=G, lo=lo, hi=hi) -> cp.Problem:
             x = cp.Variable(qp.layout.n_variables)
             cons = [A @ x == b, G @ x <= hi, G @ x >= lo]
             return cp.Problem(cp.Minimize(0.5 * cp.quad_form(x, cp.psd_wrap(qp.P))), cons)

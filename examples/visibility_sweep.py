@@ -17,7 +17,15 @@ import math
 
 import numpy as np
 
-from avp import ContactVelocity, FovConfig, PerchTarget, PlannerConfig, State, plan_detailed, visibility
+from avp import (
+    ContactVelocity,
+    FovConfig,
+    PerchTarget,
+    PlannerConfig,
+    State,
+    plan_detailed,
+    visibility,
+)
 from avp.timing import initial_durations
 
 INTO_PAD = (0.0, 1.0, 2.0)
@@ -60,7 +68,7 @@ def heatmap(values: np.ndarray, path: str, title: str) -> None:
     import matplotlib.pyplot as plt
 
     fig, axes = plt.subplots(1, 2, figsize=(9, 4.5), constrained_layout=True)
-    for k, (ax, name) in enumerate(zip(axes, ("time", "path"))):
+    for k, (ax, name) in enumerate(zip(axes, ("time", "path"), strict=True)):
         im = ax.imshow(100 * values[:, :, k], vmin=0, vmax=100, cmap="viridis")
         ax.set_xticks(range(len(INTO_PAD)), [f"{v:g}" for v in INTO_PAD])
         ax.set_yticks(range(len(SLOPE)), ["free" if s is None else f"{s:+g}" for s in SLOPE])

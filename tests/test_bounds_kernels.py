@@ -59,7 +59,7 @@ def below_oracle(coeffs, a: float, b: float) -> bool:
 def _exact_floats(fracs) -> list[float] | None:
     """The floats of exact Fractions, or None when one is not representable exactly."""
     out = [float(f) for f in fracs]
-    return out if all(Fraction(v) == f for v, f in zip(out, fracs)) else None
+    return out if all(Fraction(v) == f for v, f in zip(out, fracs, strict=False)) else None
 
 
 def _mul(p, q):
@@ -294,7 +294,7 @@ def test_certify_spline_matches_exact_oracle(sk, data):
     fn = np.linalg.norm(ev[1, :, :3] + [0, 0, g], axis=1)
     jn = np.linalg.norm(ev[2, :, :3], axis=1)
     # limits close to the sampled extremes, so both verdicts happen
-    pick = lambda v: float(v * data.draw(st.sampled_from([0.9, 1.0, 1.01, 1.5])))  # noqa: E731
+    pick = lambda v: float(v * data.draw(st.sampled_from([0.9, 1.0, 1.01, 1.5])))
     fmax = pick(fn.max())
     fmin = float(fn.min() * data.draw(st.sampled_from([0.5, 0.99, 1.0, 1.1])))
     rate = pick(jn.max()) if jn.max() > 0 else 1.0

@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from scenarios import standard, standard_grid
 
 import avp
-from scenarios import standard, standard_grid
 
 GRID = 1e-4  # s, the 0.1 ms sample grid
 

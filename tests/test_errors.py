@@ -6,9 +6,9 @@ import math
 
 import numpy as np
 import pytest
+from scenarios import standard
 
 import avp
-from scenarios import standard
 
 
 def field_of(exc_info: pytest.ExceptionInfo[avp.ConfigError]) -> str:

@@ -13,7 +13,16 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import avp
-from avp import Camera, FovConfig, FovPointPolicy, PerchTarget, PlannerConfig, State, plan_detailed, visibility
+from avp import (
+    Camera,
+    FovConfig,
+    FovPointPolicy,
+    PerchTarget,
+    PlannerConfig,
+    State,
+    plan_detailed,
+    visibility,
+)
 from avp.errors import ConfigError
 from avp.frames import attitude
 from avp.qp.assemble import build_perching_qp

@@ -68,7 +68,7 @@ def test_fly_stops_at_contact_on_a_floor_pad():
         return FlatReference([0.0, 0.0, 0.5 - 0.5 * t], [0.0, 0.0, -0.5], z, z, z)
 
     start = RigidBodyState(np.array([0.0, 0.0, 0.5]), v_W=[0.0, 0.0, -0.5])
-    hook = lambda a, b, ta, tb: detect_contact(a, b, floor, ta, tb)  # noqa: E731
+    hook = lambda a, b, ta, tb: detect_contact(a, b, floor, ta, tb)
     res = fly(start, descend, 0.0, 3.0, stop=hook)
     c = res.event
     assert c is not None and res.t < 1.01

@@ -62,7 +62,7 @@ def test_feedforward_matches_the_derivatives_of_the_reference_attitude():
     h = 1e-5
     for t in (0.3, 0.9, 1.6):
         W, dW = angular_acceleration(move(t), frames.GRAVITY)
-        R = lambda r: frames.attitude(r.acceleration, r.yaw)  # noqa: E731
+        R = lambda r: frames.attitude(r.acceleration, r.yaw)
         Rdot = (R(move(t + h)) - R(move(t - h))) / (2 * h)
         Wfd = R(move(t)).T @ Rdot
         np.testing.assert_allclose(W, [Wfd[2, 1], Wfd[0, 2], Wfd[1, 0]], atol=1e-6)

@@ -76,8 +76,8 @@ def test_rk4_is_fourth_order_and_conserves_energy_and_momentum():
     assert np.all((orders > 3.6) & (orders < 4.4)), orders
     J = params.J
     s, _, _ = _torque_free(0.002)
-    energy = lambda x: 0.5 * x.omega_B @ J @ x.omega_B  # noqa: E731
-    momentum = lambda x: x.R_WB @ J @ x.omega_B  # noqa: E731  (world frame)
+    energy = lambda x: 0.5 * x.omega_B @ J @ x.omega_B
+    momentum = lambda x: x.R_WB @ J @ x.omega_B
     assert abs(energy(s) - energy(s0)) < 1e-8 * energy(s0)
     np.testing.assert_allclose(momentum(s), momentum(s0), atol=1e-9)
     np.testing.assert_allclose(s.R_WB.T @ s.R_WB, np.eye(3), atol=1e-13)

@@ -9,11 +9,11 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
+from oracles import eval_spline_reference
+from scenarios import standard
 
 import avp
 from avp import _avp_rust, frames
-from oracles import eval_spline_reference
-from scenarios import standard
 
 
 @st.composite

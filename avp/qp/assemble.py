@@ -88,11 +88,11 @@ class PerchingQp:
             np.concatenate([b.upper for b in self.inequalities]),
         )
 
-    def with_inequalities(self, *blocks: ConstraintBlock) -> "PerchingQp":
+    def with_inequalities(self, *blocks: ConstraintBlock) -> PerchingQp:
         """A copy with more inequality blocks (e.g. the FoV rows (8) and trust region (9))."""
         return replace(self, inequalities=self.inequalities + tuple(blocks))
 
-    def without(self, name_prefix: str) -> "PerchingQp":
+    def without(self, name_prefix: str) -> PerchingQp:
         """A copy without the inequality blocks whose name starts with ``name_prefix``."""
         kept = tuple(b for b in self.inequalities if not b.name.startswith(name_prefix))
         return replace(self, inequalities=kept)
@@ -104,7 +104,7 @@ class PerchingQp:
         conditions than the spline can meet).
         """
         A, b = self.stacked_equalities()
-        m, n = A.shape
+        m = A.shape[0]
         Q, R, piv = scipy.linalg.qr(A.T, pivoting=True, check_finite=False)
         diag = np.abs(np.diag(R))
         rank = int(np.sum(diag > RANK_TOL * max(diag[0] if diag.size else 0.0, 1.0)))

@@ -26,7 +26,7 @@ def initial_state_rows(
     rows = np.zeros((len(orders), layout.n_variables))
     derivs = state.derivatives()
     rhs = np.empty(len(orders))
-    for i, (r, a) in enumerate(zip(orders, axes)):
+    for i, (r, a) in enumerate(zip(orders, axes, strict=True)):
         s = layout.start(a, 0)
         w = (t_scale / T0) ** r
         rows[i, s : s + n] = B0[r] * w

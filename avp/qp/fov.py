@@ -33,11 +33,11 @@ Array = npt.NDArray[np.float64]
 __all__ = [
     "FOV_PREFIX",
     "FovGradient",
-    "fov_h",
-    "fov_gradient",
-    "fov_times",
     "FovLinearisation",
     "fov_blocks",
+    "fov_gradient",
+    "fov_h",
+    "fov_times",
 ]
 
 FOV_PREFIX = "fov"

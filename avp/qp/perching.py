@@ -45,11 +45,14 @@ def terminal_rows(
     V = vector_rows(layout, knots_rel, 1, tf)[0]
     A = vector_rows(layout, knots_rel, 2, tf)[0]
     for axis in range(3):
-        rows.append(P[axis]); rhs.append(target.point[axis]); names.append(f"terminal position {'xyz'[axis]}")
+        rows.append(P[axis])
+        rhs.append(target.point[axis])
+        names.append(f"terminal position {'xyz'[axis]}")
     if config.alpha_range is None:
         c0 = terminal_acceleration(target, config.alpha, config.g)
         for axis in range(3):
-            rows.append(A[axis] * t_scale**2); rhs.append(c0[axis] * t_scale**2)
+            rows.append(A[axis] * t_scale**2)
+            rhs.append(c0[axis] * t_scale**2)
             names.append(f"terminal acceleration (12) {'xyz'[axis]}")
     else:  # (12) with alpha free: a(tf) + g e3 has no component along s1, s2
         for label, direction in (("s1", target.s1), ("s2", target.s2)):
@@ -57,11 +60,12 @@ def terminal_rows(
             rhs.append(-config.g * direction[2] * t_scale**2)
             names.append(f"terminal thrust along s3 (12): no {label} component")
     for label, direction, value in zip(
-        ("s1", "s2", "s3"), target.R_WS.T, config.contact_velocity.components(target.incline)
+        ("s1", "s2", "s3"), target.R_WS.T, config.contact_velocity.components(target.incline), strict=True
     ):
         if value is None:
             continue
-        rows.append((direction @ V) * t_scale); rhs.append(value * t_scale)
+        rows.append((direction @ V) * t_scale)
+        rhs.append(value * t_scale)
         names.append(f"contact velocity v.{label}")
     rows.append(derivative_rows(layout, knots_rel, YAW, 0, tf)[0])
     rhs.append(terminal_yaw(target, yaw_start))

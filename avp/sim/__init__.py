@@ -15,8 +15,8 @@ Pieces, each seeded through an explicit ``np.random.Generator`` where random:
 from .camera import FRONT_CAMERA_R_BC, Camera, CameraMeasurement, CameraParams, in_fov
 from .contact import Contact, PerchPad, SuccessCriteria, detect_contact
 from .controller import (
-    ControlOutput,
     ControllerGains,
+    ControlOutput,
     FlatReference,
     angular_acceleration,
     control,
@@ -27,14 +27,14 @@ from .odometry import OdometryNoise, noisy_odometry
 from .vehicle import RigidBodyState, VehicleParams, step
 
 __all__ = [
+    "DT_CONTROL",
+    "FRONT_CAMERA_R_BC",
     "Camera",
     "CameraMeasurement",
     "CameraParams",
     "Contact",
     "ControlOutput",
     "ControllerGains",
-    "DT_CONTROL",
-    "FRONT_CAMERA_R_BC",
     "FlatReference",
     "FlightResult",
     "OdometryNoise",

@@ -41,7 +41,7 @@ from ..errors import ConfigError
 from ._so3 import Array, as_rotation, as_vector, expm_so3
 from .vehicle import RigidBodyState
 
-__all__ = ["CameraParams", "CameraMeasurement", "Camera", "in_fov", "FRONT_CAMERA_R_BC"]
+__all__ = ["FRONT_CAMERA_R_BC", "Camera", "CameraMeasurement", "CameraParams", "in_fov"]
 
 FRONT_CAMERA_R_BC = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
 """Default mounting: ``c3 = b1`` (optical axis forward), ``c1 = -b2``, ``c2 = -b3``."""

@@ -27,7 +27,7 @@ from ..errors import ConfigError
 from ._so3 import Array, as_rotation, as_vector, project_so3
 from .vehicle import RigidBodyState
 
-__all__ = ["PerchPad", "SuccessCriteria", "Contact", "detect_contact"]
+__all__ = ["Contact", "PerchPad", "SuccessCriteria", "detect_contact"]
 
 
 @dataclass(frozen=True, eq=False)

@@ -38,9 +38,9 @@ from ._so3 import Array, as_vector, cross, hat, vee
 from .vehicle import RigidBodyState, VehicleParams
 
 __all__ = [
-    "FlatReference",
-    "ControllerGains",
     "ControlOutput",
+    "ControllerGains",
+    "FlatReference",
     "angular_acceleration",
     "control",
 ]
@@ -84,7 +84,7 @@ class FlatReference:
             object.__setattr__(self, name, float(getattr(self, name)))
 
     @classmethod
-    def hover(cls, position: Any, yaw: float = 0.0) -> "FlatReference":
+    def hover(cls, position: Any, yaw: float = 0.0) -> FlatReference:
         """At rest at ``position`` (m) with heading ``yaw`` (rad)."""
         z = np.zeros(3)
         return cls(position, z, z, z, z, yaw, 0.0, 0.0)

@@ -17,9 +17,10 @@ import dataclasses
 import math
 import sys
 import time
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Iterable, TextIO
+from typing import Any, TextIO
 
 import numpy as np
 
@@ -27,7 +28,7 @@ from ..config import PlannerConfig
 from ..replan import ReplanConfig
 from .run import Mode, SimResult, SimScenario, simulate
 
-__all__ = ["Condition", "Comparison", "compare", "REPLAN_PERIOD"]
+__all__ = ["REPLAN_PERIOD", "Comparison", "Condition", "compare"]
 
 REPLAN_PERIOD = 1.0 / 30.0
 """The paper's replanning cycle (s); latencies are reported as a fraction of it."""
@@ -164,7 +165,7 @@ class Comparison:
         colors = {Mode.ONE_SHOT: "tab:red", Mode.AVP: "tab:blue"}
         for i, c in enumerate(self.conditions):
             fig, axes = plt.subplots(1, 2, figsize=(11, 4.2), sharey=True)
-            for ax, m in zip(axes, Mode):
+            for ax, m in zip(axes, Mode, strict=True):
                 for r in self.runs(c, m)[:max_paths]:
                     if r.path_p.size:
                         ls = "-" if r.success else ":"

@@ -9,8 +9,9 @@ once per camera frame or replanning period, feed the camera and estimator, and r
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 
@@ -20,7 +21,7 @@ from .controller import ControllerGains, FlatReferenceLike, control
 from .odometry import OdometryNoise, noisy_odometry
 from .vehicle import RigidBodyState, VehicleParams, step
 
-__all__ = ["DT_CONTROL", "Trace", "FlightResult", "fly"]
+__all__ = ["DT_CONTROL", "FlightResult", "Trace", "fly"]
 
 DT_CONTROL = 0.002
 """Default control and integration step (s): 500 Hz."""

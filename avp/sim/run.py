@@ -59,7 +59,7 @@ from .flight import DT_CONTROL, fly
 from .odometry import OdometryNoise, noisy_odometry
 from .vehicle import RigidBodyState, VehicleParams
 
-__all__ = ["AfterPlan", "Mode", "SimScenario", "SimResult", "simulate", "sim_config"]
+__all__ = ["AfterPlan", "Mode", "SimResult", "SimScenario", "sim_config", "simulate"]
 
 
 def sim_config(tilt_rate_max: float | None = None) -> PlannerConfig:
@@ -85,7 +85,7 @@ class Mode(Enum):
     AVP = "avp: replan at 30 Hz with the fused target estimate"
 
     @classmethod
-    def parse(cls, value: "Mode | str") -> "Mode":
+    def parse(cls, value: Mode | str) -> Mode:
         """A :class:`Mode`, or its name (``"one_shot"``, ``"one-shot"``, ``"avp"``)."""
         if isinstance(value, Mode):
             return value
@@ -197,7 +197,7 @@ class SimScenario:
         t = self.target()
         return t.point + np.array([-self.distance, 0.0, self.start_height]) + self.lateral * t.s2
 
-    def without_noise(self) -> "SimScenario":
+    def without_noise(self) -> SimScenario:
         """The same scenario with a perfect camera and perfect odometry."""
         cam = dataclasses.replace(self.camera, sigma0_pos=0.0, sigma0_ang=0.0)
         return dataclasses.replace(self, camera=cam, odometry=None)

@@ -31,7 +31,7 @@ from ..errors import ConfigError
 from ..frames import GRAVITY
 from ._so3 import Array, as_rotation, as_vector, cross, hat, project_so3
 
-__all__ = ["VehicleParams", "RigidBodyState", "step"]
+__all__ = ["RigidBodyState", "VehicleParams", "step"]
 
 _E3 = np.array([0.0, 0.0, 1.0])
 
@@ -129,7 +129,7 @@ class RigidBodyState:
         object.__setattr__(self, "omega_B", as_vector("state.omega_B", self.omega_B))
 
     @classmethod
-    def _trusted(cls, p_W: Array, v_W: Array, R_WB: Array, omega_B: Array) -> "RigidBodyState":
+    def _trusted(cls, p_W: Array, v_W: Array, R_WB: Array, omega_B: Array) -> RigidBodyState:
         # Internal fast path: the integrator's outputs are finite and R_WB is projected.
         obj = object.__new__(cls)
         for name, val in (("p_W", p_W), ("v_W", v_W), ("R_WB", R_WB), ("omega_B", omega_B)):
