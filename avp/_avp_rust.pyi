@@ -3,6 +3,18 @@
 import numpy as np
 import numpy.typing as npt
 
+__all__ = [
+    "BOUND_NAMES",
+    "__version__",
+    "anticipate",
+    "bound_polynomial",
+    "certify_below",
+    "certify_below_many",
+    "certify_spline",
+    "eval_spline",
+    "sturm_count",
+]
+
 __version__: str
 
 def eval_spline(

@@ -296,10 +296,10 @@ class PlannerConfig:
         if not isinstance(self.solver, str):
             raise ConfigError("config.solver", f"must be a qpsolvers solver name, got {self.solver!r}")
         if self.alpha_range is not None:
-            lo, hi = (float(x) for x in self.alpha_range)
-            if not (math.isfinite(lo) and math.isfinite(hi) and 0.0 < lo <= hi):
+            a_lo, a_hi = (float(x) for x in self.alpha_range)
+            if not (math.isfinite(a_lo) and math.isfinite(a_hi) and 0.0 < a_lo <= a_hi):
                 raise ConfigError("config.alpha_range", f"must be (lo, hi) with 0 < lo <= hi, got {self.alpha_range}")
-            object.__setattr__(self, "alpha_range", (lo, hi))
+            object.__setattr__(self, "alpha_range", (a_lo, a_hi))
         if not isinstance(self.bounds, BoundsPolicy):
             raise ConfigError("config.bounds", f"must be a BoundsPolicy, got {self.bounds!r}")
         if not self.limits.accel_min < self.alpha < self.limits.accel_max:

@@ -191,7 +191,7 @@ def solve_with_fov(
                 f"({int(lin.progress.sum())} progress-only, {n_vis} visible at linearisation)")
         out, err = run(qp, fov_cfg, label, False)
         why = err if out is None else incompatibility(out)
-        if why is not None:
+        if why is not None or out is None:
             log.append(f"{desc}; incompatible (16): {why}")
             return out, None, why, lin
         log.append(f"{desc}; {fov_cfg.solver}: solved (max violation {out.max_violation:.1e})")

@@ -110,7 +110,7 @@ def solve_perching_qp(qp: PerchingQp, config: PlannerConfig, initvals: Array | N
         problem = qpsolvers.Problem(P=qp.P, q=np.zeros(qp.layout.n_variables), G=Gs, h=hs, A=A, b=b)
         init = initvals
     if config.solver not in qpsolvers.dense_solvers:  # sparse-only back-ends (OSQP...)
-        problem = qpsolvers.Problem(*[
+        problem = qpsolvers.Problem(*[  # type: ignore[arg-type]
             scipy.sparse.csc_matrix(m) if isinstance(m, np.ndarray) and m.ndim == 2 else m
             for m in problem.unpack()
         ])

@@ -151,7 +151,7 @@ def build_perching_qp(
         ConstraintBlock("terminal", At, bt, bt),
     )
     G, lo, hi = pre_impact_rows(layout, knots_rel, target, config)
-    ineq = (ConstraintBlock("pre-impact band (14)", G, lo, hi),) if G.shape[0] else ()
+    ineq: tuple[ConstraintBlock, ...] = (ConstraintBlock("pre-impact band (14)", G, lo, hi),) if G.shape[0] else ()
     Ga, la, ha = terminal_thrust_rows(layout, knots_rel, target, config)
     if Ga.shape[0]:
         ineq += (ConstraintBlock("contact thrust range (12)", Ga, la, ha),)

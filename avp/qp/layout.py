@@ -73,7 +73,7 @@ class DecisionLayout:
     def fit_pinv(self) -> Array:
         """Pseudo-inverse of the Vandermonde matrix at :attr:`fit_nodes` (ascending powers)."""
         V = self.fit_nodes[:, None] ** np.arange(self.n_coeffs)[None, :]
-        return np.linalg.pinv(V)
+        return np.asarray(np.linalg.pinv(V), dtype=np.float64)
 
     def columns(self, axis: int | npt.NDArray[np.intp], segment: int | npt.NDArray[np.intp]) -> npt.NDArray[np.intp]:
         """Column indices of the coefficients of ``(axis, segment)`` (broadcast, last axis ``k``)."""
@@ -97,7 +97,7 @@ class DecisionLayout:
         """Inverse of :meth:`to_physical`."""
         c = np.asarray(coeffs, dtype=float).transpose(1, 0, 2)
         scale = np.asarray(durations, dtype=float)[:, None] ** np.arange(self.n_coeffs)[None, :]
-        return (c * scale[None]).reshape(-1)
+        return np.asarray((c * scale[None]).reshape(-1), dtype=np.float64)
 
 
 @lru_cache(maxsize=32)

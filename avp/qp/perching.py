@@ -89,7 +89,7 @@ def terminal_thrust_rows(
 def band_times(config: PlannerConfig, tf: float) -> Array:
     """Sample times ``t_f - t_k + j dt``, ``0 <= j < round(t_k/dt)``, of (14), clipped to ``t >= 0``."""
     t = tf - config.t_k + config.dt * np.arange(config.band_samples)
-    return t[t >= 0.0]
+    return np.asarray(t[t >= 0.0], dtype=np.float64)
 
 
 def pre_impact_rows(
@@ -130,14 +130,16 @@ def pre_impact_rows(
     kappa = math.tan(config.cone_half_angle) * math.cos(math.pi / config.cone_facets)
     dirs = [math.cos(th) * s1 + math.sin(th) * s2
             for th in 2 * math.pi * np.arange(config.cone_facets) / config.cone_facets]
-    rows, lo, hi = [], [], []
+    rows: list[Array] = []
+    lower: list[float] = []
+    upper: list[float] = []
     for k in range(times.size):
         rows.append(s3 @ A[k])
-        lo.append(alpha_lo - s3 @ gz)
-        hi.append((1.0 + config.q) * alpha_hi - s3 @ gz)
+        lower.append(float(alpha_lo - s3 @ gz))
+        upper.append(float((1.0 + config.q) * alpha_hi - s3 @ gz))
         for d in dirs:
             w = d - kappa * s3
             rows.append(w @ A[k])
-            lo.append(-np.inf)
-            hi.append(-(w @ gz))
-    return np.array(rows), np.array(lo), np.array(hi)
+            lower.append(-np.inf)
+            upper.append(float(-(w @ gz)))
+    return np.array(rows), np.array(lower), np.array(upper)

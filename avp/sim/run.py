@@ -417,7 +417,7 @@ def simulate(
         w0 = time.perf_counter()
         try:
             result: PlanResult | None = plan_detailed(start, initial, cfg)
-            reason = "" if result.ok else result.status.value
+            reason = "" if result is not None and result.ok else (result.status.value if result else "")
         except AvpError as exc:
             result, reason = None, f"{type(exc).__name__}: {exc}"
         solve_times.append(time.perf_counter() - w0)
