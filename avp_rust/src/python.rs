@@ -22,6 +22,18 @@ pub(crate) fn contiguous<'a>(
     slice.map_err(|_| PyValueError::new_err(format!("{arg}: must be a C-contiguous float64 array")))
 }
 
+/// Borrows a `(segments, axes, coeffs)` array and its knots as a validated [`SplineView`].
+pub(crate) fn spline_view<'a>(
+    coeffs: &'a PyReadonlyArray3<'_, f64>,
+    knots: &'a PyReadonlyArray1<'_, f64>,
+) -> PyResult<SplineView<'a>> {
+    let shape = coeffs.shape();
+    let shape = (shape[0], shape[1], shape[2]);
+    let c = contiguous("coeffs", coeffs.as_slice())?;
+    let k = contiguous("knots", knots.as_slice())?;
+    SplineView::new(c, shape, k).map_err(to_py_err)
+}
+
 /// Evaluates a spline at `times` for each derivative order in `orders`.
 ///
 /// `coeffs` has shape `(segments, axes, coeffs)` (ascending powers of `t - knots[i]`),
@@ -34,23 +46,19 @@ fn eval_spline_py<'py>(
     times: PyReadonlyArray1<'py, f64>,
     orders: Vec<usize>,
 ) -> PyResult<Bound<'py, PyArray3<f64>>> {
-    let shape = coeffs.shape();
-    let shape = (shape[0], shape[1], shape[2]);
-    let c = contiguous("coeffs", coeffs.as_slice())?;
-    let k = contiguous("knots", knots.as_slice())?;
+    let view = spline_view(&coeffs, &knots)?;
     let t = contiguous("times", times.as_slice())?;
     if let Some(&bad) = orders.iter().find(|&&o| o > 64) {
         return Err(PyValueError::new_err(format!(
             "orders: derivative order {bad} is too large (at most 64)"
         )));
     }
-    let view = SplineView::new(c, shape, k).map_err(to_py_err)?;
     let n_times = t.len();
     let n_orders = orders.len();
     let out = py
         .detach(|| guarded(|| spline::evaluate(&view, t, &orders)))
         .map_err(to_py_err)?;
-    let arr = numpy::ndarray::Array3::from_shape_vec((n_orders, n_times, shape.1), out)
+    let arr = numpy::ndarray::Array3::from_shape_vec((n_orders, n_times, view.n_axes()), out)
         .map_err(|e| PyValueError::new_err(format!("internal shape error: {e}")))?;
     Ok(arr.into_pyarray(py))
 }
@@ -67,24 +75,21 @@ fn anticipate_py<'py>(
     t_rp: f64,
     t_ex: f64,
 ) -> PyResult<Bound<'py, PyArray2<f64>>> {
-    let shape = coeffs.shape();
-    let shape = (shape[0], shape[1], shape[2]);
-    let c = contiguous("coeffs", coeffs.as_slice())?;
-    let k = contiguous("knots", knots.as_slice())?;
+    let view = spline_view(&coeffs, &knots)?;
+    let n_axes = view.n_axes();
     let odo_shape = odometry.shape().to_vec();
-    if odo_shape != [crate::anticipation::ORDERS, shape.1] {
+    if odo_shape != [crate::anticipation::ORDERS, n_axes] {
         return Err(PyValueError::new_err(format!(
             "odometry: expected shape ({}, {}), got {:?}",
             crate::anticipation::ORDERS,
-            shape.1,
+            n_axes,
             odo_shape
         )));
     }
     let o = contiguous("odometry", odometry.as_slice())?;
-    let view = SplineView::new(c, shape, k).map_err(to_py_err)?;
     let out =
         guarded(|| crate::anticipation::anticipate(&view, o, t_rp, t_ex)).map_err(to_py_err)?;
-    let arr = numpy::ndarray::Array2::from_shape_vec((crate::anticipation::ORDERS, shape.1), out)
+    let arr = numpy::ndarray::Array2::from_shape_vec((crate::anticipation::ORDERS, n_axes), out)
         .map_err(|e| PyValueError::new_err(format!("internal shape error: {e}")))?;
     Ok(arr.into_pyarray(py))
 }

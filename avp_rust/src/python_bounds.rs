@@ -13,8 +13,7 @@ use crate::error::guarded;
 
 use crate::bounds::{self, BoundKind, Limits, ALL_BOUNDS};
 use crate::certify;
-use crate::python::{contiguous, to_py_err};
-use crate::spline::SplineView;
+use crate::python::{contiguous, spline_view, to_py_err};
 use crate::sturm;
 
 /// Exact number of distinct real roots of `sum coeffs[k] x^k` in the closed interval `[a, b]`.
@@ -112,17 +111,13 @@ fn certify_spline_py<'py>(
     g: f64,
     exact: bool,
 ) -> PyResult<(Bound<'py, PyArray2<i8>>, Bound<'py, PyArray2<f64>>)> {
-    let shape = coeffs.shape();
-    let shape = (shape[0], shape[1], shape[2]);
-    let c = contiguous("coeffs", coeffs.as_slice())?;
-    let k = contiguous("knots", knots.as_slice())?;
+    let view = spline_view(&coeffs, &knots)?;
     let l = contiguous("limits", limits.as_slice())?;
     let limits = Limits::from_slice(l).map_err(to_py_err)?;
-    let view = SplineView::new(c, shape, k).map_err(to_py_err)?;
     let verdicts = py
         .detach(|| guarded(|| bounds::certify_spline(&view, &limits, g, exact)))
         .map_err(to_py_err)?;
-    let n_seg = shape.0;
+    let n_seg = view.n_segments();
     let mut codes = Array2::<i8>::from_elem((ALL_BOUNDS.len(), n_seg), 3);
     let mut times = Array2::<f64>::from_elem((ALL_BOUNDS.len(), n_seg), f64::NAN);
     for v in &verdicts {
@@ -149,11 +144,8 @@ fn bound_polynomial_py<'py>(
     limit: f64,
     g: f64,
 ) -> PyResult<(Bound<'py, PyArray1<f64>>, Bound<'py, PyArray1<f64>>)> {
-    let shape = coeffs.shape();
-    let shape = (shape[0], shape[1], shape[2]);
-    let c = contiguous("coeffs", coeffs.as_slice())?;
-    let k = contiguous("knots", knots.as_slice())?;
-    let view = SplineView::new(c, shape, k).map_err(to_py_err)?;
+    let view = spline_view(&coeffs, &knots)?;
+    let shape = (view.n_segments(), view.n_axes(), view.n_coeffs());
     if shape.1 != 4 {
         return Err(PyValueError::new_err(format!(
             "coeffs: expected 4 axes (x, y, z, yaw), got {}",
