@@ -133,11 +133,13 @@ def solve_with_fov(
     T: Array,
     log: list[str],
     previous: Trajectory | None = None,
+    initvals: Array | None = None,
 ) -> FovSolve:
     """Solve the perching QP at durations ``T`` with FoV rows (8)-(9) and the fallback (16).
 
     Appends one line per QP to ``log``. ``fov_dropped`` is ``True`` when the returned plan was
-    solved without FoV rows because the rows were incompatible (16).
+    solved without FoV rows because the rows were incompatible (16). ``initvals`` (normalised
+    coefficients) warm-start every solve of back-ends that take a guess.
 
     Raises
     ------
@@ -155,7 +157,7 @@ def solve_with_fov(
         try:
             with warnings.catch_warnings(record=True) as caught:
                 warnings.simplefilter("always" if not strict else "default")
-                out = solve_perching_qp(qp, c)
+                out = solve_perching_qp(qp, c, initvals)
             if not strict:  # expected on an incompatible FoV QP (16): log, do not warn
                 log.extend(f"{label}: {w.category.__name__}: {w.message}" for w in caught)
             else:

@@ -150,7 +150,7 @@ def _solve_at(
     """
     if cfg.fov.enabled:  # FoV rows (8)-(9), SQP step, fallback (16): avp.perception
         from .perception import solve_with_fov
-        r = solve_with_fov(state, target, cfg, T, log, previous)
+        r = solve_with_fov(state, target, cfg, T, log, previous, initvals)
         return _Attempt(r.outcome, r.trajectory, r.fov_dropped, r.build, r.solve)
     t0 = time.perf_counter()
     qp = build_perching_qp(state, target, cfg, T)
