@@ -10,6 +10,7 @@ equalities then hold to rounding whatever the solver's tolerance.
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
+from functools import cached_property
 
 import numpy as np
 import numpy.typing as npt
@@ -90,15 +91,24 @@ class PerchingQp:
 
     def with_inequalities(self, *blocks: ConstraintBlock) -> PerchingQp:
         """A copy with more inequality blocks (e.g. the FoV rows (8) and trust region (9))."""
-        return replace(self, inequalities=self.inequalities + tuple(blocks))
+        return self._same_equalities(replace(self, inequalities=self.inequalities + tuple(blocks)))
 
     def without(self, name_prefix: str) -> PerchingQp:
         """A copy without the inequality blocks whose name starts with ``name_prefix``."""
         kept = tuple(b for b in self.inequalities if not b.name.startswith(name_prefix))
-        return replace(self, inequalities=kept)
+        return self._same_equalities(replace(self, inequalities=kept))
 
-    def reduce(self) -> ReducedQp:
-        """Eliminate the equalities with a QR factorisation of ``A^T``.
+    def _same_equalities(self, other: PerchingQp) -> PerchingQp:
+        """``other`` has this QP's cost and equalities: hand over the elimination if computed."""
+        if "elimination" in self.__dict__:
+            other.__dict__["elimination"] = self.__dict__["elimination"]
+        return other
+
+    @cached_property
+    def elimination(self) -> tuple[Array, Array, Array, Array]:
+        """``(Z, c_p, H, g)``: ``A c = b`` iff ``c = c_p + Z z`` (pivoted QR of ``A^T``), and the
+        cost in ``z``, scaled to a unit largest Hessian diagonal. Shared by copies made with
+        :meth:`with_inequalities` / :meth:`without` (same cost and equalities).
 
         Raises :class:`InfeasibleError` when the equalities are inconsistent (more independent
         conditions than the spline can meet).
@@ -125,6 +135,11 @@ class PerchingQp:
         scale = 1.0 / max(float(np.max(np.abs(np.diag(H)))) if H.size else 1.0, 1e-300)
         H = (0.5 * scale) * (H + H.T)
         g = scale * (PZ.T @ c_p)
+        return Z, c_p, H, g
+
+    def reduce(self) -> ReducedQp:
+        """The QP in ``z`` (see :attr:`elimination`): only inequalities, positive-definite Hessian."""
+        Z, c_p, H, g = self.elimination
         G, lo, hi = self.stacked_inequalities()
         Gc = G @ c_p
         return ReducedQp(H=H, g=g, G=G @ Z, lower=lo - Gc, upper=hi - Gc, Z=Z, c_p=c_p)
