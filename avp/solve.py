@@ -18,7 +18,7 @@ import qpsolvers
 import scipy.sparse
 
 from .config import PlannerConfig, QpForm
-from .errors import InfeasibleError, SolverError
+from .errors import SolverError
 from .qp.assemble import PerchingQp
 
 Array = npt.NDArray[np.float64]
@@ -118,8 +118,6 @@ def solve_perching_qp(qp: PerchingQp, config: PlannerConfig, initvals: Array | N
     t_solve = time.perf_counter()
     try:
         solution = qpsolvers.solve_problem(problem, solver=config.solver, initvals=init, **_options(config))
-    except InfeasibleError:
-        raise
     except Exception as exc:  # qpsolvers/back-end errors must not leak (one hierarchy)
         raise SolverError(f"QP back-end '{config.solver}' failed: {exc}") from exc
     solve_time = time.perf_counter() - t_solve
