@@ -230,7 +230,8 @@ def plan_detailed(
     config:
         :class:`PlannerConfig` (paper defaults when ``None``).
     durations:
-        Segment durations (s) overriding the allocation rule.
+        Segment durations (s) overriding the allocation rule. The time search still scales them
+        when a bound fails; pass ``BoundsPolicy(factors=(), relaxations=())`` to keep them.
     previous:
         The committed plan when replanning (linearisation point of the FoV rows (8)).
     warm_start:
