@@ -22,7 +22,7 @@ from .errors import (
 )
 from .qp.assemble import build_perching_qp
 from .qp.layout import DecisionLayout, layout_for
-from .solve import QpOutcome, solve_perching_qp
+from .solve import WARM_START_SOLVERS, QpOutcome, solve_perching_qp
 from .timing import check_durations, initial_durations
 from .trajectory import Trajectory
 from .types import PerchTarget, State
@@ -272,7 +272,7 @@ def plan_detailed(
             if factor != 1.0 or stage is not None:
                 log.append(f"durations x{factor:g}: total {T.sum():.3f} s")
             initvals = None
-            if warm_start is not None:
+            if warm_start is not None and cfg.solver in WARM_START_SOLVERS:
                 knots = state.time + np.concatenate([[0.0], np.cumsum(T)])
                 initvals = _fit_initvals(warm_start, layout_for(cfg.n_segments, cfg.degree), knots)
             attempt = _solve_at(state, target, stage_cfg, T, log, previous, initvals)

@@ -33,6 +33,9 @@ SOLVER_DEFAULTS: dict[str, dict[str, Any]] = {
 }
 """Per-back-end settings avp uses unless ``config.solver_options`` overrides them."""
 
+WARM_START_SOLVERS = frozenset({"proxqp", "osqp", "piqp", "qpalm"})
+"""Back-ends that use an initial guess (DAQP, an active-set method, ignores it)."""
+
 FEASIBILITY_TOL = 1e-6
 """Largest accepted inequality violation, relative to ``max(1, |bound|)``."""
 
