@@ -66,12 +66,10 @@ class FovSolve:
     linearisation: FovLinearisation | None = None
 
 
-def _trajectory(qp: PerchingQp, outcome: QpOutcome, state: State, T: Array, g: float) -> Trajectory | None:
+def _trajectory(qp: PerchingQp, outcome: QpOutcome, g: float) -> Trajectory | None:
     if not outcome.ok or outcome.c_hat is None:
         return None
-    coeffs = qp.layout.to_physical(outcome.c_hat, T)
-    knots = state.time + np.concatenate([[0.0], np.cumsum(T)])
-    return Trajectory(coeffs, knots, g=g)
+    return qp.trajectory(outcome.c_hat, g)
 
 
 def linearise_on(
@@ -180,7 +178,7 @@ def solve_with_fov(
         if out is None:
             return None, None
         log.append(f"{label} {cfg.solver}: {out.status.value} (max violation {out.max_violation:.1e})")
-        return out, _trajectory(base, out, state, T, cfg.g)
+        return out, _trajectory(base, out, cfg.g)
 
     def with_rows(reference: Trajectory, label: str) -> tuple[QpOutcome | None, Trajectory | None, str | None, FovLinearisation]:
         nonlocal build
@@ -197,7 +195,7 @@ def solve_with_fov(
             log.append(f"{desc}; incompatible (16): {why}")
             return out, None, why, lin
         log.append(f"{desc}; {fov_cfg.solver}: solved (max violation {out.max_violation:.1e})")
-        return out, _trajectory(qp, out, state, T, cfg.g), None, lin
+        return out, _trajectory(qp, out, cfg.g), None, lin
 
     if previous is not None:
         probe = fov_times(0.0, float(np.sum(T)), cfg.fov)

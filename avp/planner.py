@@ -161,11 +161,7 @@ def _solve_at(
         log.append(str(exc))
         return _Attempt(None, None, False, build, 0.0)
     log.append(f"QP {cfg.solver}: {outcome.status.value} (max violation {outcome.max_violation:.1e})")
-    traj = None
-    if outcome.ok and outcome.c_hat is not None:
-        coeffs = qp.layout.to_physical(outcome.c_hat, T)
-        knots = state.time + np.concatenate([[0.0], np.cumsum(T)])
-        traj = Trajectory(coeffs, knots, g=cfg.g)
+    traj = qp.trajectory(outcome.c_hat, cfg.g) if outcome.ok and outcome.c_hat is not None else None
     return _Attempt(outcome, traj, False, build + outcome.build_time, outcome.solve_time)
 
 

@@ -18,6 +18,7 @@ import scipy.linalg
 
 from ..config import PlannerConfig
 from ..errors import InfeasibleError
+from ..trajectory import Trajectory
 from ..types import PerchTarget, State
 from .boundary import continuity_rows, initial_state_rows
 from .cost import cost_matrix
@@ -88,6 +89,12 @@ class PerchingQp:
             np.concatenate([b.lower for b in self.inequalities]),
             np.concatenate([b.upper for b in self.inequalities]),
         )
+
+    def trajectory(self, c_hat: Array, g: float) -> Trajectory:
+        """The :class:`~avp.trajectory.Trajectory` of normalised coefficients ``c_hat``, starting
+        at ``t0`` with this QP's durations."""
+        coeffs = self.layout.to_physical(c_hat, self.durations)
+        return Trajectory(coeffs, self.t0 + self.knots_rel, g=g)
 
     def with_inequalities(self, *blocks: ConstraintBlock) -> PerchingQp:
         """A copy with more inequality blocks (e.g. the FoV rows (8) and trust region (9))."""
