@@ -32,6 +32,21 @@ def frozen_array(field: str, value: Any, shape: tuple[int, ...]) -> npt.NDArray[
     return arr
 
 
+def vector(field: str, value: Any, size: int = 3) -> npt.NDArray[np.float64]:
+    """``value`` as a finite (writable) float vector of length ``size``; a scalar is broadcast."""
+    try:
+        arr = np.array(value, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise ConfigError(field, f"expected {size} numbers, got {value!r}") from exc
+    if arr.ndim == 0:
+        arr = np.full(size, float(arr))
+    if arr.shape != (size,):
+        raise ConfigError(field, f"expected shape ({size},), got {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        raise ConfigError(field, "contains NaN or inf; pass finite values")
+    return arr
+
+
 def finite_float(field: str, value: Any) -> float:
     """``value`` as a finite float."""
     try:

@@ -9,6 +9,8 @@ construction (13): ``b2_des = [-sin psi, cos psi, 0]``, ``b1 = (b2_des x b3)/|.|
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import numpy.typing as npt
 
@@ -16,6 +18,11 @@ __all__ = [
     "GRAVITY",
     "attitude",
     "body_rates",
+    "cross",
+    "expm_so3",
+    "hat",
+    "project_so3",
+    "vee",
     "rotation_error_angle",
     "thrust_magnitude",
     "thrust_vector",
@@ -117,3 +124,39 @@ def rotation_error_angle(R_a: npt.ArrayLike, R_b: npt.ArrayLike) -> Array:
     Rb = np.asarray(R_b, dtype=float)
     tr = np.einsum("...ij,...ij->...", Ra, Rb)
     return np.arccos(np.clip((tr - 1.0) / 2.0, -1.0, 1.0))
+
+
+# -- SO(3) helpers (the single home of hat/vee/exp/projection for the planner and avp.sim) ------
+
+
+def hat(w: Array) -> Array:
+    """Skew matrix with ``hat(w) @ b == cross(w, b)`` for one 3-vector."""
+    return np.array([[0.0, -w[2], w[1]], [w[2], 0.0, -w[0]], [-w[1], w[0], 0.0]])
+
+
+def vee(S: Array) -> Array:
+    """Inverse of :func:`hat` for a skew-symmetric ``S``."""
+    return np.array([S[2, 1], S[0, 2], S[1, 0]])
+
+
+def cross(a: Array, b: Array) -> Array:
+    """``a x b`` for two single 3-vectors (much faster than ``np.cross`` on one pair)."""
+    return np.array(
+        [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+    )
+
+
+def expm_so3(phi: Array) -> Array:
+    """Rodrigues' formula: ``exp(hat(phi))`` for a rotation vector ``phi`` (rad)."""
+    theta = math.sqrt(float(phi @ phi))
+    K = hat(phi)
+    if theta < 1e-8:
+        return np.eye(3) + K + 0.5 * K @ K
+    return np.eye(3) + (math.sin(theta) / theta) * K + ((1.0 - math.cos(theta)) / theta**2) * K @ K
+
+
+def project_so3(M: Array) -> Array:
+    """Nearest rotation to ``M`` in the Frobenius norm (polar factor via SVD, det forced to +1)."""
+    U, _, Vt = np.linalg.svd(M)
+    D = np.diag([1.0, 1.0, float(np.sign(np.linalg.det(U @ Vt))) or 1.0])
+    return U @ D @ Vt

@@ -1,11 +1,32 @@
 """Active replanning (Sec. IV): a :class:`Replanner` that user code calls from its own loop
 (30 Hz in the paper) with odometry and the latest target estimate.
 
-Each :meth:`Replanner.step` anticipates the state at the moment a new plan can take over (6),
-``t_ex = t_rp + latency``, replans from there to the (re-estimated) target with the FoV rows
-linearised around the committed plan, and commits the new plan if it is usable. It keeps the
-committed plan when a solve fails or comes too late, and stops replanning near contact. It never
-raises for a planning or solver failure: the :class:`ReplanStep` says what happened.
+Each :meth:`Replanner.step` plans from the moment a new plan can take over,
+``t_ex = t_rp + latency``, to the (re-estimated) target with the FoV rows linearised around the
+committed plan, and commits the new plan only if it is certified. The policy
+(:class:`ReplanConfig`, every knob measured in ``docs/simulation.md``):
+
+- **Anchoring.** While odometry agrees with the committed reference (tracking error below
+  ``anchor_position`` / ``anchor_velocity``), the new plan starts from the committed plan's own
+  state at ``t_ex``: odometry noise never enters the reference. On real divergence it
+  re-anchors on odometry with the anticipation (6).
+- **Hold.** With the estimate unchanged (no new detection: the pad left the view) and tracking
+  good, there is nothing to correct: the committed plan is kept without a solve (``HELD``).
+- **Reach budget.** The contact point may move by at most ``0.5 reach_acceleration T^2`` with
+  ``T`` the time left; larger corrections are clipped to the budget, and if the full correction
+  does not certify, the fractions ``partial_fractions`` of it are tried: a partial, certified
+  correction is preferred over none (``PARTIAL``).
+- **Certified commits.** A plan is committed only if ``result.ok`` (no relaxed plan unless
+  ``allow_relaxed``), its actuator bounds are certified and its snap is certified below
+  ``snap_max`` (:mod:`avp.trackability`), which bounds the angular acceleration.
+- **Freeze** within ``freeze_horizon`` s of contact (no replan can be tracked there).
+- **Cannot reach.** When the committed contact point is farther from the latest estimate than
+  ``reach_tolerance`` and no certified plan closes the gap, the step's action is
+  ``CANNOT_REACH`` with the numbers (``target_error``, ``reach_budget``): the user's cue to abort
+  or go around.
+
+It never raises for a planning or solver failure (including ``ValueError`` / ``LinAlgError`` from
+inside planning): the :class:`ReplanStep` says what happened.
 """
 
 from __future__ import annotations
@@ -21,7 +42,8 @@ from . import _avp_rust
 from . import _validate as v
 from .config import PlannerConfig
 from .errors import AvpError, ConfigError
-from .planner import PlanResult, plan_detailed
+from .planner import PlanResult, PlanStatus, plan_detailed
+from .trackability import SnapReport, certify_snap
 from .trajectory import FlatOutput, Trajectory
 from .types import PerchTarget, State
 
@@ -30,43 +52,84 @@ __all__ = ["ReplanAction", "ReplanConfig", "ReplanStep", "Replanner", "anticipat
 Array = npt.NDArray[np.float64]
 
 
+
+_PLANNING_ERRORS = (AvpError, ValueError, ArithmeticError, np.linalg.LinAlgError, RuntimeError)
+"""Exceptions a planning call may raise that :meth:`Replanner.step` turns into a result."""
+
+
 class ReplanAction(Enum):
     """What one :meth:`Replanner.step` did."""
 
     INITIAL_PLAN = "initial plan committed"
     REPLANNED = "replanned: new plan committed from t_ex"
-    KEPT_PREVIOUS = "kept the committed plan (replanning failed or came too late)"
+    PARTIAL = "replanned: a certified partial correction towards the new estimate committed"
+    HELD = "held: estimate unchanged and tracking good, committed plan kept without a solve"
+    KEPT_PREVIOUS = "kept the committed plan (replanning failed, was not certified or came too late)"
     FROZEN_NEAR_CONTACT = "too close to contact: committed plan kept without replanning"
+    CANNOT_REACH = "the latest estimate is beyond what a certified plan reaches in the time left"
     NO_PLAN = "no plan yet: the first plan failed"
 
 
 @dataclass(frozen=True)
 class ReplanConfig:
-    """Replanning policy.
+    """Replanning policy (module docstring). Defaults measured in closed loop in the realistic
+    simulator (``docs/simulation.md``, "Replanning policy"; 90 deg wall and 45 deg slope at 4.5 m
+    and 7.5 m, 20 ms motor lag, 3 mm / 1 cm/s odometry noise with drift, 3 % range bias).
 
     Parameters
     ----------
     latency:
         Time (s) between the odometry sample ``t_rp`` and the switch to the new plan ``t_ex``.
+        20 ms: the median replan step measured 8-15 ms on 2 shared cores.
     adapt_latency:
         If true, use ``max(latency, latency_margin * recent median solve time)``.
     latency_margin:
         Safety factor on the measured solve time.
     freeze_horizon:
         No replanning when less than this (s) is left to contact (at least the band window).
+        0.25 s: the snap of replans from later switch times exceeded ``snap_max`` in most steps
+        and was not certified anyway (each step then cost a solve for nothing).
     deadline:
         A solve slower than this (s, wall clock) is discarded as too late; ``None``: no deadline
         (use ``None`` in simulation for deterministic runs).
     measured_orders:
-        Derivative orders taken from odometry (2: position and velocity, yaw and yaw rate);
-        higher orders come from the committed plan, so commands stay continuous (6).
+        When re-anchoring: derivative orders taken from odometry (2: position and velocity, yaw
+        and yaw rate); higher orders come from the committed plan, so commands stay continuous (6).
     warm_start:
         Pass the committed plan as initial guess to back-ends that accept one.
     search_on_replan:
-        Let replans run the duration search and relaxations of ``config.bounds``. Off by
-        default: a replan keeps the committed contact time and, if its bounds do not certify,
-        the committed plan is kept (in closed loop the search made the contact time drift and
-        let relaxed plans through; it also cost up to 55 solves per step).
+        Let replans run the duration search and relaxations of ``config.bounds``. Off: a replan
+        keeps the committed contact time (in closed loop the search made the contact time drift
+        from 2.5 s to 20 s at 7.5 m and cost up to 55 solves per step).
+    anchor_position, anchor_velocity:
+        Tracking error (m, m/s) between odometry and the committed reference below which a
+        replan starts from the committed plan's own state (anchored), above which it re-anchors
+        on odometry. 0.15 m / 0.5 m/s: with 20 ms motor lag the tracking error of certified
+        plans peaked at 6-9 cm and 0.25 m/s; odometry anchoring (the old behaviour, thresholds 0)
+        fed the 3 mm / 1 cm/s noise into every plan and failed 4/5 exact-estimate perches.
+    target_tolerance:
+        Change (m) of the estimated pad centre (and ``target_tolerance`` rad of its normal)
+        below which, when anchored, the step holds the committed plan without solving. 5 mm:
+        below the 3 cm plane tolerance of a perch by a factor of 6; replanning for smaller
+        changes only added solves.
+    reach_acceleration:
+        Budget (m/s^2) on moving the contact point: at most ``0.5 reach_acceleration T^2`` with
+        ``T`` the time left. 6 m/s^2: about a third of the thrust margin above hover; larger
+        corrections late in the flight produced uncertifiable plans (tilt rate or snap).
+    partial_fractions:
+        Fractions of the (budgeted) correction tried in order until one certifies. ``(1, 0.5,
+        0.25)``: the second and third attempts rescued most steps whose full correction failed.
+    reach_tolerance:
+        Distance (m) between the committed contact point and the latest estimate above which a
+        step without a full correction reports ``CANNOT_REACH``. 0.05 m: half the in-plane
+        success radius.
+    snap_max:
+        Snap limit (m/s^4) certified on every committed plan (:mod:`avp.trackability`; ``inf``
+        skips it). 600 m/s^4: first plans from hover at 1.5-7.5 m peak at 120-320 m/s^4; the
+        uncertified late replans that broke perches carried 1000-1500 m/s^4.
+    allow_relaxed:
+        Commit plans the planner obtained by relaxing something (``result.relaxations``, status
+        ``SOLVED_RELAXED``). Off: a relaxed plan moves the contact velocity or band.
     """
 
     latency: float = 0.02
@@ -77,6 +140,14 @@ class ReplanConfig:
     measured_orders: int = 2
     warm_start: bool = True
     search_on_replan: bool = False
+    anchor_position: float = 0.15
+    anchor_velocity: float = 0.5
+    target_tolerance: float = 0.005
+    reach_acceleration: float = 6.0
+    partial_fractions: tuple[float, ...] = (1.0, 0.5, 0.25)
+    reach_tolerance: float = 0.05
+    snap_max: float = 600.0
+    allow_relaxed: bool = False
 
     def __post_init__(self) -> None:
         v.positive_float("replan.latency", self.latency)
@@ -86,6 +157,17 @@ class ReplanConfig:
             v.positive_float("replan.deadline", self.deadline)
         if not 0 <= self.measured_orders <= 5:
             raise ConfigError("replan.measured_orders", "must be in 0..5 (0: all orders from the plan)")
+        for name in ("anchor_position", "anchor_velocity", "target_tolerance"):
+            val = v.finite_float(f"replan.{name}", getattr(self, name))
+            if val < 0:
+                raise ConfigError(f"replan.{name}", f"must be >= 0 (0: never anchor / never hold), got {val}")
+        v.positive_float("replan.reach_acceleration", self.reach_acceleration, allow_inf=True)
+        v.positive_float("replan.reach_tolerance", self.reach_tolerance)
+        v.positive_float("replan.snap_max", self.snap_max, allow_inf=True)
+        fr = tuple(float(f) for f in self.partial_fractions)
+        if not fr or any(not 0.0 < f <= 1.0 for f in fr):
+            raise ConfigError("replan.partial_fractions", f"need fractions in (0, 1], got {self.partial_fractions!r}")
+        object.__setattr__(self, "partial_fractions", fr)
 
 
 @dataclass(frozen=True)
@@ -94,6 +176,12 @@ class ReplanStep:
 
     ``trajectory`` is the committed plan after the step (what to track from ``t_ex`` on; before
     ``t_ex`` keep tracking the previous one, or call :meth:`Replanner.reference`).
+
+    ``target_error`` (m) is the distance from the committed plan's contact point to the latest
+    estimate after the step; ``reach_budget`` (m) how far the contact point could move in the
+    time left; ``fraction`` the share of the requested correction committed (0 when nothing
+    was); ``anchored`` whether the plan started from the committed reference (True) or from
+    odometry; ``snap`` the trackability certificate of the committed plan, when one was checked.
     """
 
     t: float
@@ -104,6 +192,22 @@ class ReplanStep:
     anticipated: State | None = None
     result: PlanResult | None = None
     solve_time: float = 0.0
+    target_error: float = 0.0
+    reach_budget: float = float("inf")
+    fraction: float = 0.0
+    anchored: bool = False
+    n_solves: int = 0
+    snap: SnapReport | None = None
+
+    @property
+    def solved(self) -> bool:
+        """Whether the step ran at least one planning call."""
+        return self.n_solves > 0
+
+    @property
+    def committed(self) -> bool:
+        """Whether the step committed a new plan."""
+        return self.fraction > 0.0 or self.action is ReplanAction.INITIAL_PLAN
 
 
 def anticipate(plan: Trajectory, odometry: State, t_rp: float, t_ex: float, measured_orders: int = 2) -> State:
@@ -126,8 +230,35 @@ def anticipate(plan: Trajectory, odometry: State, t_rp: float, t_ex: float, meas
                  yaw=float(x0[0, 3]), yaw_rate=float(x0[1, 3]), time=float(t_ex))
 
 
+def _plan_state(plan: Trajectory, t: float) -> State:
+    """The committed plan's own flat state at ``t`` (an anchored start)."""
+    d = plan.derivatives(min(max(t, plan.t0), plan.tf))
+    return State(position=d[0, :3], velocity=d[1, :3], acceleration=d[2, :3], jerk=d[3, :3],
+                 yaw=float(d[0, 3]), yaw_rate=float(d[1, 3]), time=float(t))
+
+
+def _blend(a: PerchTarget, b: PerchTarget, f: float) -> PerchTarget:
+    """The target a fraction ``f`` of the way from ``a`` to ``b`` (point and frame)."""
+    if f >= 1.0:
+        return b
+    point = a.point + f * (b.point - a.point)
+    normal = (1.0 - f) * a.s3 + f * b.s3
+    up = (1.0 - f) * a.s1 + f * b.s1
+    try:
+        return PerchTarget.from_normal(point, normal, up_slope=up)
+    except ConfigError:
+        return PerchTarget(point=point, R_WS=a.R_WS)
+
+
+def _target_change(a: PerchTarget, b: PerchTarget) -> tuple[float, float]:
+    """Distance (m) between the pad centres and angle (rad) between the normals."""
+    d = float(np.linalg.norm(b.point - a.point))
+    ang = float(np.arccos(np.clip(a.s3 @ b.s3, -1.0, 1.0)))
+    return d, ang
+
+
 class Replanner:
-    """Replans a perch from a user-owned loop.
+    """Replans a perch from a user-owned loop (module docstring for the policy).
 
     Parameters
     ----------
@@ -138,7 +269,8 @@ class Replanner:
     replan:
         :class:`ReplanConfig`.
     trajectory:
-        An already committed plan (otherwise the first :meth:`step` plans from odometry).
+        An already committed plan (otherwise the first :meth:`step` plans from odometry); it is
+        taken to end at ``target``.
     """
 
     def __init__(
@@ -158,6 +290,7 @@ class Replanner:
                 self.config, bounds=replace(self.config.bounds, factors=(), max_steps=0, relaxations=())
             )
         self.target = target
+        self.committed_target: PerchTarget = target
         self.trajectory: Trajectory | None = trajectory
         self._previous: Trajectory | None = None
         self._solve_times: list[float] = []
@@ -172,6 +305,11 @@ class Replanner:
         recent = float(np.median(self._solve_times[-15:]))
         return max(self.replan.latency, self.replan.latency_margin * recent)
 
+    @property
+    def cannot_reach(self) -> bool:
+        """The last step reported ``CANNOT_REACH``."""
+        return bool(self.history) and self.history[-1].action is ReplanAction.CANNOT_REACH
+
     def reference(self, t: float) -> FlatOutput:
         """Flat output to track at ``t``: the previous plan until the committed one starts."""
         traj = self.trajectory
@@ -184,8 +322,8 @@ class Replanner:
     def step(self, t: float, odometry: State, target_estimate: PerchTarget | None = None) -> ReplanStep:
         """One replanning cycle at time ``t`` with ``odometry`` (a :class:`State` at ``t``).
 
-        Raises only for bad input (:class:`~avp.errors.ConfigError`); planning failures are
-        reported in the returned :class:`ReplanStep`.
+        Raises only for bad input (:class:`~avp.errors.ConfigError`); planning failures of any
+        kind are reported in the returned :class:`ReplanStep`.
         """
         t = v.finite_float("t", t)
         if not isinstance(odometry, State):
@@ -198,53 +336,116 @@ class Replanner:
         self.history.append(step)
         return step
 
+    # -- certification ---------------------------------------------------------------------
+    def _certified(self, result: PlanResult | None) -> tuple[bool, str, SnapReport | None]:
+        """Whether ``result`` may be committed, why not, and its snap certificate."""
+        if result is None or not result.ok or result.trajectory is None:
+            return False, result.status.value if result is not None else "planning failed", None
+        relaxed = getattr(PlanStatus, "SOLVED_RELAXED", None)
+        if not self.replan.allow_relaxed and (result.relaxations or (relaxed is not None and result.status is relaxed)):
+            return False, "relaxed plan (allow_relaxed is off)", None
+        if self.config.bounds.certify and (result.bounds is None or not result.bounds.certified):
+            return False, "actuator bounds not certified", None
+        try:
+            snap = certify_snap(result.trajectory, self.replan.snap_max)
+        except _PLANNING_ERRORS as exc:
+            return False, f"snap certificate failed: {type(exc).__name__}: {exc}", None
+        if not snap.certified:
+            return False, snap.summary(), snap
+        return True, "ok", snap
+
     def _initial(self, t: float, odometry: State) -> ReplanStep:
         state = State(position=odometry.position, velocity=odometry.velocity,
                       acceleration=odometry.acceleration, jerk=odometry.jerk,
                       yaw=odometry.yaw, yaw_rate=odometry.yaw_rate, time=t)
-        result, elapsed, error = self._plan(state, None, None, self.config)
-        if result is None or not result.ok:
-            reason = error or (result.status.value if result else "planning failed")
-            return ReplanStep(t, ReplanAction.NO_PLAN, None, reason, t, state, result, elapsed)
+        result, elapsed, error = self._plan(state, self.target, None, None, self.config)
+        ok, why, snap = self._certified(result)
+        if not ok:
+            return ReplanStep(t, ReplanAction.NO_PLAN, None, error or why, t, state, result, elapsed, n_solves=1, snap=snap)
+        assert result is not None
         self.trajectory = result.trajectory
-        return ReplanStep(t, ReplanAction.INITIAL_PLAN, self.trajectory, "first plan", t, state, result, elapsed)
+        self.committed_target = self.target
+        return ReplanStep(t, ReplanAction.INITIAL_PLAN, self.trajectory, "first plan", t, state, result,
+                          elapsed, fraction=1.0, n_solves=1, snap=snap)
 
     def _replan(self, t: float, odometry: State) -> ReplanStep:
         committed = self.trajectory
         assert committed is not None
+        rc = self.replan
         t_ex = t + self.latency
         remaining = committed.tf - t_ex
-        if remaining < max(self.replan.freeze_horizon, self.config.t_k):
-            return ReplanStep(t, ReplanAction.FROZEN_NEAR_CONTACT, committed,
-                              f"{max(remaining, 0.0):.3f} s to contact", t_ex)
+        shift, turn = _target_change(self.committed_target, self.target)
+        budget = 0.5 * rc.reach_acceleration * max(remaining, 0.0) ** 2
+
+        def record(action: ReplanAction, reason: str, **kw: object) -> ReplanStep:
+            err, _ = _target_change(self.committed_target, self.target)
+            if action in (ReplanAction.KEPT_PREVIOUS, ReplanAction.FROZEN_NEAR_CONTACT, ReplanAction.PARTIAL) \
+                    and err > rc.reach_tolerance:
+                reason = (f"{action.name.lower()}: committed contact point {err:.3f} m from the estimate "
+                          f"(tolerance {rc.reach_tolerance:.3f} m, budget {budget:.3f} m in "
+                          f"{max(remaining, 0.0):.2f} s); {reason}")
+                action = ReplanAction.CANNOT_REACH
+            return ReplanStep(t, action, self.trajectory, reason, t_ex, target_error=err,
+                              reach_budget=budget, **kw)  # type: ignore[arg-type]
+
+        if remaining < max(rc.freeze_horizon, self.config.t_k):
+            return record(ReplanAction.FROZEN_NEAR_CONTACT, f"{max(remaining, 0.0):.3f} s to contact")
         if t < committed.t0:
-            return ReplanStep(t, ReplanAction.KEPT_PREVIOUS, committed,
-                              "the committed plan has not started yet", t_ex)
-        start = anticipate(committed, odometry, t, t_ex, self.replan.measured_orders)
+            return record(ReplanAction.KEPT_PREVIOUS, "the committed plan has not started yet")
+
+        ref = committed.derivatives(t)
+        e_p = float(np.linalg.norm(odometry.position - ref[0, :3]))
+        e_v = float(np.linalg.norm(odometry.velocity - ref[1, :3]))
+        anchored = e_p <= rc.anchor_position and e_v <= rc.anchor_velocity
+        if anchored and shift <= rc.target_tolerance and turn <= rc.target_tolerance:
+            return record(ReplanAction.HELD, f"tracking {e_p:.3f} m / {e_v:.3f} m/s, estimate moved {shift:.4f} m",
+                          anchored=True)
+        try:
+            start = _plan_state(committed, t_ex) if anchored else anticipate(committed, odometry, t, t_ex, rc.measured_orders)
+        except ConfigError as exc:
+            return record(ReplanAction.KEPT_PREVIOUS, f"no start state: {exc}")
         durations = np.full(self.config.n_segments, remaining / self.config.n_segments)
-        result, elapsed, error = self._plan(start, durations, committed, self._replan_config)
-        if error is not None or result is None:
-            return ReplanStep(t, ReplanAction.KEPT_PREVIOUS, committed, error or "planning failed", t_ex, start, result, elapsed)
-        if not result.ok:
-            return ReplanStep(t, ReplanAction.KEPT_PREVIOUS, committed, result.status.value, t_ex, start, result, elapsed)
-        if self.replan.deadline is not None and elapsed > self.replan.deadline:
-            return ReplanStep(t, ReplanAction.KEPT_PREVIOUS, committed,
-                              f"too late: solve took {elapsed * 1e3:.1f} ms > deadline "
-                              f"{self.replan.deadline * 1e3:.1f} ms", t_ex, start, result, elapsed)
-        self._previous = committed
-        self.trajectory = result.trajectory
-        return ReplanStep(t, ReplanAction.REPLANNED, self.trajectory, "ok", t_ex, start, result, elapsed)
+        f_max = 1.0 if shift <= budget else budget / shift
+        elapsed_total, n_solves, last_reason = 0.0, 0, ""
+        last_result: PlanResult | None = None
+        for frac in rc.partial_fractions:
+            f = frac * f_max
+            goal = _blend(self.committed_target, self.target, f)
+            result, elapsed, error = self._plan(start, goal, durations, committed, self._replan_config)
+            elapsed_total += elapsed
+            n_solves += 1
+            last_result = result
+            if rc.deadline is not None and elapsed_total > rc.deadline:
+                return record(ReplanAction.KEPT_PREVIOUS, f"too late: solves took {elapsed_total * 1e3:.1f} ms > "
+                              f"deadline {rc.deadline * 1e3:.1f} ms", anticipated=start, result=result,
+                              solve_time=elapsed_total, anchored=anchored, n_solves=n_solves)
+            ok, why, snap = self._certified(result)
+            if error is not None:
+                why = error
+            if ok:
+                assert result is not None
+                self._previous = committed
+                self.trajectory = result.trajectory
+                self.committed_target = goal
+                action = ReplanAction.REPLANNED if f >= 1.0 else ReplanAction.PARTIAL
+                return record(action, "ok" if f >= 1.0 else f"{f:.0%} of the correction ({shift:.3f} m requested, "
+                              f"budget {budget:.3f} m)", anticipated=start, result=result,
+                              solve_time=elapsed_total, fraction=f, anchored=anchored, n_solves=n_solves, snap=snap)
+            last_reason = why
+        return record(ReplanAction.KEPT_PREVIOUS, last_reason, anticipated=start, result=last_result,
+                      solve_time=elapsed_total, anchored=anchored, n_solves=n_solves)
 
     def _plan(
-        self, state: State, durations: Array | None, previous: Trajectory | None, config: PlannerConfig
+        self, state: State, target: PerchTarget, durations: Array | None, previous: Trajectory | None,
+        config: PlannerConfig,
     ) -> tuple[PlanResult | None, float, str | None]:
         t0 = time.perf_counter()
         try:
             result = plan_detailed(
-                state, self.target, config, durations=durations, previous=previous,
+                state, target, config, durations=durations, previous=previous,
                 warm_start=previous if self.replan.warm_start else None,
             )
-        except AvpError as exc:  # never raise for a planning or solver failure
+        except _PLANNING_ERRORS as exc:  # never raise for a planning or solver failure
             elapsed = time.perf_counter() - t0
             self._solve_times.append(elapsed)
             return None, elapsed, f"{type(exc).__name__}: {exc}"

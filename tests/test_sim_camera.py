@@ -3,11 +3,13 @@
 from __future__ import annotations
 
 import numpy as np
+
+import avp
 import pytest
 
 from avp.frames import rotation_error_angle
-from avp.sim import Camera, CameraParams, OdometryNoise, RigidBodyState, in_fov, noisy_odometry
-from avp.sim._so3 import expm_so3
+from avp.sim import CameraSensor, CameraParams, OdometryNoise, RigidBodyState, noisy_odometry
+from avp.frames import expm_so3
 
 WALL = np.array([[0.0, 0.0, 1.0], [0.0, 1.0, 0.0], [-1.0, 0.0, 0.0]]).T  # s1=e3, s2=e2, s3=-e1
 ORIGIN = RigidBodyState(np.zeros(3))  # level, b1 = e1: the front camera looks along +x
@@ -19,37 +21,34 @@ def at_angle(deg, dist=3.0):
 
 
 def test_sees_in_front_not_behind_and_not_outside_the_cone():
-    cam = Camera()
+    cam = CameraSensor()
     assert cam.visible(ORIGIN, at_angle(0), WALL)
     assert cam.visible(ORIGIN, at_angle(30), WALL)
     assert not cam.visible(ORIGIN, at_angle(40), WALL)
     assert not cam.visible(ORIGIN, at_angle(180), WALL)
     assert not cam.visible(ORIGIN, at_angle(0, dist=12.0), WALL)  # beyond max_range
-    # the one-sided cone, vectorised: the target straight behind is rejected
-    e_c = np.array([1.0, 0.0, 0.0])
-    np.testing.assert_array_equal(
-        in_fov(np.array([at_angle(0), at_angle(180), at_angle(34)]), np.zeros(3), e_c, 0.61),
-        [True, False, True],
-    )
+    # the sensor's test is the planner's avp.Camera.sees (one FoV test), vectorised
+    pts = np.array([at_angle(0), at_angle(180), at_angle(34)])
+    np.testing.assert_array_equal(cam.params.camera.sees(np.zeros(3), np.eye(3), pts), [True, False, True])
 
 
 def test_camera_turns_with_the_body_and_mounting():
     pitched_down = RigidBodyState(np.zeros(3), R_WB=expm_so3(np.array([0.0, np.pi / 2, 0.0])))
     below = np.array([0.0, 0.0, -2.0])
-    assert Camera().visible(pitched_down, below, WALL)  # b1 points down after +90 deg pitch
-    assert not Camera().visible(ORIGIN, below, WALL)
-    down_cam = CameraParams(R_BC=np.diag([1.0, -1.0, -1.0]))  # optical axis along -b3
-    assert Camera(down_cam).visible(ORIGIN, below, WALL)
+    assert CameraSensor().visible(pitched_down, below, WALL)  # b1 points down after +90 deg pitch
+    assert not CameraSensor().visible(ORIGIN, below, WALL)
+    down_cam = CameraParams(camera=avp.Camera(R_BC=np.diag([1.0, -1.0, -1.0]), range=10.0))  # optical axis along -b3
+    assert CameraSensor(down_cam).visible(ORIGIN, below, WALL)
 
 
 def test_incidence_limit_hides_a_pad_seen_from_behind():
-    cam = Camera(CameraParams(max_incidence=np.deg2rad(80)))
+    cam = CameraSensor(CameraParams(max_incidence=np.deg2rad(80)))
     assert cam.visible(ORIGIN, at_angle(0), WALL)  # s3 = -e1 faces the camera
     assert not cam.visible(ORIGIN, at_angle(0), WALL @ np.diag([-1.0, 1.0, -1.0]))
 
 
 def test_frames_arrive_at_10_hz_only_while_visible():
-    cam, rng = Camera(), np.random.default_rng(0)
+    cam, rng = CameraSensor(), np.random.default_rng(0)
     meas = [cam.measure(k * 0.002, ORIGIN, at_angle(0), WALL, rng) for k in range(1000)]
     times = [m.t for m in meas if m is not None]
     assert len(times) == 20
@@ -59,7 +58,7 @@ def test_frames_arrive_at_10_hz_only_while_visible():
 
 
 def _errors(dist, n=1500, seed=1):
-    cam, rng = Camera(), np.random.default_rng(seed)
+    cam, rng = CameraSensor(), np.random.default_rng(seed)
     target = at_angle(10, dist)
     pos, ang = [], []
     for k in range(n):
@@ -87,7 +86,7 @@ def test_noise_grows_with_distance_like_fig_9():
 
 
 def test_measurement_uses_the_believed_vehicle_pose():
-    cam = Camera(CameraParams(sigma0_pos=0.0, sigma0_ang=0.0))
+    cam = CameraSensor(CameraParams(sigma0_pos=0.0, sigma0_ang=0.0))
     believed = RigidBodyState(np.array([0.1, -0.2, 0.05]))
     m = cam.measure(0.0, ORIGIN, at_angle(0), WALL, np.random.default_rng(0), believed=believed)
     np.testing.assert_allclose(m.p_W, at_angle(0) + believed.p_W, atol=1e-12)
@@ -97,7 +96,7 @@ def test_measurement_uses_the_believed_vehicle_pose():
 
 def test_measurements_are_deterministic_per_seed():
     def run(seed):
-        rng, cam = np.random.default_rng(seed), Camera()
+        rng, cam = np.random.default_rng(seed), CameraSensor()
         odo = noisy_odometry(ORIGIN, OdometryNoise(), rng)
         return cam.measure(0.0, ORIGIN, at_angle(5), WALL, rng, believed=odo).p_W
 

@@ -17,7 +17,7 @@ from avp.sim import (
     control,
     fly,
 )
-from avp.sim._so3 import expm_so3
+from avp.frames import expm_so3
 
 T_MOVE = 2.0
 P0 = np.array([0.0, 0.0, 1.0])
@@ -45,9 +45,11 @@ def move(t):
     )
 
 
-def tracking_errors(feedforward):
+def tracking_errors(feedforward, params=None):
+    """Controller alone: an ideal vehicle (instant thrust and moments) unless ``params``."""
     gains = ControllerGains(feedforward=feedforward)
-    res = fly(RigidBodyState(P0), move, 0.0, 2.5, gains=gains, record=True)
+    params = params if params is not None else VehicleParams.ideal()
+    res = fly(RigidBodyState(P0), move, 0.0, 2.5, params, gains=gains, record=True)
     tr = res.trace
     refs = [move(t) for t in tr.t]
     p_ref = np.array([r.position for r in refs])
@@ -75,11 +77,19 @@ def test_feedforward_matches_the_derivatives_of_the_reference_attitude():
 def test_tracking_with_feedforward_is_accurate_and_without_it_is_not():
     pos_ff, att_ff, tr = tracking_errors(True)
     pos_no, att_no, _ = tracking_errors(False)
-    params = VehicleParams()
+    params = VehicleParams.ideal()
     assert tr.thrust.max() < params.thrust_max and np.all(np.abs(tr.moment_B) < params.moment_max)
     assert np.rad2deg(np.arccos(tr.R_WB_des[:, 2, 2])).max() > 25  # a real pitch manoeuvre
     assert pos_ff < 2e-3 and att_ff < 0.2, (pos_ff, att_ff)  # measured 0.18 mm, 0.034 deg
     assert pos_no > 10 * pos_ff and att_no > 2.0, (pos_no, att_no)  # measured 62 mm, 8.3 deg
+
+
+def test_motor_lag_degrades_tracking_but_feedforward_still_helps():
+    pos_ideal, att_ideal, _ = tracking_errors(True)
+    pos_lag, att_lag, _ = tracking_errors(True, VehicleParams(motor_time_constant=0.02))
+    pos_lag_no, att_lag_no, _ = tracking_errors(False, VehicleParams(motor_time_constant=0.02))
+    assert att_lag > 3 * att_ideal  # 20 ms of lag is visible (measured 0.6 vs 0.034 deg)
+    assert att_lag_no > 3 * att_lag and pos_lag_no > 5 * pos_lag
 
 
 def test_hover_recovers_from_an_offset_and_a_tilt():
@@ -143,7 +153,7 @@ def test_a_wall_perch_is_flown_to_millimetres_only_with_feedforward():
     pad = PerchPad([1.5, 0.0, 0.0], R_WS)
 
     def contact(feedforward):
-        res = fly(RigidBodyState(np.zeros(3)), _perch_reference(), 0.0, 1.2,
+        res = fly(RigidBodyState(np.zeros(3)), _perch_reference(), 0.0, 1.2, VehicleParams.ideal(),
                   gains=ControllerGains(feedforward=feedforward),
                   stop=lambda a, b, ta, tb: detect_contact(a, b, pad, ta, tb))
         return res.event

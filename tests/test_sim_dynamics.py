@@ -5,10 +5,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from avp.config import VehicleLimits
 from avp.errors import ConfigError
 from avp.frames import GRAVITY
 from avp.sim import RigidBodyState, VehicleParams, step
-from avp.sim._so3 import expm_so3
+from avp.frames import expm_so3
 
 
 def _fly_open_loop(state, thrust, moment, dt, duration, params):
@@ -28,7 +29,7 @@ def test_hover_is_an_equilibrium():
 
 
 def test_free_fall_matches_g():
-    params = VehicleParams(thrust_min=0.0)
+    params = VehicleParams.ideal(VehicleLimits(thrust_min=0.0))
     s0 = RigidBodyState(p_W=[0.0, 0.0, 10.0], v_W=[1.0, 0.0, 0.0])
     s = _fly_open_loop(s0, 0.0, np.zeros(3), 0.002, 1.0, params)
     np.testing.assert_allclose(s.p_W, [1.0, 0.0, 10.0 - 0.5 * GRAVITY], atol=1e-10)
@@ -36,18 +37,20 @@ def test_free_fall_matches_g():
 
 
 def test_thrust_is_clipped_to_the_limits():
-    params = VehicleParams()  # 0.25 .. 8.5 N on 0.5 kg
-    s0 = RigidBodyState(p_W=np.zeros(3))
-    hi = step(s0, 100.0, np.zeros(3), 0.002, params)
-    lo = step(s0, -5.0, np.zeros(3), 0.002, params)
-    np.testing.assert_allclose(hi.v_W[2] / 0.002, 8.5 / 0.5 - GRAVITY, rtol=1e-9)
-    np.testing.assert_allclose(lo.v_W[2] / 0.002, 0.25 / 0.5 - GRAVITY, rtol=1e-9)
+    limits = VehicleLimits()  # the planner's: 0.25 .. 9.81 N on 0.5 kg
+    for params in (VehicleParams.ideal(limits), VehicleParams(limits=limits, motor_time_constant=0.0)):
+        s0 = RigidBodyState(p_W=np.zeros(3))
+        hi = step(s0, 100.0, np.zeros(3), 0.002, params)
+        lo = step(s0, -5.0, np.zeros(3), 0.002, params)
+        np.testing.assert_allclose(hi.v_W[2] / 0.002, limits.thrust_max / limits.mass - GRAVITY, rtol=1e-9)
+        np.testing.assert_allclose(lo.v_W[2] / 0.002, limits.thrust_min / limits.mass - GRAVITY, rtol=1e-9)
 
 
 def test_moment_is_clipped_per_axis():
-    params = VehicleParams(moment_max=(0.5, 0.5, 0.1))
-    s = step(RigidBodyState(p_W=np.zeros(3)), 4.9, np.array([10.0, -0.2, -3.0]), 0.001, params)
-    expected = np.array([0.5, -0.2, -0.1]) / np.diag(params.J) * 0.001
+    params = VehicleParams.ideal()
+    mm = params.moment_max
+    s = step(RigidBodyState(p_W=np.zeros(3)), 4.9, np.array([10.0, -0.2 * mm[1], -3.0]), 0.001, params)
+    expected = np.array([mm[0], -0.2 * mm[1], -mm[2]]) / np.diag(params.J) * 0.001
     np.testing.assert_allclose(s.omega_B, expected, rtol=1e-4)  # gyroscopic term is O(dt^2)
 
 
@@ -61,7 +64,7 @@ def test_spin_about_a_principal_axis_is_exact():
 
 
 def _torque_free(dt):
-    params = VehicleParams(thrust_min=0.0)
+    params = VehicleParams.ideal(VehicleLimits(thrust_min=0.0))
     s0 = RigidBodyState(p_W=np.zeros(3), omega_B=[4.0, 0.3, 2.0])  # not a principal axis
     return _fly_open_loop(s0, 0.0, np.zeros(3), dt, 1.0, params), params, s0
 
@@ -85,11 +88,50 @@ def test_rk4_is_fourth_order_and_conserves_energy_and_momentum():
 
 
 def test_bad_inputs_raise_config_error():
-    with pytest.raises(ConfigError, match="params.mass"):
-        VehicleParams(mass=-1.0)
-    with pytest.raises(ConfigError, match="params.thrust_min"):
-        VehicleParams(thrust_min=9.0, thrust_max=8.0)
+    with pytest.raises(ConfigError, match="vehicle.inertia"):
+        VehicleParams(inertia=(-1.0, 1.0, 1.0))
+    with pytest.raises(ConfigError, match="vehicle.motor_time_constant"):
+        VehicleParams(motor_time_constant=-0.01)
+    with pytest.raises(ConfigError, match="vehicle.limits"):
+        VehicleParams(limits="heavy")
     with pytest.raises(ConfigError, match="state.R_WB"):
         RigidBodyState(p_W=np.zeros(3), R_WB=2 * np.eye(3))
     with pytest.raises(ConfigError, match="dt"):
         step(RigidBodyState(p_W=np.zeros(3)), 4.9, np.zeros(3), 0.0)
+
+
+def test_vehicle_is_built_from_the_planners_limits():
+    limits = VehicleLimits(mass=0.8, thrust_max=14.0)
+    params = VehicleParams(limits=limits)
+    assert params.limits is limits
+    assert (params.mass, params.thrust_max) == (0.8, 14.0)
+    assert params.rotor_thrust_limits == (limits.thrust_min / 4, 14.0 / 4)
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_mixer_reproduces_feasible_wrenches_and_respects_rotor_limits(seed):
+    params = VehicleParams()
+    rng = np.random.default_rng(seed)
+    lo, hi = params.rotor_thrust_limits
+    T = rng.uniform(lo, hi, 4)  # a feasible allocation: its wrench must come back exactly
+    tau, M = params.wrench(T)
+    np.testing.assert_allclose(params.mix(tau, M), T, rtol=1e-12, atol=1e-12)
+    # an infeasible request: every rotor stays in its range, roll/pitch keep their sign
+    big = params.mix(params.hover_thrust, np.array([5.0, -3.0, 1.0]))
+    assert np.all(big >= lo - 1e-15) and np.all(big <= hi + 1e-15)
+    _, M_out = params.wrench(big)
+    assert M_out[0] > 0 and M_out[1] < 0
+
+
+def test_motor_lag_is_first_order_with_the_documented_time_constant():
+    params = VehicleParams(motor_time_constant=0.02)
+    s = RigidBodyState(p_W=np.zeros(3))
+    cmd = 1.5 * params.hover_thrust
+    w0 = params.rotor_speed(np.array(params.hover_thrust / 4))
+    w_cmd = params.rotor_speed(np.array(cmd / 4))
+    for _ in range(10):  # 20 ms = one time constant
+        s = step(s, cmd, np.zeros(3), 0.002, params)
+    expected = w_cmd + (w0 - w_cmd) * np.exp(-1.0)
+    np.testing.assert_allclose(s.rotor_speeds, expected, rtol=1e-12)
+    v_instant = (cmd / params.mass - GRAVITY) * 0.02  # climb rate after 20 ms without lag
+    assert 0.2 * v_instant < s.v_W[2] < 0.6 * v_instant  # e^-1 of the step still missing at the end

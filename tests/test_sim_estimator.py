@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from avp.frames import rotation_error_angle
-from avp.sim import Camera, CameraParams, RigidBodyState, TargetEstimator
+from avp.sim import CameraSensor, CameraParams, RigidBodyState, TargetEstimator
 
 WALL = np.array([[0.0, 0.0, 1.0], [0.0, 1.0, 0.0], [-1.0, 0.0, 0.0]]).T
 TARGET = np.array([8.0, 0.0, 1.0])
@@ -26,7 +26,7 @@ def test_no_estimate_before_the_first_measurement():
 
 def test_noise_free_measurements_give_the_exact_pose():
     est = TargetEstimator()
-    exact = Camera(CameraParams(sigma0_pos=1e-12, sigma0_ang=1e-12))
+    exact = CameraSensor(CameraParams(sigma0_pos=1e-12, sigma0_ang=1e-12))
     observe(est, exact, np.random.default_rng(0), 2.0, 3)
     e = est.estimate()
     np.testing.assert_allclose(e.p_W, TARGET, atol=1e-9)
@@ -38,7 +38,7 @@ def test_error_shrinks_with_more_close_measurements():
     rng = np.random.default_rng(42)
     far, close, ang_far, ang_close, sig_far, sig_close = [], [], [], [], [], []
     for _ in range(300):
-        est, cam = TargetEstimator(), Camera()
+        est, cam = TargetEstimator(), CameraSensor()
         observe(est, cam, rng, 2.0, 1)  # one detection from 6 m
         e = est.estimate()
         far.append(e.p_W - TARGET)

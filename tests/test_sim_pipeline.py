@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from avp.sim import (
-    Camera,
+    CameraSensor,
     FlatReference,
     OdometryNoise,
     RigidBodyState,
@@ -20,7 +20,7 @@ TARGET = np.array([4.0, 0.0, 1.0])
 
 def run(seed):
     rng = np.random.default_rng(seed)
-    cam, est, odo = Camera(), TargetEstimator(), OdometryNoise()
+    cam, est, odo = CameraSensor(), TargetEstimator(), OdometryNoise()
 
     def approach(t):  # 1 m/s towards the wall
         z = np.zeros(3)

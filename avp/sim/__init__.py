@@ -1,19 +1,25 @@
 """Closed-loop evaluation simulator for avp (not flight code; the core ``avp`` never imports it).
 
-Pieces, each seeded through an explicit ``np.random.Generator`` where random:
+One vehicle and one camera: the simulated vehicle holds the planner's
+:class:`avp.config.VehicleLimits` and the camera the planner's :class:`avp.Camera`. Pieces, each
+seeded through an explicit ``np.random.Generator`` where random, each effect configurable and
+off-able:
 
-- :mod:`~avp.sim.vehicle`: rigid-body dynamics (1), RK4, thrust and moment limits;
+- :mod:`~avp.sim.vehicle`: rigid-body dynamics (1), RK4, rotor mixer with per-rotor limits and
+  first-order motor lag;
 - :mod:`~avp.sim.controller`: geometric SE(3) controller (2) with body-rate (22) and
   angular-acceleration feed-forward;
 - :mod:`~avp.sim.flight`: :func:`fly`, vehicle + controller over a stretch of time;
-- :mod:`~avp.sim.odometry`: odometry noise;
-- :mod:`~avp.sim.camera`: front camera with FoV (7), 10 Hz and distance-dependent error (Fig. 9);
-- :mod:`~avp.sim.estimator`: inverse-variance fusion of the detections;
-- :mod:`~avp.sim.contact`: pad contact and the success criterion.
+- :mod:`~avp.sim.odometry`: odometry at its own rate with white noise and drift;
+- :mod:`~avp.sim.camera`: detections in the FoV at 10 Hz with latency, dropouts, range-growing
+  noise, scale bias and a tilted normal;
+- :mod:`~avp.sim.estimator`: the user-side target filter (inverse-variance fusion);
+- :mod:`~avp.sim.contact`: pad contact and the success criterion;
+- :mod:`~avp.sim.run` / :mod:`~avp.sim.evaluate`: one run, comparisons and sweeps.
 """
 
-from .camera import FRONT_CAMERA_R_BC, Camera, CameraMeasurement, CameraParams, in_fov
-from .contact import Contact, PerchPad, SuccessCriteria, detect_contact
+from .camera import FRONT_CAMERA_R_BC, CameraMeasurement, CameraParams, CameraSensor
+from .contact import Contact, PerchCriteria, PerchOutcome, PerchPad, SuccessCriteria, detect_contact, judge_perch
 from .controller import (
     ControllerGains,
     ControlOutput,
@@ -23,21 +29,24 @@ from .controller import (
 )
 from .estimator import TargetEstimate, TargetEstimator
 from .flight import DT_CONTROL, FlightResult, Trace, fly
-from .odometry import OdometryNoise, noisy_odometry
+from .odometry import Odometry, OdometryNoise, noisy_odometry
 from .vehicle import RigidBodyState, VehicleParams, step
 
 __all__ = [
     "DT_CONTROL",
     "FRONT_CAMERA_R_BC",
-    "Camera",
     "CameraMeasurement",
     "CameraParams",
+    "CameraSensor",
     "Contact",
     "ControlOutput",
     "ControllerGains",
     "FlatReference",
     "FlightResult",
+    "Odometry",
     "OdometryNoise",
+    "PerchCriteria",
+    "PerchOutcome",
     "PerchPad",
     "RigidBodyState",
     "SuccessCriteria",
@@ -49,7 +58,7 @@ __all__ = [
     "control",
     "detect_contact",
     "fly",
-    "in_fov",
+    "judge_perch",
     "noisy_odometry",
     "step",
 ]

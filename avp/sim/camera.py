@@ -1,82 +1,137 @@
-"""Front camera that localises the perch pad, with a distance-dependent error (Sec. VI-B, Fig. 9).
+"""The camera sensor that localises the perch pad (Sec. VI-B, Fig. 9), built on :class:`avp.Camera`.
 
-Geometry. The camera frame C has its optical axis along ``c3``; it is mounted with rotation
-``R_BC`` and offset ``p_B`` (from the centre of mass, in B). The default ``R_BC`` looks along
-``b1`` (front camera) with image x along ``-b2`` and image y along ``-b3``. The pad centre ``s`` is
-visible when it lies inside the one-sided FoV cone (7) of half-angle ``half_fov`` (35 deg, the
-paper's 70 deg front camera)::
+One camera. :class:`CameraParams` *holds* the planner's :class:`avp.Camera` (mounting ``R_BC``,
+FoV cone (7), range) and adds only what the sensor needs: an offset from the centre of mass, a
+frame rate, latency, dropouts and the error model. Visibility is :meth:`avp.Camera.sees` (the
+planner's own test) plus a minimum range and an optional incidence limit; there is no second FoV
+test. :func:`avp.sim.run.simulate` hands the same :class:`avp.Camera` object to the planner.
 
-    cos(half_fov) |n_d| <= n_d . e_c,   n_d = s - p_cam_W,   e_c = R_WB R_BC e3
+Timing. Frames are captured at ``rate_hz`` (10 Hz, as in the paper) at ``phase + k / rate_hz``;
+a frame is consumed whether or not the pad is visible, is lost with probability ``dropout`` and
+is delivered ``latency`` s after capture (composed with the pose the robot believed at capture).
 
-and within ``[min_range, max_range]``; optionally (``max_incidence``) the pad's face must be
-turned towards the camera, ``-n_d . s3 >= cos(max_incidence) |n_d|``.
+Error model (each term can be set to 0):
 
-Timing. Frames arrive at ``rate_hz`` (10 Hz, as in the paper) at times ``phase + k / rate_hz``;
-a frame is consumed whether or not the pad is visible.
+- Noise growing with range. Fig. 9 shows the AprilTag localisation error growing roughly
+  exponentially with distance: a few centimetres at 1-2 m, tens of centimetres at 7-8 m::
 
-Noise model. Fig. 9 shows the AprilTag localisation error growing roughly exponentially with
-distance: a few centimetres at 1-2 m, tens of centimetres at 7-8 m. We use isotropic, per-axis
-Gaussian errors in C with::
+      sigma_p(d)   = 0.012 m * exp(d / 2.6 m)     (1.8 cm at 1 m, 2.6 cm at 2 m, 21 cm at 7.5 m)
+      sigma_ang(d) = 0.5 deg * exp(d / 2.6 m)     (0.7 deg at 1 m, 9 deg at 7.5 m)
 
-    sigma_p(d)   = 0.012 m   * exp(d / 2.6 m)     (1.8 cm at 1 m, 2.6 cm at 2 m, 21 cm at 7.5 m)
-    sigma_ang(d) = 0.5 deg   * exp(d / 2.6 m)     (0.7 deg at 1 m, 9 deg at 7.5 m)
-
-so the mean norm of the position error (about 1.6 sigma_p) is 3-4 cm at 1-2 m and 34 cm at
-7.5 m. The ten-fold growth between 1.5 m and 7.5 m sets ``d0 = 6 m / ln 10 = 2.6 m``. The paper
-gives no angular curve; the angular model reuses ``d0`` with a scale typical of a large tag.
-Rotation noise is a right perturbation ``R_CS exp(hat(delta))``. The measured relative pose is
-composed with the vehicle pose the robot believes (odometry), so odometry errors enter the
-world-frame measurement as they would on the robot.
+  per axis in C; rotation noise is a right perturbation ``R_CS exp(hat(delta))``.
+- Scale error: the measured relative position is ``(1 + b) p_C``, ``b = bias_sign * scale_bias``,
+  a bias proportional to range along the line of sight (a wrong tag size or focal length does
+  exactly this). The sign is drawn per run unless ``bias_sign`` fixes it.
+- Tilted normal: the measured pad rotation is ``exp(normal_tilt hat(u)) R_WS`` for a unit axis
+  ``u`` in the pad plane drawn per run (a constant error of the normal).
 """
 
 from __future__ import annotations
 
+import math
+from collections import deque
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 
+from .. import _validate as v
+from ..camera import FRONT_CAMERA_R_BC, Camera
 from ..errors import ConfigError
-from ._so3 import Array, as_rotation, as_vector, expm_so3
+from ..frames import Array, expm_so3
 from .vehicle import RigidBodyState
 
-__all__ = ["FRONT_CAMERA_R_BC", "Camera", "CameraMeasurement", "CameraParams", "in_fov"]
+__all__ = ["FRONT_CAMERA_R_BC", "CameraMeasurement", "CameraParams", "CameraSensor"]
 
-FRONT_CAMERA_R_BC = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
-"""Default mounting: ``c3 = b1`` (optical axis forward), ``c1 = -b2``, ``c2 = -b3``."""
+
+def _default_camera() -> Camera:
+    return Camera(range=10.0)
 
 
 @dataclass(frozen=True, eq=False)
 class CameraParams:
-    """Mounting, field of view, frame rate and noise model (module docstring) of the camera."""
+    """The planner's :class:`avp.Camera` plus timing and the error model (module docstring).
 
-    R_BC: Any = field(default_factory=lambda: FRONT_CAMERA_R_BC.copy())
+    Parameters
+    ----------
+    camera:
+        :class:`avp.Camera` (mounting, FoV cone, range; default: front camera, 35 deg, 10 m).
+    p_B:
+        Camera offset from the centre of mass in B (m).
+    min_range:
+        Closer than this (m) the tag is not detected.
+    max_incidence:
+        Optional: the pad's face must be turned towards the camera within this angle (rad).
+    rate_hz, phase:
+        Frame rate (Hz) and time of frame 0 (s).
+    latency:
+        Capture-to-delivery delay (s).
+    dropout:
+        Probability that a due frame with the pad in view gives no detection.
+    sigma0_pos, d0_pos, sigma0_ang, d0_ang:
+        Range-growing noise ``sigma0 exp(d / d0)`` (m, m, rad, m).
+    scale_bias:
+        Range-proportional bias (fraction of the range, along the line of sight).
+    bias_sign:
+        +1 (ranges too long), -1 (too short) or None (drawn per run).
+    normal_tilt:
+        Constant tilt of the measured pad normal (rad), about a per-run axis in the pad plane.
+    """
+
+    camera: Camera = field(default_factory=_default_camera)
     p_B: Any = (0.0, 0.0, 0.0)
-    half_fov: float = float(np.deg2rad(35.0))
     min_range: float = 0.05
-    max_range: float = 10.0
     max_incidence: float | None = None
     rate_hz: float = 10.0
     phase: float = 0.0
+    latency: float = 0.0
+    dropout: float = 0.0
     sigma0_pos: float = 0.012
     d0_pos: float = 2.6
     sigma0_ang: float = float(np.deg2rad(0.5))
     d0_ang: float = 2.6
+    scale_bias: float = 0.0
+    bias_sign: float | None = None
+    normal_tilt: float = 0.0
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "R_BC", as_rotation("camera.R_BC", self.R_BC))
-        object.__setattr__(self, "p_B", as_vector("camera.p_B", self.p_B))
-        if not 0.0 < self.half_fov < np.pi / 2:
-            raise ConfigError("camera.half_fov", "must be in (0, pi/2) rad")
-        if not 0.0 <= self.min_range < self.max_range:
-            raise ConfigError("camera.max_range", "need 0 <= min_range < max_range (m)")
+        if not isinstance(self.camera, Camera):
+            raise ConfigError("camera.camera", f"must be an avp.Camera, got {type(self.camera).__name__}")
+        object.__setattr__(self, "p_B", v.vector("camera.p_B", self.p_B))
+        if not 0.0 <= self.min_range < self.camera.range:
+            raise ConfigError("camera.min_range", "need 0 <= min_range < camera.range (m)")
         for name in ("rate_hz", "d0_pos", "d0_ang"):
             if not (np.isfinite(getattr(self, name)) and getattr(self, name) > 0):
                 raise ConfigError(f"camera.{name}", "must be a positive finite number")
-        for name in ("sigma0_pos", "sigma0_ang"):
+        for name in ("sigma0_pos", "sigma0_ang", "latency", "scale_bias", "normal_tilt"):
             if not (np.isfinite(getattr(self, name)) and getattr(self, name) >= 0):
-                raise ConfigError(f"camera.{name}", "must be a finite std >= 0")
+                raise ConfigError(f"camera.{name}", "must be a finite number >= 0")
+        if not 0.0 <= self.dropout < 1.0:
+            raise ConfigError("camera.dropout", f"must be a probability in [0, 1), got {self.dropout}")
+        if self.bias_sign not in (None, 1, -1, 1.0, -1.0):
+            raise ConfigError("camera.bias_sign", "must be +1, -1 or None (random per run)")
+
+    @property
+    def R_BC(self) -> Array:
+        """Mounting rotation of :attr:`camera`."""
+        return np.asarray(self.camera.R_BC)
+
+    @property
+    def half_fov(self) -> float:
+        """FoV half-angle of :attr:`camera` (rad)."""
+        return float(self.camera.half_fov)
+
+    @property
+    def max_range(self) -> float:
+        """Detection range of :attr:`camera` (m)."""
+        return float(self.camera.range)
+
+    def ideal(self) -> CameraParams:
+        """The same camera without noise, bias, latency or dropouts."""
+        return CameraParams(camera=self.camera, p_B=self.p_B, min_range=self.min_range,
+                            max_incidence=self.max_incidence, rate_hz=self.rate_hz, phase=self.phase,
+                            sigma0_pos=0.0, sigma0_ang=0.0)
 
     def sigma_position(self, distance: npt.ArrayLike) -> Array:
         """Per-axis position std (m) at ``distance`` (m): ``sigma0_pos exp(d / d0_pos)``."""
@@ -88,16 +143,17 @@ class CameraParams:
 
     def pose_W(self, p_W: Array, R_WB: Array) -> tuple[Array, Array]:
         """Camera position and rotation ``(p_cam_W, R_WC)`` for the vehicle pose ``(p_W, R_WB)``."""
-        return p_W + R_WB @ self.p_B, R_WB @ self.R_BC
+        return p_W + R_WB @ self.p_B, self.camera.R_WC(R_WB)
 
 
 @dataclass(frozen=True, eq=False)
 class CameraMeasurement:
-    """One detection of the pad at time ``t`` (s).
+    """One detection of the pad captured at time ``t`` (s).
 
-    ``p_C, R_CS`` is the noisy relative pose in C; ``p_W, R_WS`` the same composed with the
-    vehicle pose used at measurement time. ``sigma_pos`` (m) and ``sigma_ang`` (rad) are the
-    per-axis stds of the model at the true ``distance`` (m), for the estimator's weights.
+    ``p_C, R_CS`` is the measured relative pose in C; ``p_W, R_WS`` the same composed with the
+    vehicle pose believed at capture. ``sigma_pos`` (m) and ``sigma_ang`` (rad) are the per-axis
+    stds of the model at the true ``distance`` (m), for the estimator's weights; ``t_delivered``
+    is when the robot gets it (``t + latency``).
     """
 
     t: float
@@ -108,43 +164,44 @@ class CameraMeasurement:
     distance: float
     sigma_pos: float
     sigma_ang: float
+    t_delivered: float = float("nan")
 
 
-def in_fov(
-    target_W: npt.ArrayLike,
-    p_cam_W: npt.ArrayLike,
-    e_c_W: npt.ArrayLike,
-    half_fov: float,
-) -> npt.NDArray[np.bool_]:
-    """One-sided FoV cone test ``cos(half_fov) |n_d| <= n_d . e_c``, ``n_d = target - p_cam``.
+class CameraSensor:
+    """Produces pad detections at ``rate_hz`` while the pad is visible (module docstring).
 
-    Vectorised over leading axes; ``e_c_W`` must be a unit vector.
+    Parameters
+    ----------
+    params:
+        :class:`CameraParams`.
+    rng:
+        Draws the per-run bias sign and tilt axis (when random) at construction.
     """
-    n_d = np.asarray(target_W, dtype=float) - np.asarray(p_cam_W, dtype=float)
-    along = np.sum(n_d * np.asarray(e_c_W, dtype=float), axis=-1)
-    return np.cos(half_fov) * np.linalg.norm(n_d, axis=-1) <= along
 
-
-class Camera:
-    """A camera producing pad detections at ``rate_hz`` while the pad is visible."""
-
-    def __init__(self, params: CameraParams | None = None) -> None:
+    def __init__(self, params: CameraParams | None = None, rng: np.random.Generator | None = None) -> None:
         self.params = params if params is not None else CameraParams()
+        draws = (rng if rng is not None else np.random.default_rng(0)).random(2)
+        sign = self.params.bias_sign if self.params.bias_sign is not None else (1.0 if draws[0] < 0.5 else -1.0)
+        self.scale = float(sign) * self.params.scale_bias
+        self.tilt_phase = float(2.0 * math.pi * draws[1])
         self._next_frame: float | None = None
+        self._queue: deque[CameraMeasurement] = deque()
 
     def reset(self) -> None:
-        """Forget the frame schedule (the next call to :meth:`measure` starts it again)."""
+        """Forget the frame schedule and any detection in flight."""
         self._next_frame = None
+        self._queue.clear()
 
     def visible(self, state: RigidBodyState, target_p_W: Array, target_R_WS: Array) -> bool:
-        """Whether the pad centre is in the FoV cone and in range (and optionally faces us)."""
+        """Whether the pad centre is seen (:meth:`avp.Camera.sees`, at least ``min_range``
+        away, optionally facing the camera)."""
         cp = self.params
-        p_cam, R_WC = cp.pose_W(state.p_W, state.R_WB)
+        p_cam = state.p_W + state.R_WB @ cp.p_B
+        if not bool(cp.camera.sees(p_cam, state.R_WB, target_p_W)):
+            return False
         n_d = np.asarray(target_p_W, dtype=float) - p_cam
         d = float(np.linalg.norm(n_d))
-        if not cp.min_range <= d <= cp.max_range:
-            return False
-        if not bool(in_fov(target_p_W, p_cam, R_WC[:, 2], cp.half_fov)):
+        if d < cp.min_range:
             return False
         if cp.max_incidence is not None:
             return float(-n_d @ np.asarray(target_R_WS)[:, 2]) >= np.cos(cp.max_incidence) * d
@@ -170,7 +227,8 @@ class Camera:
         rng: np.random.Generator,
         believed: RigidBodyState | None = None,
     ) -> CameraMeasurement | None:
-        """A detection at time ``t`` if a frame is due and the pad is visible, else None.
+        """A detection captured at ``t`` if a frame is due, the pad visible and the frame not
+        dropped, else None (ignores the latency: see :meth:`poll`).
 
         Parameters
         ----------
@@ -181,10 +239,10 @@ class Camera:
         target_p_W, target_R_WS:
             True pad centre (m) and rotation ``[s1 s2 s3]``.
         rng:
-            Source of the measurement noise (6 normals per detection).
+            Source of the measurement noise (7 uniforms/normals per due frame with the pad seen).
         believed:
-            Vehicle state the robot believes (odometry), used to express the detection in W;
-            the true state when omitted.
+            Vehicle state the robot believes (odometry) at capture, used to express the detection
+            in W; the true state when omitted.
         """
         if not self._frame_due(t):
             return None
@@ -193,21 +251,39 @@ class Camera:
         if not self.visible(state, p_S, R_WS):
             return None
         cp = self.params
+        n = rng.standard_normal(6)
+        if rng.random() < cp.dropout:
+            return None
         p_cam, R_WC = cp.pose_W(state.p_W, state.R_WB)
         d = float(np.linalg.norm(p_S - p_cam))
         sp, sa = float(cp.sigma_position(d)), float(cp.sigma_angle(d))
-        n = rng.standard_normal(6)
-        p_C = R_WC.T @ (p_S - p_cam) + sp * n[:3]
-        R_CS = R_WC.T @ R_WS @ expm_so3(sa * n[3:])
+        p_C = (1.0 + self.scale) * (R_WC.T @ (p_S - p_cam)) + sp * n[:3]
+        R_meas = R_WS
+        if cp.normal_tilt > 0.0:
+            u = math.cos(self.tilt_phase) * R_WS[:, 0] + math.sin(self.tilt_phase) * R_WS[:, 1]
+            R_meas = expm_so3(cp.normal_tilt * u) @ R_WS
+        R_CS = R_WC.T @ R_meas @ expm_so3(sa * n[3:])
         b = believed if believed is not None else state
         p_cam_b, R_WC_b = cp.pose_W(b.p_W, b.R_WB)
         return CameraMeasurement(
-            t=float(t),
-            p_W=p_cam_b + R_WC_b @ p_C,
-            R_WS=R_WC_b @ R_CS,
-            p_C=p_C,
-            R_CS=R_CS,
-            distance=d,
-            sigma_pos=sp,
-            sigma_ang=sa,
+            t=float(t), p_W=p_cam_b + R_WC_b @ p_C, R_WS=R_WC_b @ R_CS, p_C=p_C, R_CS=R_CS,
+            distance=d, sigma_pos=sp, sigma_ang=sa, t_delivered=float(t) + cp.latency,
         )
+
+    def poll(
+        self,
+        t: float,
+        state: RigidBodyState,
+        target_p_W: npt.ArrayLike,
+        target_R_WS: npt.ArrayLike,
+        rng: np.random.Generator,
+        believed: RigidBodyState | None = None,
+    ) -> list[CameraMeasurement]:
+        """Capture (as :meth:`measure`) and return every detection delivered by ``t`` (latency)."""
+        m = self.measure(t, state, target_p_W, target_R_WS, rng, believed)
+        if m is not None:
+            self._queue.append(m)
+        out = []
+        while self._queue and self._queue[0].t_delivered <= t + 1e-9:
+            out.append(self._queue.popleft())
+        return out

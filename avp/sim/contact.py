@@ -24,10 +24,11 @@ from typing import Any, Literal
 import numpy as np
 
 from ..errors import ConfigError
-from ._so3 import Array, as_rotation, as_vector, project_so3
+from .. import _validate as v
+from ..frames import Array, project_so3
 from .vehicle import RigidBodyState
 
-__all__ = ["Contact", "PerchPad", "SuccessCriteria", "detect_contact"]
+__all__ = ["Contact", "PerchCriteria", "PerchOutcome", "PerchPad", "SuccessCriteria", "detect_contact", "judge_perch"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -40,8 +41,8 @@ class PerchPad:
     shape: Literal["square", "disc"] = "square"
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "p_W", as_vector("pad.p_W", self.p_W))
-        object.__setattr__(self, "R_WS", as_rotation("pad.R_WS", self.R_WS))
+        object.__setattr__(self, "p_W", v.vector("pad.p_W", self.p_W))
+        object.__setattr__(self, "R_WS", np.array(v.rotation("pad.R_WS", self.R_WS)))
         if not (np.isfinite(self.half_size) and self.half_size > 0):
             raise ConfigError("pad.half_size", f"must be a positive length, not {self.half_size}")
         if self.shape not in ("square", "disc"):
@@ -156,3 +157,53 @@ def detect_contact(
         inside=inside,
         failures=tuple(failures),
     )
+
+
+@dataclass(frozen=True)
+class PerchCriteria:
+    """Success of a perch judged at the plan's contact time (issue 9's definition).
+
+    At ``t_eval`` = the final committed plan's contact time ``t_f`` (or the moment the centre of
+    mass reaches the pad plane, if that comes first, since the vehicle cannot pass the wall):
+
+    - ``|signed distance to the pad plane| <= plane_tolerance`` (m),
+    - in-plane distance from the pad centre ``< center_tolerance`` (m),
+    - angle between ``b3`` and ``s3`` ``<= attitude_tolerance`` (rad).
+    """
+
+    plane_tolerance: float = 0.03
+    center_tolerance: float = 0.10
+    attitude_tolerance: float = float(np.deg2rad(10.0))
+
+
+@dataclass(frozen=True, eq=False)
+class PerchOutcome:
+    """The vehicle at ``t`` judged against :class:`PerchCriteria`.
+
+    ``error_S`` is the position error in the true pad frame ``(s1, s2, normal)`` (m);
+    ``attitude_error`` the angle between ``b3`` and ``s3`` (rad).
+    """
+
+    t: float
+    error_S: Array
+    attitude_error: float
+    failures: tuple[str, ...]
+
+    @property
+    def success(self) -> bool:
+        return not self.failures
+
+
+def judge_perch(t: float, p_W: Array, R_WB: Array, pad: PerchPad,
+                criteria: PerchCriteria = PerchCriteria()) -> PerchOutcome:
+    """:class:`PerchOutcome` of the pose ``(p_W, R_WB)`` at time ``t`` for ``pad``."""
+    e = pad.R_WS.T @ (np.asarray(p_W, dtype=float) - pad.p_W)
+    att = float(np.arccos(np.clip(np.asarray(R_WB)[:, 2] @ pad.R_WS[:, 2], -1.0, 1.0)))
+    failures = []
+    if abs(float(e[2])) > criteria.plane_tolerance:
+        failures.append("plane")
+    if float(np.hypot(e[0], e[1])) >= criteria.center_tolerance:
+        failures.append("center")
+    if att > criteria.attitude_tolerance:
+        failures.append("attitude")
+    return PerchOutcome(float(t), e, att, tuple(failures))

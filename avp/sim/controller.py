@@ -33,8 +33,8 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from ..frames import attitude, body_rates
-from ._so3 import Array, as_vector, cross, hat, vee
+from .. import _validate as v
+from ..frames import Array, attitude, body_rates, cross, hat, vee
 from .vehicle import RigidBodyState, VehicleParams
 
 __all__ = [
@@ -79,7 +79,7 @@ class FlatReference:
 
     def __post_init__(self) -> None:
         for name in ("position", "velocity", "acceleration", "jerk", "snap"):
-            object.__setattr__(self, name, as_vector(f"reference.{name}", getattr(self, name)))
+            object.__setattr__(self, name, v.vector(f"reference.{name}", getattr(self, name)))
         for name in ("yaw", "yaw_rate", "yaw_acceleration"):
             object.__setattr__(self, name, float(getattr(self, name)))
 
@@ -194,7 +194,9 @@ def control(
         + cross(w, J @ w)
         - J @ (hat(w) @ RtRc @ W_C - RtRc @ dW_C)
     )
-    return ControlOutput(thrust, params.clip_moment(moment), R_C, W_C, dW_C)
+    if not params.mixer:  # with a mixer the rotors' limits act in VehicleParams.mix
+        moment = params.clip_moment(moment)
+    return ControlOutput(thrust, moment, R_C, W_C, dW_C)
 
 
 _DEFAULT_PARAMS = VehicleParams()

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ._so3 import Array, project_so3
+from ..frames import Array, project_so3
 from .camera import CameraMeasurement
 
 __all__ = ["TargetEstimate", "TargetEstimator"]

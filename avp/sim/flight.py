@@ -16,9 +16,9 @@ from typing import Any
 import numpy as np
 
 from ..errors import ConfigError
-from ._so3 import Array
+from ..frames import Array
 from .controller import ControllerGains, FlatReferenceLike, control
-from .odometry import OdometryNoise, noisy_odometry
+from .odometry import Odometry, OdometryNoise, noisy_odometry
 from .vehicle import RigidBodyState, VehicleParams, step
 
 __all__ = ["DT_CONTROL", "FlightResult", "Trace", "fly"]
@@ -63,7 +63,7 @@ def fly(
     gains: ControllerGains = ControllerGains(),
     *,
     dt: float = DT_CONTROL,
-    odometry: OdometryNoise | None = None,
+    odometry: OdometryNoise | Odometry | None = None,
     rng: np.random.Generator | None = None,
     stop: StopHook | None = None,
     record: bool = False,
@@ -83,7 +83,8 @@ def fly(
     dt:
         Control and integration step (s); at most 2 ms (>= 500 Hz).
     odometry, rng:
-        Odometry noise on what the controller sees, drawn from ``rng`` (required with noise).
+        What the controller sees: an :class:`~avp.sim.odometry.Odometry` stream (shared with
+        the rest of the robot), or memoryless :class:`OdometryNoise` drawn from ``rng``.
     stop:
         ``stop(prev, new, t_prev, t_new)``; a non-None return ends the stretch at ``t_new`` and
         is returned as ``event``.
@@ -94,13 +95,18 @@ def fly(
         params = VehicleParams()
     if not 0.0 < dt <= 0.002 + 1e-12:
         raise ConfigError("dt", f"must be in (0, 0.002] s (>= 500 Hz), got {dt}")
-    if odometry is not None and rng is None:
+    if isinstance(odometry, OdometryNoise) and rng is None:
         raise ConfigError("rng", "odometry noise needs an explicit np.random.Generator")
     n_steps = max(int(round(duration / dt)), 0)
     log: dict[str, list[Any]] = {k: [] for k in Trace.__dataclass_fields__}
     t, event = float(t0), None
     for k in range(n_steps):
-        seen = state if odometry is None else noisy_odometry(state, odometry, rng)  # type: ignore
+        if odometry is None:
+            seen = state
+        elif isinstance(odometry, Odometry):
+            seen = odometry.sample(t, state)
+        else:
+            seen = noisy_odometry(state, odometry, rng)  # type: ignore[arg-type]
         cmd = control(seen, reference(t), params, gains)
         new = step(state, cmd.thrust, cmd.moment_B, dt, params)
         t_new = float(t0) + (k + 1) * dt

@@ -3,33 +3,35 @@
 :func:`simulate` flies one perch in the simulator and records what the paper's Tables V and VI
 measure. One run:
 
-1. The vehicle hovers at the start of the :class:`SimScenario`. The camera takes
-   ``initial_frames`` detections of the pad (10 Hz, noise growing with distance, Fig. 9) and the
-   :class:`~avp.sim.estimator.TargetEstimator` fuses them: that is the first target estimate. If
-   the pad is not visible from the start there is no run (``outcome = "no initial detection"``).
+1. The vehicle hovers at the start of the :class:`SimScenario`. The camera
+   (:class:`~avp.sim.camera.CameraSensor`) takes ``initial_frames`` detections of the pad and the
+   user-side :class:`~avp.sim.estimator.TargetEstimator` fuses them: that is the first target
+   estimate. If the pad is not visible from the start there is no run.
 2. ``Mode.ONE_SHOT`` plans once from that estimate and odometry and flies the plan.
    ``Mode.AVP`` hands the estimate to a :class:`~avp.replan.Replanner` and calls
-   :meth:`~avp.replan.Replanner.step` every ``1 / replan_rate_hz`` s (30 Hz) with a noisy odometry
-   sample and the current fused estimate; the camera keeps detecting at 10 Hz while the pad is in
-   the FoV, and the estimator keeps fusing.
-3. The SE(3) controller tracks the reference at 500 Hz on (noisy) odometry: the replanner's
-   :meth:`~avp.replan.Replanner.reference` (the previous plan until a new one takes over at
-   ``t_ex``), or the single plan. After the end of the committed plan the reference continues from
-   the plan's final flat state at constant acceleration (zero jerk and snap, constant yaw) until the
-   centre of mass crosses the pad plane (:func:`~avp.sim.contact.detect_contact`) or ``timeout`` s
-   have passed (a miss).
+   :meth:`~avp.replan.Replanner.step` every ``1 / replan_rate_hz`` s (30 Hz) with the odometry
+   estimate and the current fused target; the camera keeps detecting while the pad is in view.
+3. The SE(3) controller tracks the reference at 500 Hz on odometry; its commands go through the
+   vehicle's mixer and motor lag (:mod:`~avp.sim.vehicle`). After the end of the committed plan
+   the reference continues from its final flat state (:class:`AfterPlan`) until the pad plane is
+   reached or ``timeout`` s have passed.
 
-Determinism: all randomness comes from ``seed`` through four independent streams (the
-controller's odometry, the camera, the odometry samples handed to the planner, the odometry the
-camera composes detections with), so the same seed gives the same run, and both modes of a seed
-share the initial detections and the first odometry sample (paired comparison). Simulated time
-does not advance while a plan is solved; wall-clock solve times are recorded but never change the
-trajectory as long as the :class:`~avp.replan.ReplanConfig` has ``deadline=None`` and
-``adapt_latency=False`` (the default here).
+One vehicle, one camera: the planner configuration and the simulated vehicle and camera share
+their objects. Without an explicit ``config`` the planner gets ``sc.vehicle.limits`` and
+``sc.camera.camera``; with one, the simulator flies ``config.limits`` and ``config.fov.camera``
+(:attr:`SimResult.vehicle`, :attr:`SimResult.camera` are what flew).
 
-Odometry handed to the planner carries position, velocity, yaw and yaw rate from the noisy state
-estimate; acceleration and jerk are filled in from the reference being tracked (the replanner takes
-them from its committed plan anyway with ``measured_orders <= 2``).
+Success (:class:`~avp.sim.contact.PerchCriteria`) is judged at the final committed plan's
+contact time (or at the plane crossing if earlier): within 3 cm of the pad plane, less than 10 cm
+from the pad centre in the plane, ``b3`` within 10 deg of ``s3``. The crossing itself
+(:class:`~avp.sim.contact.Contact`) is recorded too.
+
+Determinism: all randomness comes from ``seed`` through independent streams (odometry, camera
+noise, per-run camera bias draws), so the same seed gives the same run and both modes of a seed
+share the initial detections, the odometry stream's draws and the camera bias (paired
+comparison). Simulated time does not advance while a plan is solved; wall-clock solve times are
+recorded but never change the trajectory as long as the :class:`~avp.replan.ReplanConfig` has
+``deadline=None`` and ``adapt_latency=False`` (the default here).
 """
 
 from __future__ import annotations
@@ -43,29 +45,34 @@ from typing import Any
 
 import numpy as np
 
-from ..config import PlannerConfig
+from ..camera import Camera
+from ..config import PlannerConfig, VehicleLimits
 from ..errors import AvpError, ConfigError
-from ..frames import yaw_from_b2
+from ..frames import Array, yaw_from_b2
 from ..planner import PlanResult, plan_detailed
 from ..replan import ReplanAction, ReplanConfig, Replanner, ReplanStep
 from ..trajectory import Trajectory
 from ..types import PerchTarget, State
-from ._so3 import Array
-from .camera import Camera, CameraMeasurement, CameraParams
-from .contact import Contact, PerchPad, SuccessCriteria, detect_contact
+from .camera import CameraMeasurement, CameraParams, CameraSensor
+from .contact import Contact, PerchCriteria, PerchOutcome, PerchPad, SuccessCriteria, detect_contact, judge_perch
 from .controller import ControllerGains, FlatReference
 from .estimator import TargetEstimator
 from .flight import DT_CONTROL, fly
-from .odometry import OdometryNoise, noisy_odometry
+from .odometry import Odometry, OdometryNoise
 from .vehicle import RigidBodyState, VehicleParams
 
 __all__ = ["AfterPlan", "Mode", "SimResult", "SimScenario", "sim_config", "simulate"]
 
 
-def sim_config(tilt_rate_max: float | None = None) -> PlannerConfig:
+def sim_config(
+    tilt_rate_max: float | None = None,
+    *,
+    limits: VehicleLimits | None = None,
+    camera: Camera | None = None,
+) -> PlannerConfig:
     """The planner configuration :func:`simulate` uses by default: :class:`PlannerConfig`'s
-    defaults (which bound the tilt rate at 10 rad/s, and whose :class:`~avp.replan.Replanner`
-    runs no duration search on replans), optionally with another tilt-rate limit.
+    defaults with the simulated vehicle's ``limits`` and camera (the same objects), optionally
+    with another tilt-rate limit.
 
     Both defaults come from closed-loop runs here: without a rate bound, replans from a noisy
     state close to contact certified only after the relaxations and spun at 100+ rad/s (126
@@ -73,9 +80,11 @@ def sim_config(tilt_rate_max: float | None = None) -> PlannerConfig:
     from 2.5 s to 20 s at 7.5 m. docs/simulation.md has the measurements.
     """
     base = PlannerConfig()
-    if tilt_rate_max is None:
-        return base
-    return dataclasses.replace(base, limits=dataclasses.replace(base.limits, tilt_rate_max=float(tilt_rate_max)))
+    lim = limits if limits is not None else base.limits
+    if tilt_rate_max is not None:
+        lim = dataclasses.replace(lim, tilt_rate_max=float(tilt_rate_max))
+    fov = base.fov if camera is None else dataclasses.replace(base.fov, camera=camera)
+    return dataclasses.replace(base, limits=lim, fov=fov)
 
 
 class Mode(Enum):
@@ -125,11 +134,17 @@ class SimScenario:
     pad_half_size:
         Half the side of the square pad (m); the paper's pad is about 0.3 m wide.
     camera:
-        :class:`~avp.sim.camera.CameraParams` (FoV, 10 Hz, noise ``0.012 m exp(d / 2.6 m)``).
+        :class:`~avp.sim.camera.CameraParams`: the planner's :class:`avp.Camera` plus rate,
+        latency, dropouts, range-growing noise, scale bias and normal tilt.
     odometry:
-        :class:`~avp.sim.odometry.OdometryNoise`, or ``None`` for perfect state estimation.
-    vehicle, gains, criteria:
-        Vehicle, controller gains and success thresholds.
+        :class:`~avp.sim.odometry.OdometryNoise` (rate, white noise, drift), or ``None`` for
+        perfect state estimation.
+    vehicle:
+        :class:`~avp.sim.vehicle.VehicleParams`: the planner's ``VehicleLimits`` plus inertia,
+        rotors, mixer and motor lag.
+    gains, criteria, perch_criteria:
+        Controller gains, the contact record's thresholds and the success criterion
+        (:class:`~avp.sim.contact.PerchCriteria`).
     initial_frames:
         Detections fused at hover before the first plan (10 Hz apart).
     replan_rate_hz:
@@ -155,6 +170,7 @@ class SimScenario:
     vehicle: VehicleParams = field(default_factory=VehicleParams)
     gains: ControllerGains = field(default_factory=ControllerGains)
     criteria: SuccessCriteria = field(default_factory=SuccessCriteria)
+    perch_criteria: PerchCriteria = field(default_factory=PerchCriteria)
     initial_frames: int = 1
     replan_rate_hz: float = 30.0
     timeout: float = 0.5
@@ -199,8 +215,12 @@ class SimScenario:
 
     def without_noise(self) -> SimScenario:
         """The same scenario with a perfect camera and perfect odometry."""
-        cam = dataclasses.replace(self.camera, sigma0_pos=0.0, sigma0_ang=0.0)
-        return dataclasses.replace(self, camera=cam, odometry=None)
+        return dataclasses.replace(self, camera=self.camera.ideal(), odometry=None)
+
+    def ideal(self) -> SimScenario:
+        """:meth:`without_noise` on an ideal vehicle (instant thrust and moments, no mixer)."""
+        vehicle = dataclasses.replace(self.vehicle, mixer=False, motor_time_constant=0.0)
+        return dataclasses.replace(self.without_noise(), vehicle=vehicle)
 
 
 @dataclass(frozen=True, eq=False)
@@ -241,6 +261,11 @@ class SimResult:
         the fused estimate after it (m), for every detection including the initial ones.
     t_plan:
         Time the first plan starts (s).
+    perch:
+        :class:`~avp.sim.contact.PerchOutcome` at the final plan's contact time (the success
+        criterion), None without a plan.
+    vehicle, camera:
+        The simulated vehicle and camera (their ``limits`` / ``camera`` are the planner's).
     """
 
     scenario: SimScenario
@@ -262,11 +287,14 @@ class SimResult:
     visible: Array
     detections: Array
     t_plan: float
+    perch: PerchOutcome | None = None
+    vehicle: VehicleParams | None = None
+    camera: CameraParams | None = None
 
     @property
     def success(self) -> bool:
-        """A contact that meets every success criterion."""
-        return self.contact is not None and self.contact.success
+        """The perch meets :class:`~avp.sim.contact.PerchCriteria` at the plan's contact time."""
+        return self.perch is not None and self.perch.success
 
     def actions(self) -> dict[str, int]:
         """How often each :class:`~avp.replan.ReplanAction` occurred (AVP)."""
@@ -313,6 +341,15 @@ def _estimate_target(est: TargetEstimator) -> PerchTarget | None:
     return None if e is None else PerchTarget(point=e.p_W, R_WS=e.R_WS)
 
 
+def _shared(sc: SimScenario, config: PlannerConfig | None) -> tuple[SimScenario, PlannerConfig]:
+    """Scenario and planner configuration sharing one vehicle and one camera object."""
+    if config is None:
+        return sc, sim_config(limits=sc.vehicle.limits, camera=sc.camera.camera)
+    vehicle = sc.vehicle if sc.vehicle.limits is config.limits else dataclasses.replace(sc.vehicle, limits=config.limits)
+    camera = sc.camera if sc.camera.camera is config.fov.camera else dataclasses.replace(sc.camera, camera=config.fov.camera)
+    return dataclasses.replace(sc, vehicle=vehicle, camera=camera), config
+
+
 def simulate(
     scenario: SimScenario | None = None,
     mode: Mode | str = Mode.AVP,
@@ -334,37 +371,34 @@ def simulate(
     seed:
         Seed of every random stream of the run.
     config:
-        Planner configuration (default :func:`sim_config`).
+        Planner configuration (default :func:`sim_config` with the scenario's vehicle and camera);
+        its ``limits`` and ``fov.camera`` are what the simulator flies.
     replan:
-        Replanning policy (default ``ReplanConfig(deadline=None)``: deterministic).
+        Replanning policy (default ``ReplanConfig()``: deterministic).
     dt:
         Control and integration step (s), at most 2 ms.
     max_time:
         Hard cap on simulated time (s) after the first plan.
     """
-    sc = scenario if scenario is not None else SimScenario()
+    sc, cfg = _shared(scenario if scenario is not None else SimScenario(), config)
     mode = Mode.parse(mode)
-    cfg = config if config is not None else sim_config()
-    rcfg = replan if replan is not None else ReplanConfig(deadline=None)
+    rcfg = replan if replan is not None else ReplanConfig()
     streams = np.random.SeedSequence(int(seed)).spawn(4)
-    rng_ctrl, rng_cam, rng_plan, rng_believed = (np.random.default_rng(s) for s in streams)
+    rng_odo, rng_cam, rng_bias, _ = (np.random.default_rng(s) for s in streams)
 
     truth, pad = sc.target(), sc.pad()
     idle = sc.vehicle.thrust_min / sc.vehicle.mass if sc.after_plan is AfterPlan.IDLE_THRUST else None
-    camera, estimator = Camera(sc.camera), TargetEstimator()
-    odo = sc.odometry
+    camera, estimator = CameraSensor(sc.camera, rng_bias), TargetEstimator()
+    odo = None if sc.odometry is None else Odometry(sc.odometry, rng_odo)
     state = RigidBodyState(sc.start())
     detections: list[tuple[float, float, float, float]] = []
 
+    def believed(t: float, s: RigidBodyState) -> RigidBodyState:
+        return s if odo is None else odo.sample(t, s)
+
     def detect(t: float, s: RigidBodyState) -> None:
-        m = camera.measure(t, s, truth.point, truth.R_WS, rng_cam)
-        if m is None:
-            return
-        if odo is not None:  # compose the relative pose with the pose the robot believes
-            b = noisy_odometry(s, odo, rng_believed)
-            p_cam, R_WC = sc.camera.pose_W(b.p_W, b.R_WB)
-            m = dataclasses.replace(m, p_W=p_cam + R_WC @ m.p_C, R_WS=R_WC @ m.R_CS)
-        _fuse(m, t)
+        for m in camera.poll(t, s, truth.point, truth.R_WS, rng_cam, believed(t, s)):
+            _fuse(m, t)
 
     def _fuse(m: CameraMeasurement, t: float) -> None:
         estimator.update(m)
@@ -373,11 +407,17 @@ def simulate(
         detections.append((t, m.distance, float(np.linalg.norm(m.p_W - truth.point)),
                            float(np.linalg.norm(e.p_W - truth.point))))
 
-    # 1. hover and detect
+    # 1. hover and detect (until the initial frames have been delivered)
     t = 0.0
-    for k in range(sc.initial_frames):
-        t = k / sc.camera.rate_hz + sc.camera.phase
+    period_cam = 1.0 / sc.camera.rate_hz
+    k = 0
+    while estimator.n_measurements < sc.initial_frames and k < sc.initial_frames + 10:
+        t = k * period_cam + sc.camera.phase
         detect(t, state)
+        if sc.camera.latency > 0:
+            t = t + sc.camera.latency
+            detect(t, state)
+        k += 1
     t_plan = t
     initial = _estimate_target(estimator)
     empty = np.zeros((0, 3))
@@ -392,6 +432,7 @@ def simulate(
             anticipation_t=np.zeros(0), solve_times=np.zeros(0), path_t=np.zeros(0),
             path_p=empty, visible=np.zeros(0, dtype=bool),
             detections=np.array(detections, dtype=float).reshape(-1, 4), t_plan=t_plan,
+            vehicle=sc.vehicle, camera=sc.camera,
         )
         base.update(kw)
         return SimResult(**base)
@@ -400,9 +441,8 @@ def simulate(
         return finish("no initial detection")
 
     # 2. first plan (both modes from the same odometry sample)
-    believed = state if odo is None else noisy_odometry(state, odo, rng_plan)
     zero_ref = FlatReference(np.zeros(3), np.zeros(3), np.zeros(3), np.zeros(3), np.zeros(3))
-    start = _odometry_state(believed, t_plan, zero_ref)
+    start = _odometry_state(believed(t_plan, state), t_plan, zero_ref)
     solve_times: list[float] = []
     replanner: Replanner | None = None
     if mode is Mode.AVP:
@@ -421,7 +461,7 @@ def simulate(
         except AvpError as exc:
             result, reason = None, f"{type(exc).__name__}: {exc}"
         solve_times.append(time.perf_counter() - w0)
-        if result is None or result.trajectory is None:
+        if result is None or not result.ok or result.trajectory is None:
             return finish(f"no plan: {reason}", solve_times=np.array(solve_times))
         plan0 = result.trajectory
 
@@ -439,6 +479,7 @@ def simulate(
     # 3. closed loop
     path_t: list[float] = []
     path_p: list[Array] = []
+    path_R: list[Array] = []
     visible: list[bool] = []
     pending: list[tuple[float, Array]] = []  # (t_ex, anticipated position) of committed replans
     antic_err: list[Array] = []
@@ -447,6 +488,7 @@ def simulate(
     def hook(prev: RigidBodyState, new: RigidBodyState, t_prev: float, t_new: float) -> Contact | None:
         path_t.append(t_new)
         path_p.append(new.p_W)
+        path_R.append(new.R_WB)
         visible.append(camera.visible(new, truth.point, truth.R_WS))
         while pending and pending[0][0] <= t_new + 1e-9:
             t_ex, p_ant = pending.pop(0)
@@ -458,6 +500,7 @@ def simulate(
 
     path_t.append(t_plan)
     path_p.append(state.p_W)
+    path_R.append(state.R_WB)
     visible.append(camera.visible(state, truth.point, truth.R_WS))
     period = 1.0 / sc.replan_rate_hz
     k = 0  # control steps flown since t_plan
@@ -468,35 +511,44 @@ def simulate(
         if t > committed().tf + sc.timeout or t - t_plan > max_time:
             break
         if replanner is not None and n > 0:
-            b = state if odo is None else noisy_odometry(state, odo, rng_plan)
             est = _estimate_target(estimator)
-            s = replanner.step(t, _odometry_state(b, t, reference(t)), est)
-            if s.action is not ReplanAction.FROZEN_NEAR_CONTACT:
+            s = replanner.step(t, _odometry_state(believed(t, state), t, reference(t)), est)
+            if s.solved:
                 solve_times.append(s.solve_time)
-            if s.action is ReplanAction.REPLANNED and s.anticipated is not None:
+            if s.action in (ReplanAction.REPLANNED, ReplanAction.PARTIAL) and s.anticipated is not None:
                 pending.append((s.t_ex, s.anticipated.position.copy()))
         n += 1
         k_next = max(int(round(n * period / dt)), k + 1)
         res = fly(state, reference, t, (k_next - k) * dt, sc.vehicle, sc.gains, dt=dt,
-                  odometry=odo, rng=rng_ctrl if odo is not None else None, stop=hook)
+                  odometry=odo, stop=hook)
         state, k = res.state, k_next
         if res.event is not None:
             contact = res.event
             break
 
-    if contact is None:
-        outcome = "miss: no contact"
-    elif contact.success:
+    final = committed()
+    pt, pp, pR = np.array(path_t), np.array(path_p).reshape(-1, 3), np.array(path_R).reshape(-1, 3, 3)
+    t_eval = min(final.tf, contact.t) if contact is not None else final.tf
+    if contact is not None and contact.t <= final.tf:
+        perch = judge_perch(contact.t, contact.p_W, contact.R_WB, pad, sc.perch_criteria)
+    elif t_eval <= pt[-1]:
+        i = int(np.clip(np.searchsorted(pt, t_eval), 1, pt.size - 1))
+        lam = (t_eval - pt[i - 1]) / max(pt[i] - pt[i - 1], 1e-12)
+        p_e = pp[i - 1] + lam * (pp[i] - pp[i - 1])
+        perch = judge_perch(t_eval, p_e, pR[i] if lam > 0.5 else pR[i - 1], pad, sc.perch_criteria)
+    else:
+        perch = judge_perch(pt[-1], pp[-1], pR[-1], pad, sc.perch_criteria)
+    if perch.success:
         outcome = "success"
     else:
-        outcome = "failed: " + ", ".join(contact.failures)
+        outcome = "failed: " + ", ".join(perch.failures)
     return finish(
-        outcome, contact,
-        first_plan=plan0, final_plan=committed(),
+        outcome, contact, perch=perch,
+        first_plan=plan0, final_plan=final,
         steps=tuple(replanner.history) if replanner is not None else (),
         anticipation_error=np.array(antic_err, dtype=float).reshape(-1, 3),
         anticipation_t=np.array(antic_t, dtype=float),
         solve_times=np.array(solve_times, dtype=float),
-        path_t=np.array(path_t, dtype=float), path_p=np.array(path_p, dtype=float).reshape(-1, 3),
+        path_t=pt, path_p=pp,
         visible=np.array(visible, dtype=bool),
     )
