@@ -43,7 +43,7 @@ from . import _validate as v
 from .config import PlannerConfig
 from .errors import AvpError, ConfigError
 from .planner import PlanResult, PlanStatus, plan_detailed
-from .trackability import SnapReport, certify_snap
+from .trackability import SnapReport, certify_snap, trackability_peaks
 from .trajectory import FlatOutput, Trajectory
 from .types import PerchTarget, State
 
@@ -118,15 +118,33 @@ class ReplanConfig:
         corrections late in the flight produced uncertifiable plans (tilt rate or snap).
     partial_fractions:
         Fractions of the (budgeted) correction tried in order until one certifies. ``(1, 0.5,
-        0.25)``: the second and third attempts rescued most steps whose full correction failed.
+        0.25, 0.125)``: with ``(1, 0.5, 0.25)`` 1/6 (4.5 m) and 4/6 (7.5 m) wall perches succeeded,
+        with the extra 1/8 step 2/6 and 3/6 (6 seeds each; repeated small commits accumulate).
     reach_tolerance:
         Distance (m) between the committed contact point and the latest estimate above which a
         step without a full correction reports ``CANNOT_REACH``. 0.05 m: half the in-plane
         success radius.
-    snap_max:
-        Snap limit (m/s^4) certified on every committed plan (:mod:`avp.trackability`; ``inf``
-        skips it). 600 m/s^4: first plans from hover at 1.5-7.5 m peak at 120-320 m/s^4; the
-        uncertified late replans that broke perches carried 1000-1500 m/s^4.
+    snap_max, snap_thrust_max:
+        Trackability limits certified on every committed replan (:mod:`avp.trackability`;
+        ``inf`` skips one): ``|s| < snap_max`` (m/s^4) and ``|s| < snap_thrust_max |a + g e3|``
+        (1/s^2, an angular-acceleration scale). The first plan is certified for the actuator
+        bounds and its own trackability figures are recorded; the limits used for replans are
+        ``max(limit, 1.05 x the first plan's peak)``, so a replan never demands more than the
+        worse of the limit and the plan the user accepted. 600 m/s^4 and 45 1/s^2: first plans
+        from hover at 4.5-7.5 m peak at 120-240 m/s^4 and 18-31 1/s^2 (1.5 m: 320-740, 67-97);
+        the late replans that lost the attitude (40-80 deg at contact with 20 ms motor lag, the
+        rotors at their floor during the pitch-up) carried 75-90 1/s^2.
+    retime_normal:
+        Move the contact time with the normal component ``dn`` of a target correction:
+        the remaining time becomes ``T - dn / v_n`` (``v_n`` the contact normal speed, at most
+        ``retime_fraction`` of ``T`` either way), so a pad found deeper is reached later at the same
+        approach, instead of by a steeper plan. On: at 4.5 m on a wall, late normal corrections of
+        1.5-4 cm were otherwise uncertifiable and the 2 m/s slide turned each cm of normal error into
+        about 7 cm along the pad. Off by default: measured worse (0/6 vs 1/6 at 4.5 m and 0/6 vs
+        4/6 at 7.5 m on a wall), since early corrections from far, noisy estimates moved the
+        contact time by tenths of a second.
+    retime_fraction:
+        Cap on the retiming, as a fraction of the time left.
     allow_relaxed:
         Commit plans the planner obtained by relaxing something (``result.relaxations``, status
         ``SOLVED_RELAXED``). Off: a relaxed plan moves the contact velocity or band.
@@ -144,9 +162,12 @@ class ReplanConfig:
     anchor_velocity: float = 0.5
     target_tolerance: float = 0.005
     reach_acceleration: float = 6.0
-    partial_fractions: tuple[float, ...] = (1.0, 0.5, 0.25)
+    partial_fractions: tuple[float, ...] = (1.0, 0.5, 0.25, 0.125)
     reach_tolerance: float = 0.05
     snap_max: float = 600.0
+    snap_thrust_max: float = 45.0
+    retime_normal: bool = False
+    retime_fraction: float = 0.3
     allow_relaxed: bool = False
 
     def __post_init__(self) -> None:
@@ -164,6 +185,7 @@ class ReplanConfig:
         v.positive_float("replan.reach_acceleration", self.reach_acceleration, allow_inf=True)
         v.positive_float("replan.reach_tolerance", self.reach_tolerance)
         v.positive_float("replan.snap_max", self.snap_max, allow_inf=True)
+        v.positive_float("replan.snap_thrust_max", self.snap_thrust_max, allow_inf=True)
         fr = tuple(float(f) for f in self.partial_fractions)
         if not fr or any(not 0.0 < f <= 1.0 for f in fr):
             raise ConfigError("replan.partial_fractions", f"need fractions in (0, 1], got {self.partial_fractions!r}")
@@ -295,6 +317,8 @@ class Replanner:
         self._previous: Trajectory | None = None
         self._solve_times: list[float] = []
         self.history: list[ReplanStep] = []
+        self.snap_limits: tuple[float, float] = (self.replan.snap_max, self.replan.snap_thrust_max)
+        """``(snap_max, snap_thrust_max)`` certified on replans (raised to the first plan's peak)."""
 
     # -- policy ----------------------------------------------------------------------------
     @property
@@ -337,7 +361,7 @@ class Replanner:
         return step
 
     # -- certification ---------------------------------------------------------------------
-    def _certified(self, result: PlanResult | None) -> tuple[bool, str, SnapReport | None]:
+    def _certified(self, result: PlanResult | None, trackability: bool = True) -> tuple[bool, str, SnapReport | None]:
         """Whether ``result`` may be committed, why not, and its snap certificate."""
         if result is None or not result.ok or result.trajectory is None:
             return False, result.status.value if result is not None else "planning failed", None
@@ -346,8 +370,10 @@ class Replanner:
             return False, "relaxed plan (allow_relaxed is off)", None
         if self.config.bounds.certify and (result.bounds is None or not result.bounds.certified):
             return False, "actuator bounds not certified", None
+        if not trackability:
+            return True, "ok", None
         try:
-            snap = certify_snap(result.trajectory, self.replan.snap_max)
+            snap = certify_snap(result.trajectory, self.snap_limits[0], snap_thrust_max=self.snap_limits[1])
         except _PLANNING_ERRORS as exc:
             return False, f"snap certificate failed: {type(exc).__name__}: {exc}", None
         if not snap.certified:
@@ -359,12 +385,14 @@ class Replanner:
                       acceleration=odometry.acceleration, jerk=odometry.jerk,
                       yaw=odometry.yaw, yaw_rate=odometry.yaw_rate, time=t)
         result, elapsed, error = self._plan(state, self.target, None, None, self.config)
-        ok, why, snap = self._certified(result)
+        ok, why, snap = self._certified(result, trackability=False)
         if not ok:
             return ReplanStep(t, ReplanAction.NO_PLAN, None, error or why, t, state, result, elapsed, n_solves=1, snap=snap)
-        assert result is not None
+        assert result is not None and result.trajectory is not None
         self.trajectory = result.trajectory
         self.committed_target = self.target
+        s_peak, k_peak = trackability_peaks(self.trajectory)
+        self.snap_limits = (max(self.replan.snap_max, 1.05 * s_peak), max(self.replan.snap_thrust_max, 1.05 * k_peak))
         return ReplanStep(t, ReplanAction.INITIAL_PLAN, self.trajectory, "first plan", t, state, result,
                           elapsed, fraction=1.0, n_solves=1, snap=snap)
 
@@ -404,13 +432,13 @@ class Replanner:
             start = _plan_state(committed, t_ex) if anchored else anticipate(committed, odometry, t, t_ex, rc.measured_orders)
         except ConfigError as exc:
             return record(ReplanAction.KEPT_PREVIOUS, f"no start state: {exc}")
-        durations = np.full(self.config.n_segments, remaining / self.config.n_segments)
         f_max = 1.0 if shift <= budget else budget / shift
         elapsed_total, n_solves, last_reason = 0.0, 0, ""
         last_result: PlanResult | None = None
         for frac in rc.partial_fractions:
             f = frac * f_max
             goal = _blend(self.committed_target, self.target, f)
+            durations = np.full(self.config.n_segments, self._retimed(remaining, goal) / self.config.n_segments)
             result, elapsed, error = self._plan(start, goal, durations, committed, self._replan_config)
             elapsed_total += elapsed
             n_solves += 1
@@ -434,6 +462,15 @@ class Replanner:
             last_reason = why
         return record(ReplanAction.KEPT_PREVIOUS, last_reason, anticipated=start, result=last_result,
                       solve_time=elapsed_total, anchored=anchored, n_solves=n_solves)
+
+    def _retimed(self, remaining: float, goal: PerchTarget) -> float:
+        """Time left after moving the contact time with the normal part of the correction."""
+        v_n = self.config.contact_velocity.normal
+        if not self.replan.retime_normal or v_n is None or abs(v_n) < 1e-6:
+            return remaining
+        dn = float((goal.point - self.committed_target.point) @ self.committed_target.s3)
+        cap = self.replan.retime_fraction * remaining
+        return remaining + float(np.clip(-dn / abs(v_n), -cap, cap))
 
     def _plan(
         self, state: State, target: PerchTarget, durations: Array | None, previous: Trajectory | None,

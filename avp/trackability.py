@@ -14,6 +14,12 @@ so a certified snap bound ``|s| < s_max`` together with the certified thrust flo
 
     F_i(u) = |s_i(T_i u)|^2 - s_max^2 < 0   for u in [0, 1], every segment i,
 
+and, since the angular acceleration the flatness map asks for scales as ``|s| / |f|`` while the
+moment a quadrotor can produce shrinks with its thrust (the rotors near their floor leave no room
+for a differential), the thrust-relative form
+
+    G_i(u) = |s_i(T_i u)|^2 - k^2 |a_i(T_i u) + g e3|^2 < 0,   i.e. |s| < k |f|,
+
 in the normalised time ``u = (t - t_i) / T_i``. Soundness of the coefficients: the spline's
 float coefficients and knots are read as exact rationals, ``F_i``'s coefficients are computed
 exactly with :class:`fractions.Fraction` (a degree-``2(N-4)`` polynomial: a few hundred
@@ -38,7 +44,7 @@ from .bounds import Certificate
 from .errors import ConfigError
 from .trajectory import Trajectory
 
-__all__ = ["SnapReport", "certify_snap", "snap_polynomial"]
+__all__ = ["SnapReport", "certify_snap", "snap_polynomial", "snap_thrust_polynomial", "trackability_peaks"]
 
 
 def _round_up(q: Fraction) -> float:
@@ -47,6 +53,30 @@ def _round_up(q: Fraction) -> float:
     if Fraction(x) < q:
         x = math.nextafter(x, math.inf)
     return x
+
+
+def _axis_derivative(c: np.ndarray, order: int, T: Fraction) -> list[Fraction]:
+    """Exact ascending coefficients in ``u`` of ``d^order/dt^order`` of one axis, ``t = T u``."""
+    n = c.shape[0] - 1
+    return [Fraction(float(c[k + order])) * math.factorial(k + order) / math.factorial(k) * T**k
+            for k in range(max(n - order + 1, 0))]
+
+
+def _square_norm(rows: list[list[Fraction]]) -> list[Fraction]:
+    """Exact coefficients of ``sum_axis p_axis(u)^2``."""
+    size = max((2 * len(r) - 1 for r in rows if r), default=1)
+    out = [Fraction(0)] * size
+    for r in rows:
+        for i, ri in enumerate(r):
+            if ri == 0:
+                continue
+            for j, rj in enumerate(r):
+                out[i + j] += ri * rj
+    return out
+
+
+def _duration(duration: float | Fraction) -> Fraction:
+    return duration if isinstance(duration, Fraction) else Fraction(float(duration))
 
 
 def snap_polynomial(coefficients: np.ndarray, duration: float | Fraction, snap_max: float) -> np.ndarray:
@@ -58,64 +88,107 @@ def snap_polynomial(coefficients: np.ndarray, duration: float | Fraction, snap_m
     difference) to avoid rounding it.
     """
     c = np.asarray(coefficients, dtype=float)
-    n = c.shape[1] - 1
-    if n < 4:
-        return np.array([_round_up(-Fraction(float(snap_max)) ** 2)])
-    T = duration if isinstance(duration, Fraction) else Fraction(float(duration))
-    total = [Fraction(0)] * (2 * (n - 4) + 1)
-    for axis in range(3):
-        # s(T u) = sum_k c_{k+4} (k+4)!/k! T^{k+4} ... in t: s(t) = sum_k c_{k+4} (k+4)!/k! t^k
-        s = [Fraction(float(c[axis, k + 4])) * math.factorial(k + 4) / math.factorial(k) * T**k
-             for k in range(n - 3)]
-        for i, si in enumerate(s):
-            if si == 0:
-                continue
-            for j, sj in enumerate(s):
-                total[i + j] += si * sj
+    T = _duration(duration)
+    total = _square_norm([_axis_derivative(c[a], 4, T) for a in range(3)])
     total[0] -= Fraction(float(snap_max)) ** 2
     return np.array([_round_up(q) for q in total], dtype=np.float64)
 
 
+def snap_thrust_polynomial(coefficients: np.ndarray, duration: float | Fraction, ratio_max: float,
+                           g: float) -> np.ndarray:
+    """Upper-bounding float coefficients (ascending, in ``u``) of
+    ``|s(T u)|^2 - k^2 |a(T u) + g e3|^2`` with ``k = ratio_max`` (1/s^2): negative on ``[0, 1]``
+    iff ``|s| < k |f|``, the snap per unit of mass-normalised thrust (module docstring)."""
+    c = np.asarray(coefficients, dtype=float)
+    T = _duration(duration)
+    snap = _square_norm([_axis_derivative(c[a], 4, T) for a in range(3)])
+    acc = [_axis_derivative(c[a], 2, T) for a in range(3)]
+    acc[2] = list(acc[2]) if acc[2] else [Fraction(0)]
+    acc[2][0] += Fraction(float(g))
+    thrust = _square_norm(acc)
+    k2 = Fraction(float(ratio_max)) ** 2
+    size = max(len(snap), len(thrust))
+    total = [(snap[i] if i < len(snap) else 0) - k2 * (thrust[i] if i < len(thrust) else 0) for i in range(size)]
+    return np.array([_round_up(Fraction(q)) for q in total], dtype=np.float64)
+
+
 @dataclass(frozen=True)
 class SnapReport:
-    """Per-segment verdicts of :func:`certify_snap` (``snap_max`` in m/s^4)."""
+    """Per-segment verdicts of :func:`certify_snap`: ``|s| < snap_max`` (m/s^4) and
+    ``|s| < snap_thrust_max |a + g e3|`` (1/s^2); a cell is WITHIN only if both are proven."""
 
     snap_max: float
     verdicts: tuple[Certificate, ...]
     times: tuple[float, ...]
+    snap_thrust_max: float = math.inf
 
     @property
     def certified(self) -> bool:
-        """``|snap| < snap_max`` proven on every segment (always True for ``inf``)."""
+        """Both bounds proven on every segment (always True when both are ``inf``)."""
         return all(v in (Certificate.WITHIN, Certificate.NOT_CHECKED) for v in self.verdicts)
 
     def summary(self) -> str:
         head = "certified" if self.certified else "NOT certified"
         cells = ", ".join(v.value for v in self.verdicts)
-        return f"snap < {self.snap_max:g} m/s^4: {head} ({cells})"
+        return f"snap < {self.snap_max:g} m/s^4 and < {self.snap_thrust_max:g} |f|: {head} ({cells})"
 
 
-def certify_snap(trajectory: Trajectory, snap_max: float, *, exact: bool = True) -> SnapReport:
-    """Prove ``|x''''(t)| < snap_max`` (m/s^4) on every segment of ``trajectory`` (module
-    docstring). ``inf`` skips the check (verdicts :attr:`Certificate.NOT_CHECKED`)."""
+def _limit(name: str, value: float) -> float:
     try:
-        smax = float(snap_max)
+        out = float(value)
     except (TypeError, ValueError):
-        raise ConfigError("snap_max", f"must be a number, got {snap_max!r}") from None
-    if math.isnan(smax) or smax <= 0:
-        raise ConfigError("snap_max", f"must be > 0 m/s^4 (or inf to skip), got {snap_max!r}")
+        raise ConfigError(name, f"must be a number, got {value!r}") from None
+    if math.isnan(out) or out <= 0:
+        raise ConfigError(name, f"must be > 0 (or inf to skip), got {value!r}")
+    return out
+
+
+def certify_snap(trajectory: Trajectory, snap_max: float, *, snap_thrust_max: float = math.inf,
+                 exact: bool = True) -> SnapReport:
+    """Prove ``|x(t)| < snap_max`` (m/s^4) and ``|x(t)| < snap_thrust_max |a + g e3|``
+    on every segment of ``trajectory`` (module docstring). ``inf`` skips a bound; with both
+    ``inf`` the verdicts are :attr:`Certificate.NOT_CHECKED`."""
+    smax = _limit("snap_max", snap_max)
+    kmax = _limit("snap_thrust_max", snap_thrust_max)
     n_seg = trajectory.n_segments
-    if math.isinf(smax):
-        return SnapReport(smax, (Certificate.NOT_CHECKED,) * n_seg, (math.nan,) * n_seg)
+    if math.isinf(smax) and math.isinf(kmax):
+        return SnapReport(smax, (Certificate.NOT_CHECKED,) * n_seg, (math.nan,) * n_seg, kmax)
     knots = trajectory.knots
-    polys = np.ascontiguousarray(np.stack([
-        snap_polynomial(trajectory.coefficients[i], Fraction(float(knots[i + 1])) - Fraction(float(knots[i])), smax)
-        for i in range(n_seg)
-    ]))
-    codes, t, _ = _avp_rust.certify_below_many(polys, 0.0, 1.0, exact)
+    rows = []
+    for i in range(n_seg):
+        T = Fraction(float(knots[i + 1])) - Fraction(float(knots[i]))
+        c = trajectory.coefficients[i]
+        if math.isfinite(smax):
+            rows.append(snap_polynomial(c, T, smax))
+        if math.isfinite(kmax):
+            rows.append(snap_thrust_polynomial(c, T, kmax, trajectory.g))
+    width = max(len(r) for r in rows)
+    polys = np.zeros((len(rows), width))
+    for j, r in enumerate(rows):
+        polys[j, :len(r)] = r
+    codes, t, _ = _avp_rust.certify_below_many(np.ascontiguousarray(polys), 0.0, 1.0, exact)
+    per = len(rows) // n_seg
     codes_map = (Certificate.WITHIN, Certificate.VIOLATED, Certificate.UNKNOWN)
-    times = tuple(
-        float(knots[i] + ti * (knots[i + 1] - knots[i])) if np.isfinite(ti) else math.nan
-        for i, ti in enumerate(t)
-    )
-    return SnapReport(smax, tuple(codes_map[int(c)] for c in codes), times)
+    verdicts, times = [], []
+    for i in range(n_seg):
+        cs = [codes_map[int(x)] for x in codes[i * per:(i + 1) * per]]
+        ts = [float(x) for x in t[i * per:(i + 1) * per]]
+        if Certificate.VIOLATED in cs:
+            v, u = Certificate.VIOLATED, ts[cs.index(Certificate.VIOLATED)]
+        elif Certificate.UNKNOWN in cs:
+            v, u = Certificate.UNKNOWN, math.nan
+        else:
+            v, u = Certificate.WITHIN, math.nan
+        verdicts.append(v)
+        times.append(float(knots[i] + u * (knots[i + 1] - knots[i])) if np.isfinite(u) else math.nan)
+    return SnapReport(smax, tuple(verdicts), tuple(times), kmax)
+
+
+def trackability_peaks(trajectory: Trajectory, samples: int = 400) -> tuple[float, float]:
+    """Sampled peaks ``(max |s|, max |s| / |a + g e3|)`` of a plan (a measurement, not a proof:
+    used to set limits relative to a plan, which the certificate then proves)."""
+    t = np.linspace(trajectory.t0, trajectory.tf, samples)
+    d = trajectory.derivatives(t, (2, 4))
+    s = np.linalg.norm(d[1][:, :3], axis=-1)
+    f = np.linalg.norm(d[0][:, :3] + np.array([0.0, 0.0, trajectory.g]), axis=-1)
+    return float(s.max()), float(np.max(s / np.maximum(f, 1e-9)))

@@ -153,7 +153,8 @@ class CameraMeasurement:
     ``p_C, R_CS`` is the measured relative pose in C; ``p_W, R_WS`` the same composed with the
     vehicle pose believed at capture. ``sigma_pos`` (m) and ``sigma_ang`` (rad) are the per-axis
     stds of the model at the true ``distance`` (m), for the estimator's weights; ``t_delivered``
-    is when the robot gets it (``t + latency``).
+    is when the robot gets it (``t + latency``); ``p_cam_W`` the camera position the robot
+    believed at capture.
     """
 
     t: float
@@ -165,6 +166,7 @@ class CameraMeasurement:
     sigma_pos: float
     sigma_ang: float
     t_delivered: float = float("nan")
+    p_cam_W: Array | None = None
 
 
 class CameraSensor:
@@ -267,7 +269,7 @@ class CameraSensor:
         p_cam_b, R_WC_b = cp.pose_W(b.p_W, b.R_WB)
         return CameraMeasurement(
             t=float(t), p_W=p_cam_b + R_WC_b @ p_C, R_WS=R_WC_b @ R_CS, p_C=p_C, R_CS=R_CS,
-            distance=d, sigma_pos=sp, sigma_ang=sa, t_delivered=float(t) + cp.latency,
+            distance=d, sigma_pos=sp, sigma_ang=sa, t_delivered=float(t) + cp.latency, p_cam_W=p_cam_b,
         )
 
     def poll(

@@ -1,13 +1,31 @@
-"""Target (perch pad) estimator: inverse-variance fusion of camera detections.
+"""Target (perch pad) filter on the user side: what a user of avp would write around a tag detector.
 
-The pad is static, so the best linear unbiased estimate of its centre from independent detections
-with per-axis stds ``sigma_i`` (the camera's ``sigma_p(d_i)``, Fig. 9) is the weighted mean with
-weights ``w_i = 1 / sigma_i^2``; its per-axis std is ``(sum w_i)^-1/2``. Far, noisy detections
-therefore fade as soon as close ones arrive, which is what AVP's replanning exploits (Sec. IV).
+This is **not** part of the planner; it is the kind of filter a user puts between an AprilTag
+detector and :meth:`avp.replan.Replanner.step`, written the way a user would: a static pad, so
+fuse the detections with inverse-variance weights ``w_i = 1 / var_i`` (the best linear unbiased
+estimate for independent errors), with two user-side safeguards for a detector whose errors grow
+with range:
 
-The rotation is the weighted chordal L2 mean: ``M = sum_i u_i R_i`` with ``u_i = 1/sigma_ang_i^2``,
-projected onto SO(3) (polar factor, det +1). For small, isotropic errors this is the maximum
-likelihood rotation to first order. Running sums make every update O(1).
+- ``scale_error``: the user's guess of the detector's scale error (fraction of range, e.g. a
+  slightly wrong tag size). It adds ``(scale_error d_i)^2`` to the variance of a detection at
+  range ``d_i``, so far detections, whose bias is largest, fade faster.
+- ``range_ratio``: only detections taken within ``range_ratio`` times the closest range seen so
+  far are fused (older, farther ones are dropped once the vehicle is much closer).
+
+- ``estimate_scale``: a user who suspects a scale error (wrong tag size or focal length) can
+  estimate it from the approach itself: a detection from camera position ``c_i`` is
+  ``p_i = c_i + (1 + b)(p - c_i) + noise``, i.e. ``p_i = q - b c_i`` with ``q = (1 + b) p``, linear
+  in ``(q, b)``. The filter solves that weighted least-squares problem with the prior
+  ``b ~ N(0, scale_error^2)`` (so a hover-only start, where ``b`` is unobservable, gives the plain
+  fusion) and returns ``p = q / (1 + b)``. Detections taken from different ranges along the line
+  of sight make ``b`` observable, which an approach provides.
+
+``var_i = sigma_i^2 + (scale_error d_i)^2`` with ``sigma_i`` the detector's per-axis std at range
+``d_i`` (the camera's ``sigma_p(d)``, Fig. 9). Its per-axis std is ``(sum w_i)^-1/2`` (noise only;
+a bias common to all detections is not averaged away). The rotation is the weighted chordal L2
+mean ``M = sum_i u_i R_i`` with ``u_i = 1/sigma_ang_i^2``, projected onto SO(3) (polar factor,
+det +1): for small, isotropic errors the maximum-likelihood rotation to first order. With the
+defaults (0, None) it is the plain inverse-variance fusion of every detection.
 """
 
 from __future__ import annotations
@@ -16,6 +34,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..errors import ConfigError
 from ..frames import Array, project_so3
 from .camera import CameraMeasurement
 
@@ -35,33 +54,44 @@ class TargetEstimate:
 
 
 class TargetEstimator:
-    """Fuses :class:`~avp.sim.camera.CameraMeasurement` objects into one pad pose estimate."""
+    """Fuses :class:`~avp.sim.camera.CameraMeasurement` objects into one pad pose estimate.
 
-    def __init__(self) -> None:
+    Parameters
+    ----------
+    scale_error:
+        Assumed range-proportional error of the detector (fraction), added to each variance.
+    range_ratio:
+        Fuse only detections within this factor of the closest range so far (``None``: all).
+    estimate_scale:
+        Estimate the detector's scale error along with the pad centre (module docstring; needs
+        ``scale_error > 0`` as the prior's std).
+    """
+
+    def __init__(self, scale_error: float = 0.0, range_ratio: float | None = None,
+                 estimate_scale: bool = False) -> None:
+        if not (np.isfinite(scale_error) and scale_error >= 0):
+            raise ConfigError("estimator.scale_error", f"must be a fraction >= 0, got {scale_error}")
+        if range_ratio is not None and not (np.isfinite(range_ratio) and range_ratio >= 1.0):
+            raise ConfigError("estimator.range_ratio", f"must be >= 1 or None, got {range_ratio}")
+        self.scale_error = float(scale_error)
+        self.range_ratio = range_ratio
+        self.estimate_scale = bool(estimate_scale) and self.scale_error > 0
         self.reset()
 
     def reset(self) -> None:
         """Drop every measurement."""
-        self._w_pos = 0.0
-        self._wp = np.zeros(3)
-        self._w_ang = 0.0
-        self._wR = np.zeros((3, 3))
+        self._meas: list[CameraMeasurement] = []
         self._n = 0
         self._t_last = float("nan")
 
     @property
     def n_measurements(self) -> int:
-        """Number of fused detections."""
+        """Number of detections received."""
         return self._n
 
     def update(self, meas: CameraMeasurement) -> None:
-        """Fuse one detection, weighted by the inverse variances it carries."""
-        w_p = 1.0 / max(meas.sigma_pos, 1e-9) ** 2
-        w_a = 1.0 / max(meas.sigma_ang, 1e-9) ** 2
-        self._w_pos += w_p
-        self._wp += w_p * np.asarray(meas.p_W, dtype=float)
-        self._w_ang += w_a
-        self._wR += w_a * np.asarray(meas.R_WS, dtype=float)
+        """Add one detection."""
+        self._meas.append(meas)
         self._n += 1
         self._t_last = float(meas.t)
 
@@ -69,11 +99,36 @@ class TargetEstimator:
         """The current fused pad pose, or None before the first detection."""
         if self._n == 0:
             return None
+        ms = self._meas
+        if self.range_ratio is not None:
+            d_min = min(m.distance for m in ms)
+            ms = [m for m in ms if m.distance <= self.range_ratio * d_min]
+        w_pos = np.array([1.0 / (max(m.sigma_pos, 1e-9) ** 2 + (self.scale_error * m.distance) ** 2) for m in ms])
+        w_ang = np.array([1.0 / max(m.sigma_ang, 1e-9) ** 2 for m in ms])
+        P = np.array([m.p_W for m in ms], dtype=float)
+        Rs = np.array([m.R_WS for m in ms], dtype=float)
+        p_W = (w_pos @ P) / w_pos.sum()
+        if self.estimate_scale and all(m.p_cam_W is not None for m in ms):
+            p_W = self._scale_corrected(ms, w_pos, P)
         return TargetEstimate(
-            p_W=self._wp / self._w_pos,
-            R_WS=project_so3(self._wR / self._w_ang),
-            sigma_pos=float(self._w_pos**-0.5),
-            sigma_ang=float(self._w_ang**-0.5),
+            p_W=p_W,
+            R_WS=project_so3(np.einsum("i,ijk->jk", w_ang, Rs) / w_ang.sum()),
+            sigma_pos=float(w_pos.sum() ** -0.5),
+            sigma_ang=float(w_ang.sum() ** -0.5),
             n_measurements=self._n,
             t_last=self._t_last,
         )
+
+    def _scale_corrected(self, ms: list[CameraMeasurement], w: np.ndarray, P: np.ndarray) -> Array:
+        """Weighted least squares for ``(q, b)`` in ``p_i = q - b c_i`` with the prior
+        ``b ~ N(0, scale_error^2)``; returns ``q / (1 + b)``."""
+        C = np.array([m.p_cam_W for m in ms], dtype=float)
+        H = np.zeros((4, 4))
+        r = np.zeros(4)
+        for wi, pi, ci in zip(w, P, C, strict=True):
+            A = np.hstack([np.eye(3), -ci[:, None]])  # p_i = A [q; b]
+            H += wi * A.T @ A
+            r += wi * A.T @ pi
+        H[3, 3] += 1.0 / self.scale_error**2
+        x = np.linalg.solve(H, r)
+        return x[:3] / (1.0 + x[3])

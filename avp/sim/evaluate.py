@@ -25,10 +25,15 @@ from typing import Any, TextIO
 import numpy as np
 
 from ..config import PlannerConfig
+from ..errors import ConfigError
 from ..replan import ReplanConfig
+from .camera import CameraParams
+from .odometry import OdometryNoise
 from .run import Mode, SimResult, SimScenario, simulate
+from .vehicle import VehicleParams
 
-__all__ = ["REPLAN_PERIOD", "Comparison", "Condition", "compare"]
+__all__ = ["REPLAN_PERIOD", "Comparison", "Condition", "SimConfig", "SweepPoint", "SweepResult", "compare",
+           "sweep", "wilson_interval"]
 
 REPLAN_PERIOD = 1.0 / 30.0
 """The paper's replanning cycle (s); latencies are reported as a fraction of it."""
@@ -124,8 +129,8 @@ class Comparison:
         return "\n".join(lines)
 
     def table_success(self) -> str:
-        lines = ["Success rate (contact inside the pad, |b3 - s3| <= 15 deg, normal speed 0.05-1 m/s, "
-                 "tangential <= 3 m/s); paper: 4.5 m one-shot cannot perch, AVP 60 %",
+        lines = ["Success rate (at the plan's contact time: <= 3 cm from the pad plane, < 10 cm from the "
+                 "centre, b3 within 10 deg of s3); paper: 4.5 m one-shot cannot perch, AVP 60 %",
                  f"  {'condition':34s} {'mode':9s} {'success':>8s}  outcomes"]
         for c in self.conditions:
             for m in Mode:
@@ -292,3 +297,306 @@ def compare(
                     _progress(done, total, t0, f"{m.name.lower()} {c.label()} seed {s}", stream)
     comp.wall_time = time.perf_counter() - t0
     return comp
+
+
+# -- sweeps over realism knobs (issue 9) ---------------------------------------------------------
+
+
+def wilson_interval(successes: int, n: int, z: float = 1.959964) -> tuple[float, float]:
+    """Wilson score interval (95 % by default) of a binomial proportion ``successes / n``."""
+    if n <= 0:
+        return (float("nan"), float("nan"))
+    p = successes / n
+    den = 1.0 + z * z / n
+    centre = (p + z * z / (2 * n)) / den
+    half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / den
+    return (max(0.0, centre - half), min(1.0, centre + half))
+
+
+@dataclass(frozen=True)
+class SimConfig:
+    """Every realism knob of a sweep, as flat scalars (for CLI flags or a TOML table).
+
+    The defaults are issue 9's "realistic" point: 20 ms motor lag through a rotor mixer,
+    odometry at 200 Hz with 3 mm / 1 cm/s white noise and 5 mm/sqrt(s) drift, detections at
+    10 Hz in the FoV with 50 ms latency, 10 % dropouts, range-growing noise (Fig. 9), a 3 %
+    range scale bias of random sign and a 2 deg tilt of the measured normal.
+    :meth:`scenario` turns a config into a :class:`~avp.sim.run.SimScenario`;
+    :func:`sweep` varies any numeric field one at a time.
+
+    Parameters
+    ----------
+    n_trials, seed:
+        Seeded trials per point and mode (seeds ``seed .. seed + n_trials - 1``; both modes use
+        the same seeds: paired).
+    modes:
+        Names of :class:`~avp.sim.run.Mode` to run (``"one_shot"``, ``"avp"``).
+    inclines_deg, distances:
+        Conditions (pad incline in deg: 90 wall, 45 slope; stand-off in m).
+    motor_time_constant:
+        Rotor lag (s); 0: instantaneous rotors.
+    mixer:
+        Rotor-level allocation with per-rotor limits (False: a moment box).
+    odometry_sigma_p, odometry_sigma_v, odometry_sigma_att_deg, odometry_drift, odometry_rate_hz:
+        Odometry white noise (m, m/s, deg), position random walk (m/sqrt(s)), rate (Hz).
+    perfect_odometry:
+        Ignore the odometry knobs: the state is known exactly.
+    camera_noise_scale:
+        Multiplies the Fig. 9 noise model (0: noise-free detections).
+    camera_scale_bias, camera_bias_sign:
+        Range-proportional bias (fraction) and its sign (None: random per trial).
+    camera_normal_tilt_deg:
+        Tilt of the measured pad normal (deg).
+    camera_latency, camera_dropout, camera_rate_hz:
+        Detection latency (s), dropout probability, frame rate (Hz).
+    initial_frames:
+        Detections fused at hover before the first plan.
+    filter_scale_error, filter_range_ratio, filter_estimate_scale:
+        The user-side target filter (:class:`~avp.sim.estimator.TargetEstimator`): assumed scale
+        error (the prior's std), the range window (None: fuse every detection) and whether to
+        estimate the scale error from the approach.
+    """
+
+    n_trials: int = 100
+    seed: int = 0
+    modes: tuple[str, ...] = ("one_shot", "avp")
+    inclines_deg: tuple[float, ...] = (90.0, 60.0, 45.0)
+    distances: tuple[float, ...] = (4.5, 7.5)
+    motor_time_constant: float = 0.02
+    mixer: bool = True
+    odometry_sigma_p: float = 0.003
+    odometry_sigma_v: float = 0.01
+    odometry_sigma_att_deg: float = 0.2
+    odometry_drift: float = 0.005
+    odometry_rate_hz: float = 200.0
+    perfect_odometry: bool = False
+    camera_noise_scale: float = 1.0
+    camera_scale_bias: float = 0.03
+    camera_bias_sign: float | None = None
+    camera_normal_tilt_deg: float = 2.0
+    camera_latency: float = 0.05
+    camera_dropout: float = 0.1
+    camera_rate_hz: float = 10.0
+    initial_frames: int = 3
+    filter_scale_error: float = 0.03
+    filter_range_ratio: float | None = None
+    filter_estimate_scale: bool = True
+
+    def __post_init__(self) -> None:
+        if isinstance(self.n_trials, bool) or not isinstance(self.n_trials, int) or self.n_trials < 1:
+            raise ConfigError("sim.n_trials", f"must be an integer >= 1, got {self.n_trials!r}")
+        for m in self.modes:
+            Mode.parse(m)
+        if not self.inclines_deg or not self.distances:
+            raise ConfigError("sim.inclines_deg", "need at least one incline and one distance")
+        for name in ("motor_time_constant", "odometry_sigma_p", "odometry_sigma_v", "odometry_sigma_att_deg",
+                     "odometry_drift", "camera_noise_scale", "camera_scale_bias", "camera_normal_tilt_deg",
+                     "camera_latency"):
+            val = getattr(self, name)
+            if not (isinstance(val, (int, float)) and math.isfinite(val) and val >= 0):
+                raise ConfigError(f"sim.{name}", f"must be a finite number >= 0, got {val!r}")
+
+    def scenario(self, incline_deg: float, distance: float) -> SimScenario:
+        """The :class:`~avp.sim.run.SimScenario` of one condition with this config's realism."""
+        base_cam = CameraParams()
+        cam = dataclasses.replace(
+            base_cam,
+            sigma0_pos=base_cam.sigma0_pos * self.camera_noise_scale,
+            sigma0_ang=base_cam.sigma0_ang * self.camera_noise_scale,
+            scale_bias=float(self.camera_scale_bias), bias_sign=self.camera_bias_sign,
+            normal_tilt=math.radians(self.camera_normal_tilt_deg), latency=float(self.camera_latency),
+            dropout=float(self.camera_dropout), rate_hz=float(self.camera_rate_hz),
+        )
+        odo = None if self.perfect_odometry else OdometryNoise(
+            sigma_p=float(self.odometry_sigma_p), sigma_v=float(self.odometry_sigma_v),
+            sigma_att=math.radians(self.odometry_sigma_att_deg), sigma_omega=0.01,
+            drift_p=float(self.odometry_drift), rate_hz=float(self.odometry_rate_hz))
+        vehicle = VehicleParams(motor_time_constant=float(self.motor_time_constant), mixer=bool(self.mixer))
+        return SimScenario(incline=math.radians(incline_deg), distance=float(distance), camera=cam,
+                           odometry=odo, vehicle=vehicle, initial_frames=int(self.initial_frames),
+                           filter_scale_error=float(self.filter_scale_error),
+                           filter_range_ratio=self.filter_range_ratio,
+                           filter_estimate_scale=bool(self.filter_estimate_scale))
+
+    def perfect_estimate(self) -> SimConfig:
+        """The same vehicle with a perfect target estimate and perfect odometry."""
+        return dataclasses.replace(self, camera_noise_scale=0.0, camera_scale_bias=0.0, camera_normal_tilt_deg=0.0,
+                                   perfect_odometry=True)
+
+
+@dataclass(frozen=True)
+class SweepPoint:
+    """The runs of one sweep point: ``axis = value`` (``axis`` ``"base"`` for the base config)
+    under one condition and mode. ``errors_S`` is ``(n, 3)`` position errors at the evaluation
+    time in the pad frame (s1, s2, normal; m), ``attitude`` the b3-s3 angles (deg)."""
+
+    axis: str
+    value: float
+    incline_deg: float
+    distance: float
+    mode: str
+    successes: int
+    n: int
+    errors_S: np.ndarray
+    attitude: np.ndarray
+    outcomes: dict[str, int]
+
+    @property
+    def rate(self) -> float:
+        return self.successes / self.n if self.n else float("nan")
+
+    @property
+    def interval(self) -> tuple[float, float]:
+        """Wilson 95 % interval of the success rate."""
+        return wilson_interval(self.successes, self.n)
+
+
+@dataclass
+class SweepResult:
+    """What :func:`sweep` measured: one :class:`SweepPoint` per (axis value, condition, mode),
+    the replan step latencies (s) of every AVP solve, and the config."""
+
+    config: SimConfig
+    points: list[SweepPoint]
+    latencies: np.ndarray
+    wall_time: float = 0.0
+
+    def table(self) -> str:
+        """Success rates with Wilson 95 % intervals, one row per point and mode."""
+        lines = [f"Success at the plan's contact time (<= 3 cm from the pad plane, < 10 cm from the centre, "
+                 f"b3 within 10 deg of s3); {self.config.n_trials} seeded trials per point, Wilson 95 % CI",
+                 f"  {'axis':24s} {'value':>8s} {'incline':>8s} {'dist':>5s} {'mode':9s} {'success':>8s} "
+                 f"{'95% CI':>13s}  {'|e_s1|':>7s} {'|e_s2|':>7s} {'|e_n|':>7s} {'att':>6s}"]
+        for p in self.points:
+            lo, hi = p.interval
+            e = np.abs(p.errors_S) if p.errors_S.size else np.full((1, 3), np.nan)
+            att = float(np.mean(p.attitude)) if p.attitude.size else float("nan")
+            lines.append(f"  {p.axis:24s} {p.value:8.4g} {p.incline_deg:8.0f} {p.distance:5.1f} {p.mode:9s} "
+                         f"{100 * p.rate:7.1f}% [{100 * lo:4.1f},{100 * hi:5.1f}]  "
+                         f"{np.mean(e[:, 0]):7.3f} {np.mean(e[:, 1]):7.3f} {np.mean(e[:, 2]):7.3f} {att:6.2f}")
+        return "\n".join(lines)
+
+    def table_latency(self) -> str:
+        st = self.latencies
+        if st.size == 0:
+            return "Replan step latency: no solves"
+        med, p95, mx = (float(np.percentile(st, q)) for q in (50, 95, 100))
+        return (f"Replan step latency inside the closed-loop runs ({st.size} steps with a solve): median "
+                f"{med * 1e3:.1f} ms, p95 {p95 * 1e3:.1f} ms, max {mx * 1e3:.1f} ms")
+
+    def report(self) -> str:
+        """:meth:`table`, the latency line and the wall time."""
+        return "\n\n".join([self.table(), self.table_latency(),
+                            f"{len(self.points)} points in {self.wall_time:.0f} s"])
+
+    def plot(self, output_dir: str | Path) -> list[Path]:
+        """One ``success_vs_<axis>.png`` per varied axis (success with 95 % CI against the value,
+        one line per condition and mode); returns the paths."""
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+
+        out = Path(output_dir)
+        out.mkdir(parents=True, exist_ok=True)
+        written = []
+        axes = sorted({p.axis for p in self.points if p.axis != "base"})
+        for axis in axes:
+            pts = [p for p in self.points if p.axis == axis]
+            fig, ax = plt.subplots(figsize=(7, 4.2))
+            keys = sorted({(p.incline_deg, p.distance, p.mode) for p in pts})
+            for inc, dist, mode in keys:
+                ps = sorted((p for p in pts if (p.incline_deg, p.distance, p.mode) == (inc, dist, mode)),
+                            key=lambda p: p.value)
+                x = np.array([p.value for p in ps])
+                y = np.array([100 * p.rate for p in ps])
+                ci = np.array([[100 * (p.rate - p.interval[0]), 100 * (p.interval[1] - p.rate)] for p in ps]).T
+                ax.errorbar(x, y, yerr=ci, capsize=3, ls="-" if mode == "avp" else "--",
+                            marker="o" if mode == "avp" else "s", label=f"{mode}, {inc:g} deg, {dist:g} m")
+            ax.set_xlabel(axis)
+            ax.set_ylabel("success (%) with 95 % CI")
+            ax.set_ylim(-5, 105)
+            ax.grid(alpha=0.3)
+            ax.legend(fontsize=7)
+            fig.tight_layout()
+            path = out / f"success_vs_{axis}.png"
+            fig.savefig(path, dpi=110)
+            plt.close(fig)
+            written.append(path)
+        return written
+
+
+def sweep(
+    config: SimConfig | None = None,
+    vary: dict[str, Iterable[float]] | None = None,
+    *,
+    planner: PlannerConfig | None = None,
+    replan: ReplanConfig | None = None,
+    include_base: bool = True,
+    progress: bool = False,
+    stream: TextIO | None = None,
+) -> SweepResult:
+    """Fly ``config.n_trials`` seeded trials per point in every mode and condition.
+
+    Parameters
+    ----------
+    config:
+        :class:`SimConfig` (default: issue 9's realistic point).
+    vary:
+        One-at-a-time axes: ``{field: values}`` with ``field`` a numeric :class:`SimConfig` field
+        (e.g. ``{"camera_scale_bias": (0, 0.03, 0.06), "motor_time_constant": (0, 0.02, 0.04)}``);
+        every value is run with all other fields at ``config``'s.
+    planner, replan:
+        Planner configuration (default :func:`~avp.sim.run.sim_config` with the simulated vehicle
+        and camera) and replanning policy (default :class:`~avp.replan.ReplanConfig`).
+    include_base:
+        Also run ``config`` itself (axis ``"base"``).
+    progress, stream:
+        Progress bar on ``stream`` (default stderr).
+
+    Returns
+    -------
+    SweepResult
+        ``.report()`` / ``.table()`` text, ``.plot(dir)`` figures, ``.points`` raw numbers.
+
+    Raises
+    ------
+    ConfigError
+        An unknown or non-numeric field in ``vary``.
+    """
+    cfg = config if config is not None else SimConfig()
+    runs: list[tuple[str, float, SimConfig]] = [("base", 0.0, cfg)] if include_base else []
+    for name, values in (vary or {}).items():
+        if name not in SimConfig.__dataclass_fields__ or name in ("modes", "inclines_deg", "distances"):
+            raise ConfigError(f"vary.{name}", f"not a numeric SimConfig field; choose from "
+                              f"{sorted(f for f in SimConfig.__dataclass_fields__ if f not in ('modes', 'inclines_deg', 'distances'))}")
+        for val in values:
+            runs.append((name, float(val), dataclasses.replace(cfg, **{name: type(getattr(cfg, name) or 0.0)(val)})))
+    stream = stream if stream is not None else sys.stderr
+    points: list[SweepPoint] = []
+    lat: list[np.ndarray] = []
+    total = len(runs) * len(cfg.inclines_deg) * len(cfg.distances) * len(cfg.modes) * cfg.n_trials
+    done, t0 = 0, time.perf_counter()
+    for axis, value, c in runs:
+        for inc in c.inclines_deg:
+            for dist in c.distances:
+                sc = c.scenario(inc, dist)
+                for mode_name in c.modes:
+                    mode = Mode.parse(mode_name)
+                    errs, atts, outs, k = [], [], {}, 0
+                    for s in range(c.seed, c.seed + c.n_trials):
+                        r = simulate(sc, mode, seed=s, config=planner, replan=replan)
+                        k += r.success
+                        outs[r.outcome] = outs.get(r.outcome, 0) + 1
+                        if r.perch is not None:
+                            errs.append(r.perch.error_S)
+                            atts.append(math.degrees(r.perch.attitude_error))
+                        if mode is Mode.AVP:
+                            lat.append(np.array([st.solve_time for st in r.steps[1:] if st.solved]))
+                        done += 1
+                        if progress:
+                            _progress(done, total, t0, f"{axis}={value:g} {mode.name.lower()} {inc:g} deg {dist:g} m", stream)
+                    points.append(SweepPoint(axis, value, float(inc), float(dist), mode.name.lower(), k, c.n_trials,
+                                             np.array(errs, dtype=float).reshape(-1, 3), np.array(atts), outs))
+    latencies = np.concatenate(lat) if lat else np.zeros(0)
+    return SweepResult(cfg, points, latencies, time.perf_counter() - t0)

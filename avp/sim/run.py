@@ -147,6 +147,8 @@ class SimScenario:
         (:class:`~avp.sim.contact.PerchCriteria`).
     initial_frames:
         Detections fused at hover before the first plan (10 Hz apart).
+    filter_scale_error, filter_range_ratio, filter_estimate_scale:
+        The user-side target filter's settings (:class:`~avp.sim.estimator.TargetEstimator`).
     replan_rate_hz:
         Rate of :meth:`Replanner.step` calls in AVP mode.
     timeout:
@@ -172,6 +174,9 @@ class SimScenario:
     criteria: SuccessCriteria = field(default_factory=SuccessCriteria)
     perch_criteria: PerchCriteria = field(default_factory=PerchCriteria)
     initial_frames: int = 1
+    filter_scale_error: float = 0.0
+    filter_range_ratio: float | None = None
+    filter_estimate_scale: bool = False
     replan_rate_hz: float = 30.0
     timeout: float = 0.5
     after_plan: AfterPlan = AfterPlan.HOLD_ACCELERATION
@@ -388,7 +393,8 @@ def simulate(
 
     truth, pad = sc.target(), sc.pad()
     idle = sc.vehicle.thrust_min / sc.vehicle.mass if sc.after_plan is AfterPlan.IDLE_THRUST else None
-    camera, estimator = CameraSensor(sc.camera, rng_bias), TargetEstimator()
+    camera = CameraSensor(sc.camera, rng_bias)
+    estimator = TargetEstimator(sc.filter_scale_error, sc.filter_range_ratio, sc.filter_estimate_scale)
     odo = None if sc.odometry is None else Odometry(sc.odometry, rng_odo)
     state = RigidBodyState(sc.start())
     detections: list[tuple[float, float, float, float]] = []
