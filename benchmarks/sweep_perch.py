@@ -1,0 +1,59 @@
+"""One-shot vs AVP in the realistic simulator: success with Wilson 95 % intervals over a grid
+of conditions and one-at-a-time noise axes, errors in s1/s2/normal, plots, replan step latency.
+
+    python benchmarks/sweep_perch.py --trials 100                       # base grid (issue 9 target)
+    python benchmarks/sweep_perch.py --trials 30 --axes --out sweep_out  # + success vs each knob
+    python benchmarks/sweep_perch.py --trials 20 --perfect               # perfect estimate
+
+Wraps :func:`avp.sim.evaluate.sweep` (the API the CLI wires to). Long: ~1 s per trial and mode
+on one core; not part of the test suite.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import warnings
+
+from avp.sim.evaluate import SimConfig, sweep
+
+AXES = {
+    "camera_scale_bias": (0.0, 0.015, 0.03, 0.06),
+    "odometry_sigma_p": (0.0, 0.003, 0.01),
+    "odometry_drift": (0.0, 0.005, 0.02),
+    "motor_time_constant": (0.0, 0.02, 0.04),
+    "camera_noise_scale": (0.0, 1.0, 2.0),
+    "camera_latency": (0.0, 0.05, 0.1),
+}
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--trials", type=int, default=100)
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--inclines", type=float, nargs="+", default=[90.0, 60.0, 45.0])
+    ap.add_argument("--distances", type=float, nargs="+", default=[4.5, 7.5])
+    ap.add_argument("--axes", action="store_true", help="also vary each knob of AXES one at a time")
+    ap.add_argument("--axis-inclines", type=float, nargs="+", default=[90.0],
+                    help="conditions for the one-at-a-time axes (fewer to save time)")
+    ap.add_argument("--perfect", action="store_true", help="perfect target estimate and odometry")
+    ap.add_argument("--out", default=None, help="directory for the plots")
+    args = ap.parse_args()
+    warnings.simplefilter("ignore")
+    cfg = SimConfig(n_trials=args.trials, seed=args.seed, inclines_deg=tuple(args.inclines),
+                    distances=tuple(args.distances))
+    if args.perfect:
+        cfg = cfg.perfect_estimate()
+    res = sweep(cfg, progress=True)
+    print(res.report(), flush=True)
+    if args.axes:
+        axis_cfg = dataclasses.replace(cfg, inclines_deg=tuple(args.axis_inclines))
+        ax = sweep(axis_cfg, AXES, include_base=False, progress=True)
+        print(ax.report(), flush=True)
+        if args.out:
+            for p in ax.plot(args.out):
+                print("wrote", p)
+
+
+if __name__ == "__main__":
+    main()
