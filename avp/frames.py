@@ -22,10 +22,10 @@ __all__ = [
     "expm_so3",
     "hat",
     "project_so3",
-    "vee",
     "rotation_error_angle",
     "thrust_magnitude",
     "thrust_vector",
+    "vee",
     "yaw_from_b2",
 ]
 

@@ -2,6 +2,8 @@
 
 Here a perfect-tracking stand-in replaces the vehicle (odometry = the reference being flown) and
 the target estimate drifts from 10 cm off towards the truth, as a camera's would while approaching.
+Every committed plan is certified (actuator bounds and trackability); a step whose action is
+``CANNOT_REACH`` is the cue to abort or go around (``step.target_error``, ``step.reach_budget``).
 """
 
 import numpy as np
@@ -20,7 +22,10 @@ if __name__ == "__main__":
         estimate = avp.PerchTarget(point=(1 - blend) * guess.point + blend * truth.point, R_WS=truth.R_WS)
         step = replanner.step(t, odometry, estimate)
         print(f"t={t:5.3f} s  {step.action.name:20s} {step.reason[:40]:40s} "
-              f"solve {step.solve_time * 1e3:5.1f} ms")
+              f"solve {step.solve_time * 1e3:5.1f} ms  off by {step.target_error * 100:4.1f} cm")
+        if step.action is avp.ReplanAction.CANNOT_REACH:
+            print(f"  cannot reach the estimate: {step.target_error:.3f} m off, budget {step.reach_budget:.3f} m:"
+                  " a real vehicle would go around here")
         if step.trajectory is None or t >= step.trajectory.tf:
             break
         t = min(t + dt, step.trajectory.tf)

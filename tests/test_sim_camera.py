@@ -3,13 +3,11 @@
 from __future__ import annotations
 
 import numpy as np
-
-import avp
 import pytest
 
-from avp.frames import rotation_error_angle
-from avp.sim import CameraSensor, CameraParams, OdometryNoise, RigidBodyState, noisy_odometry
-from avp.frames import expm_so3
+import avp
+from avp.frames import expm_so3, rotation_error_angle
+from avp.sim import CameraParams, CameraSensor, OdometryNoise, RigidBodyState, noisy_odometry
 
 WALL = np.array([[0.0, 0.0, 1.0], [0.0, 1.0, 0.0], [-1.0, 0.0, 0.0]]).T  # s1=e3, s2=e2, s3=-e1
 ORIGIN = RigidBodyState(np.zeros(3))  # level, b1 = e1: the front camera looks along +x

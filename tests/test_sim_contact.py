@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from avp.errors import ConfigError
-from avp.sim import FlatReference, PerchPad, RigidBodyState, detect_contact, fly
 from avp.frames import expm_so3
+from avp.sim import FlatReference, PerchPad, RigidBodyState, detect_contact, fly
 
 WALL = np.array([[0.0, 0.0, 1.0], [0.0, 1.0, 0.0], [-1.0, 0.0, 0.0]]).T  # s1=e3, s2=e2, s3=-e1
 PAD = PerchPad(p_W=[5.0, 0.0, 2.0], R_WS=WALL, half_size=0.15)

@@ -7,6 +7,7 @@ import pytest
 from numpy.polynomial import polynomial as P
 
 from avp import frames
+from avp.frames import expm_so3
 from avp.sim import (
     ControllerGains,
     FlatReference,
@@ -17,7 +18,6 @@ from avp.sim import (
     control,
     fly,
 )
-from avp.frames import expm_so3
 
 T_MOVE = 2.0
 P0 = np.array([0.0, 0.0, 1.0])
@@ -85,7 +85,7 @@ def test_tracking_with_feedforward_is_accurate_and_without_it_is_not():
 
 
 def test_motor_lag_degrades_tracking_but_feedforward_still_helps():
-    pos_ideal, att_ideal, _ = tracking_errors(True)
+    _, att_ideal, _ = tracking_errors(True)
     pos_lag, att_lag, _ = tracking_errors(True, VehicleParams(motor_time_constant=0.02))
     pos_lag_no, att_lag_no, _ = tracking_errors(False, VehicleParams(motor_time_constant=0.02))
     assert att_lag > 3 * att_ideal  # 20 ms of lag is visible (measured 0.6 vs 0.034 deg)

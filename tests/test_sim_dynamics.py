@@ -7,9 +7,8 @@ import pytest
 
 from avp.config import VehicleLimits
 from avp.errors import ConfigError
-from avp.frames import GRAVITY
+from avp.frames import GRAVITY, expm_so3
 from avp.sim import RigidBodyState, VehicleParams, step
-from avp.frames import expm_so3
 
 
 def _fly_open_loop(state, thrust, moment, dt, duration, params):

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from avp.frames import rotation_error_angle
-from avp.sim import CameraSensor, CameraParams, RigidBodyState, TargetEstimator
+from avp.sim import CameraParams, CameraSensor, RigidBodyState, TargetEstimator
 
 WALL = np.array([[0.0, 0.0, 1.0], [0.0, 1.0, 0.0], [-1.0, 0.0, 0.0]]).T
 TARGET = np.array([8.0, 0.0, 1.0])

@@ -6,7 +6,6 @@ import dataclasses
 import math
 
 import numpy as np
-import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from numpy.polynomial import polynomial as P
@@ -14,8 +13,7 @@ from numpy.polynomial import polynomial as P
 import avp
 import avp.replan
 from avp.cli import main
-from avp.planner import PlanStatus
-from avp.replan import ReplanAction, anticipate
+from avp.replan import anticipate
 from avp.sim.run import Mode, SimScenario, simulate
 
 WALL_45 = SimScenario(distance=4.5)

@@ -19,7 +19,15 @@ off-able:
 """
 
 from .camera import FRONT_CAMERA_R_BC, CameraMeasurement, CameraParams, CameraSensor
-from .contact import Contact, PerchCriteria, PerchOutcome, PerchPad, SuccessCriteria, detect_contact, judge_perch
+from .contact import (
+    Contact,
+    PerchCriteria,
+    PerchOutcome,
+    PerchPad,
+    SuccessCriteria,
+    detect_contact,
+    judge_perch,
+)
 from .controller import (
     ControllerGains,
     ControlOutput,

@@ -23,8 +23,8 @@ from typing import Any, Literal
 
 import numpy as np
 
-from ..errors import ConfigError
 from .. import _validate as v
+from ..errors import ConfigError
 from ..frames import Array, project_so3
 from .vehicle import RigidBodyState
 

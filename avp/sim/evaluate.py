@@ -571,7 +571,9 @@ def sweep(
             raise ConfigError(f"vary.{name}", f"not a numeric SimConfig field; choose from "
                               f"{sorted(f for f in SimConfig.__dataclass_fields__ if f not in ('modes', 'inclines_deg', 'distances'))}")
         for val in values:
-            runs.append((name, float(val), dataclasses.replace(cfg, **{name: type(getattr(cfg, name) or 0.0)(val)})))
+            current = getattr(cfg, name)
+            cast: Any = int(val) if isinstance(current, int) and not isinstance(current, bool) else float(val)
+            runs.append((name, float(val), dataclasses.replace(cfg, **{name: cast})))
     stream = stream if stream is not None else sys.stderr
     points: list[SweepPoint] = []
     lat: list[np.ndarray] = []
@@ -583,7 +585,10 @@ def sweep(
                 sc = c.scenario(inc, dist)
                 for mode_name in c.modes:
                     mode = Mode.parse(mode_name)
-                    errs, atts, outs, k = [], [], {}, 0
+                    errs: list[np.ndarray] = []
+                    atts: list[float] = []
+                    outs: dict[str, int] = {}
+                    k = 0
                     for s in range(c.seed, c.seed + c.n_trials):
                         r = simulate(sc, mode, seed=s, config=planner, replan=replan)
                         k += r.success

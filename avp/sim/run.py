@@ -54,7 +54,15 @@ from ..replan import ReplanAction, ReplanConfig, Replanner, ReplanStep
 from ..trajectory import Trajectory
 from ..types import PerchTarget, State
 from .camera import CameraMeasurement, CameraParams, CameraSensor
-from .contact import Contact, PerchCriteria, PerchOutcome, PerchPad, SuccessCriteria, detect_contact, judge_perch
+from .contact import (
+    Contact,
+    PerchCriteria,
+    PerchOutcome,
+    PerchPad,
+    SuccessCriteria,
+    detect_contact,
+    judge_perch,
+)
 from .controller import ControllerGains, FlatReference
 from .estimator import TargetEstimator
 from .flight import DT_CONTROL, fly
