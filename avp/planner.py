@@ -22,6 +22,7 @@ from .errors import (
 )
 from .qp.assemble import build_perching_qp
 from .qp.layout import DecisionLayout, layout_for
+from .request import check_request
 from .solve import WARM_START_SOLVERS, QpOutcome, solve_perching_qp
 from .timing import check_durations, initial_durations
 from .trajectory import Trajectory
@@ -236,6 +237,7 @@ def plan_detailed(
     t_start = time.perf_counter()
     cfg = _check_inputs(state, target, config)
     T0 = check_durations(durations, cfg) if durations is not None else initial_durations(state, target, cfg)
+    check_request(state, target, cfg, float(T0.sum()))  # physical sense of the request
     log: list[str] = [f"durations {np.round(T0, 4).tolist()} s ({'given' if durations is not None else 'allocated'})"]
     build = solve = certify = 0.0
     attempts = 0

@@ -173,7 +173,10 @@ def test_random_problems_meet_every_equality(problem: tuple[avp.State, avp.Perch
     config = avp.PlannerConfig()
     try:
         result = avp.plan_detailed(state, target, config)
-    except avp.ConfigError as exc:  # only the documented "target at the start" rejection
+    except avp.ConfigError as exc:  # the documented "target at the start" / "behind the pad" rejections
+        if exc.field == "state.position":
+            assert (state.position - target.point) @ target.s3 < 0
+            return
         assert exc.field == "target.point"
         return
     if result.trajectory is None:  # a documented, reported outcome, never a crash

@@ -9,7 +9,7 @@ import numpy as np
 import numpy.typing as npt
 
 from ..config import PlannerConfig, PreImpactMode
-from ..frames import yaw_from_b2
+from ..frames import contact_yaw
 from ..types import PerchTarget
 from .layout import YAW, DecisionLayout
 from .rows import derivative_rows, vector_rows
@@ -24,8 +24,10 @@ def terminal_acceleration(target: PerchTarget, alpha: float, g: float) -> Array:
 
 
 def terminal_yaw(target: PerchTarget, near: float) -> float:
-    """Yaw with ``b2_des`` parallel to ``s2`` (13), unwrapped to within pi of ``near``."""
-    psi = yaw_from_b2(target.s2)
+    """Yaw (13) whose attitude with ``b3 = s3`` is exactly ``R_WS`` (:func:`avp.frames.contact_yaw`),
+    unwrapped to within pi of ``near``. Raises ConfigError for a contact attitude the
+    construction cannot represent."""
+    psi, _ = contact_yaw(target.R_WS)
     return psi + 2.0 * math.pi * round((near - psi) / (2.0 * math.pi))
 
 

@@ -17,6 +17,7 @@ pub mod certify;
 pub mod error;
 pub mod exact;
 pub mod poly;
+pub mod roll;
 pub mod spline;
 pub mod sturm;
 
