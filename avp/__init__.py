@@ -41,6 +41,7 @@ from .camera import Camera, FovConfig, FovPointPolicy
 from .config import (
     BoundsPolicy,
     ContactVelocity,
+    OverhangFlip,
     PlannerConfig,
     PreImpactMode,
     QpForm,
@@ -66,6 +67,7 @@ __all__ += [
     "FlatOutput",
     "FovConfig",
     "FovPointPolicy",
+    "OverhangFlip",
     "PerchTarget",
     "PlanResult",
     "PlanStatus",

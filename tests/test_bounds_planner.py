@@ -7,7 +7,7 @@ import math
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 from scenarios import standard, standard_grid
 
@@ -58,6 +58,7 @@ def random_case(draw: st.DrawFn):
     pad = np.array([0.0, 0.0, 2.0])
     target = avp.PerchTarget.from_incline(pad, incline)
     start = pad - np.array([distance, 0.0, 0.0]) + np.array([0.0, draw(st.floats(-1, 1)), draw(st.floats(-0.5, 1.0))])
+    assume(float((start - pad) @ target.s3) >= 0.0)  # a start behind the pad is a ConfigError
     limits = avp.VehicleLimits(
         mass=1.0, thrust_min=draw(st.floats(0.5, 3.5)), thrust_max=draw(st.floats(12.0, 20.0)),
         tilt_rate_max=draw(st.floats(3.0, 10.0)),

@@ -274,12 +274,7 @@ fn segment_polys<S: Scalar>(view: &SplineView<'_>, seg: usize, g: f64) -> Segmen
 
 /// The checked polynomial `F` of one bound (negative everywhere iff the bound holds); for the
 /// body rate, at the roll level `sin²φ <= roll_s2` (see [`roll::body_rate_constants`]).
-fn bound_poly<S: Scalar>(
-    kind: BoundKind,
-    p: &SegmentPolys<S>,
-    limit: f64,
-    roll_s2: f64,
-) -> Vec<S> {
+fn bound_poly<S: Scalar>(kind: BoundKind, p: &SegmentPolys<S>, limit: f64, roll_s2: f64) -> Vec<S> {
     let l = S::from_f64(limit);
     let l2 = l.mul(&l);
     match kind {
@@ -601,6 +596,50 @@ mod tests {
                 &c,
                 &k,
                 limits([INF, 0.0, INF, INF, 1.0]),
+                BoundKind::BodyRate
+            ),
+            Certificate::Violated { .. }
+        ));
+    }
+
+    #[test]
+    fn body_rate_at_large_roll_uses_the_certified_level() {
+        // |f| = 15 tilted 75 deg towards -y, yaw turning at 1 rad/s around 0: roll ~75 deg and
+        // the true |w| = w3 ~ 1/cos(75 deg) = 3.86 rad/s. The 45-degree inequality
+        // (3, 4) would accept w = 2.5; the certified level (31, 32) needs w^2 > 32.
+        let th = 75f64.to_radians();
+        let ay = -15.0 * th.sin();
+        let az = 15.0 * th.cos() - 9.81;
+        let c = spline(
+            [
+                &[0.0],
+                &[0.0, 0.0, 0.5 * ay],
+                &[0.0, 0.0, 0.5 * az],
+                &[-0.1, 1.0],
+            ],
+            8,
+        );
+        let k = [0.0, 0.2];
+        let body = |w: f64| verdict(&c, &k, limits([INF, 1.0, INF, INF, w]), BoundKind::BodyRate);
+        assert!(matches!(body(2.5), Certificate::Violated { .. }));
+        assert!(matches!(body(5.6), Certificate::Violated { .. }));
+        assert_eq!(body(5.7), Certificate::Within); // sqrt(32) = 5.657
+                                                    // 80 deg: beyond the top level, whatever the limit
+        let th = 80f64.to_radians();
+        let c = spline(
+            [
+                &[0.0],
+                &[0.0, 0.0, -7.5 * th.sin()],
+                &[0.0, 0.0, 7.5 * th.cos() - 4.905],
+                &[0.0, 0.1],
+            ],
+            8,
+        );
+        assert!(matches!(
+            verdict(
+                &c,
+                &k,
+                limits([INF, 1.0, INF, INF, 1e3]),
                 BoundKind::BodyRate
             ),
             Certificate::Violated { .. }
