@@ -157,7 +157,8 @@ class OverhangFlip:
     ``thrust_min`` and the tilt rate (up to 550 rad/s). The planner therefore asks, at
     ``t_w = t_f - t_k - (incline - 90 deg) / turn_rate``, for a horizontal thrust along the
     horizontal part ``u`` of ``s1`` of at least ``thrust`` (m/s^2, mass-normalised):
-    ``f(t_w) . e3 = 0``, ``f(t_w) . (e3 x u) = 0``, ``f(t_w) . u >= thrust`` (linear rows).
+    ``f(t_w) . e3 = 0``, ``f(t_w) . (e3 x u) = 0``, ``f(t_w) . u >= thrust`` (linear rows;
+    ``thrust`` defaults to ``max(2.5, 2 f_min)``, below the middle of the thrust range).
     ``turn_rate`` defaults to 0.7 x ``limits.tilt_rate_max`` (7 rad/s without a tilt limit):
     the time left to turn from the horizontal to ``s3`` before the band (14). With ``cone_band``
     an overhang's pre-impact band (14) in PAPER mode is imposed as the tilt cone (CONE): the
@@ -168,15 +169,24 @@ class OverhangFlip:
     enabled: bool = True
     min_incline: float = math.radians(95.0)
     cone_band: bool = True
-    thrust: float = 2.5
+    thrust: float | None = None
     turn_rate: float | None = None
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.min_incline) and math.pi / 2 <= self.min_incline <= math.pi):
             raise ConfigError("flip.min_incline", f"must be in [pi/2, pi] rad, got {self.min_incline}")
-        v.positive_float("flip.thrust", self.thrust)
+        if self.thrust is not None:
+            v.positive_float("flip.thrust", self.thrust)
         if self.turn_rate is not None:
             v.positive_float("flip.turn_rate", self.turn_rate)
+
+    def horizontal_thrust(self, limits: VehicleLimits) -> float:
+        """Least horizontal thrust (m/s^2) at the waypoint: ``thrust``, or by default
+        ``max(2.5, 2 f_min)`` kept below the middle of the thrust range."""
+        if self.thrust is not None:
+            return self.thrust
+        lo, hi = limits.accel_min, limits.accel_max
+        return min(max(2.5, 2.0 * lo), 0.5 * (lo + hi))
 
     def rate(self, limits: VehicleLimits) -> float:
         """The planned turn rate (rad/s) of the thrust from the horizontal to ``s3``."""
@@ -346,7 +356,7 @@ class PlannerConfig:
             raise ConfigError("config.bounds", f"must be a BoundsPolicy, got {self.bounds!r}")
         if not isinstance(self.flip, OverhangFlip):
             raise ConfigError("config.flip", f"must be an OverhangFlip, got {self.flip!r}")
-        if self.flip.enabled and not self.limits.accel_min < self.flip.thrust < self.limits.accel_max:
+        if self.flip.thrust is not None and not self.limits.accel_min < self.flip.thrust < self.limits.accel_max:
             raise ConfigError(
                 "flip.thrust",
                 f"{self.flip.thrust} m/s^2 must lie strictly inside the thrust limits "

@@ -117,7 +117,8 @@ def flip_rows(
     side = np.cross(E3, u)
     A = vector_rows(layout, knots_rel, 2, t_w)[0]
     G = np.vstack([A[2], side @ A, u @ A])
-    return G, np.array([-config.g, 0.0, config.flip.thrust]), np.array([-config.g, 0.0, np.inf])
+    thrust = config.flip.horizontal_thrust(config.limits)
+    return G, np.array([-config.g, 0.0, thrust]), np.array([-config.g, 0.0, np.inf])
 
 
 def band_times(config: PlannerConfig, tf: float) -> Array:
