@@ -1,9 +1,9 @@
 """Checks that a planning request makes physical sense before any QP is built.
 
-Each rule raises :class:`~avp.errors.ConfigError` naming the field and saying what to change:
+Each rule raises :class:`~avp.errors.ConfigError` naming the field and saying what to change
+(a start on or behind the pad's plane is rejected by :func:`avp.safety.check_endpoints`, the
+perch-plane clearance region, with the other workspace limits):
 
-* the start lies on the back side of the pad's plane (``(p0 - p_pad) . s3 < 0``): the vehicle
-  would have to pass through the surface it perches on;
 * the requested contact velocity does not move into the pad (``v . s3 >= 0``): a contact needs
   ``ContactVelocity.normal < 0``;
 * the contact attitude ``R_WS`` cannot be represented by the attitude construction (13)
@@ -23,10 +23,7 @@ from .errors import ConfigError
 from .frames import contact_yaw
 from .types import PerchTarget, State
 
-__all__ = ["BACK_SIDE_TOL", "check_request", "longest_total_time"]
-
-BACK_SIDE_TOL = 1e-9
-"""A start this far (m) behind the pad's plane is still accepted (rounding of a start on it)."""
+__all__ = ["check_request", "longest_total_time"]
 
 
 def longest_total_time(config: PlannerConfig, total: float) -> float:
@@ -40,15 +37,6 @@ def check_request(state: State, target: PerchTarget, config: PlannerConfig, tota
 
     ``total`` is the first total duration (s) the planner will try.
     """
-    s3 = target.s3
-    side = float((state.position - target.point) @ s3)
-    if side < -BACK_SIDE_TOL:
-        raise ConfigError(
-            "state.position",
-            f"is {-side:.3g} m behind the plane of the pad (on the side opposite its outward normal "
-            f"s3 = {np.round(s3, 3).tolist()}); the vehicle would fly through the surface it perches "
-            "on: start in front of the pad or flip the normal",
-        )
     cv = config.contact_velocity
     if cv.normal is not None and cv.normal >= 0.0:
         raise ConfigError(
