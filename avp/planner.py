@@ -403,8 +403,20 @@ def plan_detailed(
         log.append(f"no duration in the search and no relaxation kept the workspace certified "
                    f"({attempts} solves): {failed} could not be met")
         return finish(PlanStatus.WORKSPACE_NOT_CERTIFIED, unsafe, unsafe.trajectory.durations)
-    log.append(f"no duration in the search and no relaxation gave certified bounds ({attempts} solves)")
+    log.append(f"no duration in the search and no relaxation gave certified bounds ({attempts} solves); "
+               + _measured(last.trajectory, target, cfg))
     return finish(PlanStatus.BOUNDS_NOT_CERTIFIED, last, last.trajectory.durations)
+
+
+def _measured(traj: Trajectory, target: PerchTarget, cfg: PlannerConfig) -> str:
+    """The last plan's extremes on a 1 ms grid against the limits, for the failure message."""
+    t = traj.sample(1e-3)
+    f = traj.thrust(t)
+    lim = cfg.limits
+    tilt = float(np.linalg.norm(traj.body_rates(t)[:, :2], axis=1).max())
+    return (f"the last plan ({traj.duration:.2f} s, incline {np.degrees(target.incline):.0f} deg) measured "
+            f"thrust {f.min():.2f}..{f.max():.2f} m/s^2 against limits {lim.accel_min:.2f}..{lim.accel_max:.2f}, "
+            f"tilt rate up to {tilt:.1f} rad/s against {lim.tilt_rate_max:g}")
 
 
 def _with_fov(

@@ -28,7 +28,7 @@ use num_bigint::BigInt;
 use num_rational::BigRational;
 use num_traits::Zero;
 
-use crate::certify::{certify_enclosure, certify_unit_exact, Certificate, UnitVerdict};
+use crate::certify::{certify_enclosure, certify_unit_exact, to_time, Certificate, UnitVerdict};
 use crate::error::{Error, Result};
 use crate::exact;
 use crate::poly::falling_factorial;
@@ -348,16 +348,6 @@ fn validate(view: &SplineView<'_>, limits: &Limits, g: f64) -> Result<()> {
     Ok(())
 }
 
-fn to_certificate(v: UnitVerdict, t0: f64, t1: f64) -> Certificate {
-    match v {
-        UnitVerdict::Within => Certificate::Within,
-        UnitVerdict::Violated(u) => Certificate::Violated {
-            t: (t0 + (t1 - t0) * u).clamp(t0, t1),
-        },
-        UnitVerdict::Unsure => Certificate::Unknown,
-    }
-}
-
 /// The smallest level `S` of [`roll::ROLL_LEVELS`] with `sin²φ < S` proven on the segment, or
 /// the body-rate verdict when there is none: Violated where the roll is proven above the
 /// largest level, Unsure (reported Unknown) when it is not decided.
@@ -419,7 +409,7 @@ pub fn certify_spline(
                 match certified_roll_level(&fast) {
                     Ok(s2) => roll_s2 = s2,
                     Err(v) => {
-                        verdicts[row * n_seg + seg].certificate = Some(to_certificate(v, t0, t1));
+                        verdicts[row * n_seg + seg].certificate = Some(to_time(v, t0, t1));
                         continue;
                     }
                 }
@@ -434,7 +424,7 @@ pub fn certify_spline(
                 let fe = bound_poly(kind, ep, limit, roll_s2);
                 v = certify_unit_exact(&exact::int_poly_from_rational(&fe));
             }
-            verdicts[row * n_seg + seg].certificate = Some(to_certificate(v, t0, t1));
+            verdicts[row * n_seg + seg].certificate = Some(to_time(v, t0, t1));
         }
     }
     Ok(verdicts)
