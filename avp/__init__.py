@@ -51,16 +51,16 @@ from .config import (
     PreImpactMode,
     QpForm,
     Relaxation,
-    TimeAllocation,
     Sphere,
+    TimeAllocation,
     TimeSearch,
     VehicleLimits,
     Workspace,
 )
 from .metrics import Visibility, visibility
 from .planner import PlanResult, PlanStatus, PlanTimings, plan, plan_detailed
-from .safety import SafetyReport
 from .replan import ReplanAction, ReplanConfig, Replanner, ReplanStep
+from .safety import SafetyReport
 from .trajectory import Derivative, FlatOutput, Provenance, Trajectory
 from .types import PerchTarget, State
 

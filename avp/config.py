@@ -28,9 +28,9 @@ __all__ = [
     "PreImpactMode",
     "QpForm",
     "Relaxation",
+    "Sphere",
     "TimeAllocation",
     "TimeSearch",
-    "Sphere",
     "VehicleLimits",
     "Workspace",
 ]

@@ -25,7 +25,13 @@ from .errors import (
 from .qp.assemble import ConstraintBlock, build_perching_qp
 from .qp.layout import DecisionLayout, layout_for
 from .request import check_request
-from .safety import SafetyReport, certify_workspace, check_endpoints, refinement_blocks, workspace_blocks
+from .safety import (
+    SafetyReport,
+    certify_workspace,
+    check_endpoints,
+    refinement_blocks,
+    workspace_blocks,
+)
 from .solve import WARM_START_SOLVERS, QpOutcome, solve_perching_qp
 from .timing import check_durations, initial_durations
 from .trajectory import Provenance, Trajectory

@@ -24,7 +24,7 @@ import numpy as np
 import avp
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
-from oracles import body_rate_norm_numeric  # noqa: E402
+from oracles import body_rate_norm_numeric
 
 
 def request(rng: np.random.Generator) -> tuple[avp.State, avp.PerchTarget]:
