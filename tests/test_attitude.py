@@ -12,7 +12,7 @@ import math
 
 import numpy as np
 import pytest
-from hypothesis import assume, given, settings
+from hypothesis import assume, example, given, settings
 from hypothesis import strategies as st
 from oracles import attitude_zyx, body_rate_norm_numeric, roll_zyx
 
@@ -167,8 +167,17 @@ def _contact_roll(R_WS: np.ndarray) -> float:
     return 0.0 if math.hypot(r21, r22) < 1e-12 else math.atan2(abs(r21), abs(r22))
 
 
+VERTICAL_S2 = avp.PerchTarget.from_normal([0.0, 3.5, 1.5], [0.0, -1.0, 0.0], up_slope=[1.0, 0.0, 0.0])
+CEILING = avp.PerchTarget.from_incline([3.0, 0.0, 3.0], math.pi)
+FAST = avp.State(position=[0.0, 0.0, 0.5], velocity=[3.0, -3.0, 2.0], yaw=2.0, yaw_rate=-5.0)
+
+
 @settings(max_examples=12, deadline=None)
 @given(hard_request())
+@example((avp.State.hover([0.0, 0.0, 1.5]), VERTICAL_S2))
+@example((avp.State.hover([0.0, 0.0, 1.5], yaw=1.0), CEILING))
+@example((FAST, CEILING))
+@example((FAST, avp.PerchTarget.from_incline([3.0, 0.0, 1.0], math.radians(60))))
 def test_certified_plans_keep_the_true_body_rate_below_the_limit(request) -> None:
     state, target = request
     config = avp.PlannerConfig(limits=LIMITS)
