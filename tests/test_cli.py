@@ -32,3 +32,13 @@ def test_demo_flags_and_module_entry_point(tmp_path: Path) -> None:
 def test_demo_bad_solver_is_a_clean_error(capsys) -> None:
     assert main(["demo", "--solver", "nope", "--no-plot"]) == 2
     assert "not installed" in capsys.readouterr().err
+
+
+def test_import_and_module_entry_from_the_clone_root() -> None:
+    """After the README's editable install, the checkout's ``avp/`` is the installed package (it
+    holds the compiled module), so running from the clone root works."""
+    root = Path(__file__).resolve().parent.parent
+    proc = subprocess.run([sys.executable, "-c", "import avp, avp._avp_rust; print(avp.__file__)"],
+                          capture_output=True, text=True, timeout=60, cwd=root)
+    assert proc.returncode == 0, proc.stderr
+    assert Path(proc.stdout.strip()).resolve().parent == root / "avp"
