@@ -26,7 +26,7 @@ if TYPE_CHECKING:  # pragma: no cover
     from .trajectory import Trajectory
     from .types import PerchTarget
 
-__all__ = ["MatplotlibMissingError", "euler_zxy", "plot_perch", "plot_plan", "pyplot"]
+__all__ = ["MatplotlibMissingError", "euler_zxy", "figure_plan", "pad_corners", "plot_perch", "plot_plan", "pyplot"]
 
 PAD_HALF_SIZE = 0.15
 """Half the side (m) of the square pad drawn (the paper's pad is about 0.3 m wide)."""
@@ -66,6 +66,13 @@ def euler_zxy(R: Any) -> np.ndarray:
     return np.stack([roll, pitch, yaw], axis=-1)
 
 
+def pad_corners(target: PerchTarget, half_size: float = PAD_HALF_SIZE) -> np.ndarray:
+    """``(4, 3)`` corners (W, m) of the square pad of side ``2 half_size`` in the plane of
+    ``s1, s2`` about the pad centre, in order around it."""
+    s1, s2, c = target.s1, target.s2, target.point
+    return np.array([c + half_size * (i * s1 + j * s2) for i, j in ((-1, -1), (1, -1), (1, 1), (-1, 1))])
+
+
 def _verdict(bounds: Any, name: str) -> str:
     """``certified`` / ``VIOLATED`` / ``not certified`` / ``not checked`` for one bound."""
     if bounds is None:
@@ -80,19 +87,28 @@ def _verdict(bounds: Any, name: str) -> str:
     return "certified" if all(v is Certificate.WITHIN for v in verdicts) else "not certified"
 
 
-def plot_plan(
+def plot_plan(result: Any, target: PerchTarget, path: str | Path, *, dpi: int = 110, **kwargs: Any) -> Path:
+    """Write :func:`figure_plan` to ``path`` (PNG) and return the path."""
+    plt = pyplot()
+    fig = figure_plan(result, target, **kwargs)
+    out = Path(path)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out, dpi=dpi)
+    plt.close(fig)
+    return out
+
+
+def figure_plan(
     result: Any,
     target: PerchTarget,
-    path: str | Path,
     *,
     config: Any = None,
     ground_z: float | None = None,
     title: str = "",
     label: str | None = None,
     pad_half_size: float = PAD_HALF_SIZE,
-    dpi: int = 110,
-) -> Path:
-    """Write the figure of a plan to ``path`` (PNG) and return the path.
+) -> Any:
+    """The matplotlib ``Figure`` of a plan (module docstring).
 
     ``result`` is a :class:`~avp.planner.PlanResult` (its status, bound report and relaxations
     mark the figure) or a bare :class:`~avp.trajectory.Trajectory`. ``config`` gives the limits,
@@ -145,10 +161,11 @@ def plot_plan(
     for flag, col, lab in ((0, "tab:blue", "path, target in view"), (1, "0.35", "path, target out of view")):
         pv = np.where((seg_vis == flag)[:, None], p, np.nan)
         ax.plot(pv[:, 0], pv[:, 1], pv[:, 2], "-", color=col, lw=2, label=lab)
-    s1, s2, s3, c = target.s1, target.s2, target.s3, target.point
-    h = pad_half_size
-    corners = np.array([c + h * (i * s1 + j * s2) for i, j in ((-1, -1), (1, -1), (1, 1), (-1, 1))])
-    ax.add_collection3d(Poly3DCollection([corners], facecolors="tab:purple", edgecolors="k", alpha=0.7))
+    s3, c, h = target.s3, target.point, pad_half_size
+    corners = pad_corners(target, h)
+    pad = Poly3DCollection([corners], facecolors="tab:purple", edgecolors="k", alpha=0.7)
+    pad.set_gid("pad")
+    ax.add_collection3d(pad)
     pts = np.vstack([p, corners])
     lo, hi = pts.min(axis=0), pts.max(axis=0)
     if ground_z is not None:  # the ground inside the box, whichever side of it the path is
@@ -171,7 +188,8 @@ def plot_plan(
         gx = np.array([mid[0] - half, mid[0] + half])
         gy = np.array([mid[1] - half, mid[1] + half])
         GX, GY = np.meshgrid(gx, gy)
-        ax.plot_surface(GX, GY, np.full_like(GX, ground_z), color="tab:brown", alpha=0.15, shade=False)
+        ax.plot_surface(GX, GY, np.full_like(GX, ground_z), color="tab:brown", alpha=0.15, shade=False,
+                        gid="ground")
     ax.set_xlim(mid[0] - half, mid[0] + half)
     ax.set_ylim(mid[1] - half, mid[1] + half)
     ax.set_zlim(mid[2] - half, mid[2] + half)
@@ -192,7 +210,7 @@ def plot_plan(
     ax.legend(handles=handles, loc="upper left", fontsize=8, framealpha=0.8)
     if label != "SOLVED":
         ax.text2D(0.5, 0.5, label, transform=ax.transAxes, fontsize=60, color=color, alpha=0.25,
-                  ha="center", va="center", rotation=25, weight="bold")
+                  ha="center", va="center", rotation=25, weight="bold", gid="stamp")
 
     # -- time histories ------------------------------------------------------------------------
     axes = [fig.add_subplot(gs[k, 1]) for k in range(5)]
@@ -211,8 +229,9 @@ def plot_plan(
     a.plot(tt, thrust, color="tab:red", label=f"thrust ({_verdict(bounds, 'thrust_max')} max, "
                                               f"{_verdict(bounds, 'thrust_min')} min)")
     margin = min(lim.accel_max - thrust.max(), thrust.min() - lim.accel_min)
-    a.axhline(lim.accel_max, color="k", ls="--", lw=1, label=f"limits / mass (sampled margin {margin:.2f})")
-    a.axhline(lim.accel_min, color="k", ls="--", lw=1)
+    a.axhline(lim.accel_max, color="k", ls="--", lw=1, label=f"limits / mass (sampled margin {margin:.2f})",
+              gid="thrust_max")
+    a.axhline(lim.accel_min, color="k", ls="--", lw=1, gid="thrust_min")
     a.set_ylabel("thrust (m/s$^2$)")
     a.legend(fontsize=7, loc="upper left")
     decorate(a)
@@ -223,7 +242,7 @@ def plot_plan(
     for val, col, name in ((lim.tilt_rate_max, "tab:blue", "tilt-rate limit"),
                            (lim.body_rate_max, "tab:purple", "body-rate limit")):
         if math.isfinite(val):
-            a.axhline(val, color=col, ls="--", lw=1, label=f"{name} {val:g}")
+            a.axhline(val, color=col, ls="--", lw=1, label=f"{name} {val:g}", gid=name)
     finite = [x for x in (lim.tilt_rate_max, lim.body_rate_max) if math.isfinite(x)]
     peak = float(body_rate.max())
     if finite and peak > 3 * max(finite):  # keep the limit readable; say how far the peak goes
@@ -267,11 +286,7 @@ def plot_plan(
         sub += f" (relaxed: {', '.join(relaxations)})"
     sub += f"; {traj.duration:.2f} s, {traj.n_segments} segments, in view {100 * visible.mean():.0f}% of the time"
     fig.suptitle(f"{head}\n{sub}", fontsize=12, color=color if label != "SOLVED" else "k")
-    out = Path(path)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(out, dpi=dpi)
-    plt.close(fig)
-    return out
+    return fig
 
 
 def plot_perch(trajectory: Trajectory, target: PerchTarget, path: str | Path, title: str = "") -> Path:
