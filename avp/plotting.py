@@ -172,7 +172,7 @@ def figure_plan(
         lo[2], hi[2] = min(lo[2], ground_z), max(hi[2], ground_z)
     span = float((hi - lo).max()) or 1.0
     mid = 0.5 * (lo + hi)
-    half = 0.55 * span
+    halves = np.maximum(0.55 * (hi - lo), 0.2 * span)  # per axis; one scale for all (box aspect)
     ax.quiver(*c, *s3, length=0.12 * span, color="tab:purple", lw=1.5)
     # thrust arrows along b3, length proportional to the thrust (m per m/s^2)
     ta = np.linspace(traj.t0, traj.tf, 16)
@@ -185,15 +185,15 @@ def figure_plan(
     ax.scatter(*p[0], s=60, color="tab:green", marker="o", depthshade=False, zorder=5)
     ax.scatter(*p[-1], s=120, color="k", marker="*", depthshade=False, zorder=5)
     if ground_z is not None:
-        gx = np.array([mid[0] - half, mid[0] + half])
-        gy = np.array([mid[1] - half, mid[1] + half])
+        gx = np.array([mid[0] - halves[0], mid[0] + halves[0]])
+        gy = np.array([mid[1] - halves[1], mid[1] + halves[1]])
         GX, GY = np.meshgrid(gx, gy)
         ax.plot_surface(GX, GY, np.full_like(GX, ground_z), color="tab:brown", alpha=0.15, shade=False,
                         gid="ground")
-    ax.set_xlim(mid[0] - half, mid[0] + half)
-    ax.set_ylim(mid[1] - half, mid[1] + half)
-    ax.set_zlim(mid[2] - half, mid[2] + half)
-    ax.set_box_aspect((1, 1, 1))
+    ax.set_xlim(mid[0] - halves[0], mid[0] + halves[0])
+    ax.set_ylim(mid[1] - halves[1], mid[1] + halves[1])
+    ax.set_zlim(mid[2] - halves[2], mid[2] + halves[2])
+    ax.set_box_aspect(tuple(halves))  # equal scale on every axis: angles are true
     ax.view_init(elev=18, azim=-65)
     ax.set_xlabel("x (m)")
     ax.set_ylabel("y (m)")
@@ -207,7 +207,7 @@ def figure_plan(
     ]
     if ground_z is not None:
         handles.append(Patch(facecolor="tab:brown", alpha=0.3, label=f"ground z = {ground_z:g} m"))
-    ax.legend(handles=handles, loc="upper left", fontsize=8, framealpha=0.8)
+    ax.legend(handles=handles, loc="upper center", bbox_to_anchor=(0.5, 1.0), ncol=3, fontsize=8, framealpha=0.8)
     if label != "SOLVED":
         ax.text2D(0.5, 0.5, label, transform=ax.transAxes, fontsize=60, color=color, alpha=0.25,
                   ha="center", va="center", rotation=25, weight="bold", gid="stamp")

@@ -38,8 +38,9 @@ def test_solved_plan_figure(wall, tmp_path: Path) -> None:
     try:
         ax3 = fig.axes[0]
         spans = [hi - lo for lo, hi in (ax3.get_xlim(), ax3.get_ylim(), ax3.get_zlim())]
-        assert np.allclose(spans, spans[0])  # equal axes: a 45 deg pad looks like 45 deg
-        assert np.allclose(ax3.get_box_aspect() / ax3.get_box_aspect()[0], 1.0)
+        # one scale on every axis (box sides proportional to the ranges): a 45 deg pad looks 45 deg
+        aspect = np.asarray(ax3.get_box_aspect())
+        assert np.allclose(aspect / aspect[0], np.asarray(spans) / spans[0])
         assert len(_find(fig, "pad")) == 1
         # the pad drawn is the real pad: side 2 * half size, in the pad plane, about its centre
         verts = pad_corners(target)
