@@ -1,6 +1,6 @@
 """The paper's Table I: target visibility (time % / path %) against the contact velocity.
 
-Sign convention (docs/perception.md, DESIGN.md): the paper's tables swap the component names.
+Sign convention (docs/perception.md, docs/conventions.md): the paper's tables swap the component names.
 Columns are the speed *into* the pad (our ``ContactVelocity.normal = -v``, the paper's "v_S1" in
 {0, 1, 2}); rows are the slide along the slope (our ``ContactVelocity.slope``, the paper's "v_S3"
 in {free, -3, -2, -1, 0, 1}; negative = down the slope). Every plan has the same duration (as in
