@@ -211,7 +211,19 @@ def _settings(args: argparse.Namespace, defaults: dict[str, Any] | None = None) 
 
 
 def _emit_json(doc: Any) -> None:
-    sys.stdout.write(json.dumps(doc, indent=2, allow_nan=True, default=_json_default) + "\n")
+    """Strict JSON on stdout: NaN becomes ``null``, infinities the strings ``"inf"`` / ``"-inf"``
+    (as the configuration file writes them)."""
+    sys.stdout.write(json.dumps(_finite(doc), indent=2, allow_nan=False, default=_json_default) + "\n")
+
+
+def _finite(obj: Any) -> Any:
+    if isinstance(obj, float) and not math.isfinite(obj):
+        return None if math.isnan(obj) else ("inf" if obj > 0 else "-inf")
+    if isinstance(obj, dict):
+        return {k: _finite(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_finite(v) for v in obj]
+    return obj
 
 
 def _json_default(obj: Any) -> Any:

@@ -130,6 +130,8 @@ def _convert(tp: Any, value: Any, where: str) -> Any:
     if tp is float:
         if isinstance(value, (int, float)) and not isinstance(value, bool):
             return float(value)
+        if isinstance(value, str) and value.strip().lower() in ("inf", "+inf", "-inf"):
+            return float(value)  # as --json writes infinities
         raise _bad(where, tp, value)
     if tp is str:
         if isinstance(value, str):

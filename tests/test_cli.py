@@ -118,15 +118,20 @@ def test_config_file_to_plan_to_json_round_trip(tmp_path: Path, capsys) -> None:
     path = tmp_path / "c.toml"
     path.write_text(CONFIG)
     code = main(["demo", "--config", str(path), "--json", "--no-plot", "--mass", "0.55", "--distance", "3"])
-    doc = json.loads(capsys.readouterr().out)
+    doc = json.loads(capsys.readouterr().out, parse_constant=lambda c: pytest.fail(f"non-JSON constant {c}"))
     assert code == doc["exit_code"] == EXIT_SOLVED and doc["status"] == "SOLVED"
     assert doc["config"]["planner"]["limits"]["mass"] == 0.55
     assert doc["config"]["planner"]["solver"] == "proxqp"
+    assert doc["config"]["planner"]["limits"]["body_rate_max"] == "inf"  # strict JSON
     # the same plan in-process from the same file matches the JSON's trajectory (an iterative
     # back-end does not repeat itself to the last bit between calls, hence the tolerance)
     settings = load_settings(path, {"planner": {"limits": {"mass": 0.55}}},
                              defaults={"planner": {"workspace": {"ground_z": 0.0}}}
                              if "workspace" in avp.PlannerConfig.__dataclass_fields__ else None)
+    # the configuration echoed in the JSON builds the same configuration again
+    from avp.configfile import from_mapping
+
+    assert from_mapping(avp.PlannerConfig, doc["config"]["planner"], "planner") == settings.planner
     state, target, _ = demo_geometry(90.0, 3.0, 0.0, None)
     want = avp.plan_detailed(state, target, settings.planner).trajectory
     got = avp.Trajectory.from_json(json.dumps(doc["trajectory"]))
