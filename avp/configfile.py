@@ -263,6 +263,10 @@ UNITS: dict[str, str] = {
     "FovConfig.gate": "s", "FovConfig.margin": "|n_d|",
     "Camera.half_fov": "rad", "Camera.horizontal_fov": "rad", "Camera.vertical_fov": "rad", "Camera.range": "m",
     "Camera.R_BC": "rotation (3x3)",
+    # Workspace, HalfSpace, Sphere
+    "Workspace.body_offset": "m", "Workspace.ground_z": "m", "Workspace.max_speed": "m/s",
+    "Workspace.refinement_margin": "m (m/s for the speed)",
+    "Workspace.half_spaces": "m (point), - (normal)", "Workspace.spheres": "m",
     # ReplanConfig
     "ReplanConfig.latency": "s", "ReplanConfig.freeze_horizon": "s", "ReplanConfig.deadline": "s",
 }
@@ -381,6 +385,11 @@ def configuration_markdown() -> str:
         "thrust_max = 13.7",
         "[planner.contact_velocity]",
         "slope = \"none\"",
+        "[planner.workspace]",
+        "ground_z = 0.0",
+        "[[planner.workspace.half_spaces]]  # a ceiling at 3 m: one table per half-space",
+        "point = [0.0, 0.0, 3.0]",
+        "normal = [0.0, 0.0, -1.0]",
         "[replan]",
         "latency = 0.03",
         "```",

@@ -153,6 +153,7 @@ def figure_plan(
     lim = cfg.limits
 
     fig = plt.figure(figsize=(15, 9), layout="constrained")
+    fig.get_layout_engine().set(wspace=0.06)  # room for the 3D view's z label
     gs = fig.add_gridspec(5, 2, width_ratios=(1.15, 1), height_ratios=(1, 1, 1, 1, 0.35))
 
     # -- 3D view, equal axes ---------------------------------------------------------------
@@ -257,8 +258,8 @@ def figure_plan(
     eul = np.degrees(euler_zxy(R))
     for k, (name, col) in enumerate((("roll", "tab:blue"), ("pitch", "tab:orange"), ("yaw", "tab:green"))):
         a.plot(tt, eul[:, k], color=col, label=name)
-    a.set_ylabel("attitude (deg)\nR = Rz(yaw) Rx(roll) Ry(pitch)", fontsize=8)
-    a.legend(fontsize=7, loc="upper left", ncol=3)
+    a.set_ylabel("attitude (deg)")
+    a.legend(fontsize=7, loc="upper left", ncol=3, title="R_WB = Rz(yaw) Rx(roll) Ry(pitch)", title_fontsize=7)
     decorate(a)
 
     a = axes[3]
@@ -266,8 +267,10 @@ def figure_plan(
     if ground_z is not None:
         a.plot(tt, p[:, 2] - ground_z, color="tab:brown", label="height above ground")
     a.axhline(0.0, color="k", lw=0.8)
+    safety = None if isinstance(result, Trajectory) else getattr(result, "safety", None)
+    verdict = None if safety is None else ("workspace certified" if safety.certified else "workspace NOT certified")
     a.set_ylabel("clearance (m)")
-    a.legend(fontsize=7, loc="upper right")
+    a.legend(fontsize=7, loc="upper right", title=verdict, title_fontsize=7)
     decorate(a)
 
     a = axes[4]

@@ -96,3 +96,14 @@ def test_no_references_outside_the_repository(folder: str) -> None:
             if FORBIDDEN.search(line):
                 bad.append(f"{p.relative_to(ROOT)}:{n}: {line.strip()}")
     assert not bad, "\n".join(bad)
+
+
+def test_the_page_example_loads(tmp_path: Path) -> None:
+    page = configfile.configuration_markdown()
+    example = page.split("```toml\n", 1)[1].split("```", 1)[0]
+    path = tmp_path / "example.toml"
+    path.write_text(example)
+    cfg = configfile.load_settings(path).planner
+    assert cfg.solver == "proxqp" and cfg.limits.mass == 0.7 and cfg.contact_velocity.slope is None
+    (ceiling,) = cfg.workspace.half_spaces
+    assert ceiling.normal.tolist() == [0.0, 0.0, -1.0] and ceiling.offset == -3.0
