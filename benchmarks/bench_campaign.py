@@ -51,7 +51,7 @@ def main() -> None:
         if reference is None:
             reference, base = rows, wall
         same = all(campaign.rows_equal(rows[k], reference[k]) for k in reference)
-        print(f"{backend:8s} {wall:9.1f} {60 * len(trials) / wall:11.1f} {base / wall:8.2f}x {str(same):>11s}")
+        print(f"{backend:8s} {wall:9.1f} {60 * len(trials) / wall:11.1f} {base / wall:8.2f}x {same!s:>11s}")
     print(f"load average after: {os.getloadavg()[0]:.2f}")
 
 
