@@ -119,12 +119,8 @@ def _convert(tp: Any, value: Any, where: str) -> Any:
             if key in tp.__members__:
                 return tp[key]
         raise _bad(where, tp, value)
-    if tp is bool:
-        if isinstance(value, bool):
-            return value
-        raise _bad(where, tp, value)
-    if tp is int:
-        if isinstance(value, int) and not isinstance(value, bool):
+    if tp in (bool, int, str):  # exactly that type (a bool is not an int here)
+        if isinstance(value, tp) and (tp is bool or not isinstance(value, bool)):
             return value
         raise _bad(where, tp, value)
     if tp is float:
@@ -132,10 +128,6 @@ def _convert(tp: Any, value: Any, where: str) -> Any:
             return float(value)
         if isinstance(value, str) and value.strip().lower() in ("inf", "+inf", "-inf"):
             return float(value)  # as --json writes infinities
-        raise _bad(where, tp, value)
-    if tp is str:
-        if isinstance(value, str):
-            return value
         raise _bad(where, tp, value)
     if origin is tuple:
         if len(args) == 2 and args[1] is Ellipsis:
