@@ -144,6 +144,8 @@ def test_config_file_to_plan_to_json_round_trip(tmp_path: Path, capsys) -> None:
     ("[planner]\nnot_a_knob = 1\n", "planner.not_a_knob"),
     ("[planner.limits]\nmass = \"heavy\"\n", "planner.limits.mass"),
     ("[planner]\nn_segments = 2.5\n", "planner.n_segments"),
+    ("[planner.fov]\nenabled = 1\n", "planner.fov.enabled"),
+    ("[planner]\nn_segments = true\n", "planner.n_segments"),
     ("[planner]\npre_impact = \"sideways\"\n", "planner.pre_impact"),
     ("[planner.limits]\nmass = -1.0\n", "limits.mass"),
     ("[plannr]\nsolver = \"daqp\"\n", "plannr"),
