@@ -35,14 +35,17 @@ def main() -> None:
           f"{os.cpu_count()} CPUs, {args.workers} workers; load average before: {os.getloadavg()[0]:.2f}")
     runner = campaign.Runner()
     reference: dict[str, dict] | None = None
+    cpu_per_trial = float("nan")
     base = None
     print(f"{'backend':8s} {'median s':>9s} {'trials/min':>11s} {'speed-up':>9s} {'rows equal':>11s}")
     for backend in backends:
         walls = []
         for _ in range(args.repeats):
-            t0 = time.perf_counter()
+            t0, c0 = time.perf_counter(), time.process_time()
             rows = {t.trial_id: r for t, r in campaign.execute(runner, trials, backend=backend, workers=args.workers)}
             walls.append(time.perf_counter() - t0)
+            if backend == "serial":
+                cpu_per_trial = (time.process_time() - c0) / len(trials)
             if backend == "ray":
                 import ray
 
@@ -53,6 +56,8 @@ def main() -> None:
         same = all(campaign.rows_equal(rows[k], reference[k]) for k in reference)
         print(f"{backend:8s} {wall:9.1f} {60 * len(trials) / wall:11.1f} {base / wall:8.2f}x {same!s:>11s}")
     print(f"load average after: {os.getloadavg()[0]:.2f}")
+    print(f"serial CPU time per trial {cpu_per_trial:.2f} s: {60 / cpu_per_trial:.0f} trials/min per free core "
+          "(the ceiling a pool or Ray approaches per core when nothing else runs)")
 
 
 if __name__ == "__main__":
