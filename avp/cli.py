@@ -444,6 +444,7 @@ def _simulate_parser(sub: Any, common: argparse.ArgumentParser) -> None:
     _sweep_flags(p, (4.5, 7.5))
     p.add_argument("--output-dir", default="avp_simulation", help="directory for the plots")
     p.add_argument("--no-plot", action="store_true", help="skip the plots")
+    p.add_argument("--gif", metavar="FILE.gif", help="animate the first AVP trial of the first condition")
 
 
 PAPER_NOTE = re.compile(r"\s*\((?:cf\. )?paper Table [^()]*\)|;\s*paper: [^\n]*")
@@ -491,6 +492,16 @@ def simulate(args: argparse.Namespace) -> int:
         try:
             for path in comp.plot(args.output_dir):
                 log.info("plot: %s", path)
+        except ImportError:
+            log.warning(PLOT_HINT)
+    if args.gif:
+        from .sim.run import Mode
+
+        runs = comp.runs(comp.conditions[0], Mode.AVP)
+        try:
+            from .plotting import animate_run
+
+            log.info("animation: %s", animate_run(runs[0], args.gif))
         except ImportError:
             log.warning(PLOT_HINT)
     return EXIT_SOLVED

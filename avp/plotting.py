@@ -26,7 +26,7 @@ if TYPE_CHECKING:  # pragma: no cover
     from .trajectory import Trajectory
     from .types import PerchTarget
 
-__all__ = ["MatplotlibMissingError", "euler_zxy", "figure_plan", "pad_corners", "plot_perch", "plot_plan", "pyplot"]
+__all__ = ["MatplotlibMissingError", "animate_run", "euler_zxy", "figure_plan", "pad_corners", "plot_perch", "plot_plan", "pyplot"]
 
 PAD_HALF_SIZE = 0.15
 """Half the side (m) of the square pad drawn (the paper's pad is about 0.3 m wide)."""
@@ -295,3 +295,64 @@ def figure_plan(
 def plot_perch(trajectory: Trajectory, target: PerchTarget, path: str | Path, title: str = "") -> Path:
     """A trajectory on its own (no status, default limits): :func:`plot_plan` of it."""
     return plot_plan(trajectory, target, path, title=title)
+
+
+def animate_run(run: Any, path: str | Path, *, fps: int = 20, speed: float = 0.5, pad_half_size: float | None = None) -> Path:
+    """Animated GIF of a closed-loop run (:class:`avp.sim.run.SimResult`): the true path in the
+    vertical plane of the approach (x, z; equal axes), the pad, the vehicle with its thrust axis,
+    the committed plan, and whether the pad is in the camera's view; ``speed`` is the playback
+    rate (0.5: half real time), ``fps`` the frame rate. Uses matplotlib's Pillow writer."""
+    plt = pyplot()
+    from matplotlib.animation import FuncAnimation, PillowWriter
+
+    if run.path_t.size < 2:
+        raise ValueError("the run has no flight to animate")
+    sc = run.scenario
+    target = sc.target()
+    h = sc.pad_half_size if pad_half_size is None else pad_half_size
+    t, p = run.path_t - run.path_t[0], run.path_p
+    n_frames = max(2, int(t[-1] / speed * fps) + 1)
+    idx = np.searchsorted(t, np.linspace(0.0, t[-1], n_frames)).clip(0, t.size - 1)
+    fig, ax = plt.subplots(figsize=(7, 4.5), layout="constrained")
+    ends = np.array([target.point - h * target.s1, target.point + h * target.s1])
+    ax.plot(ends[:, 0], ends[:, 2], "-", color="tab:purple", lw=5, label="pad")
+    plan = run.final_plan
+    if plan is not None:
+        pp = plan(plan.sample(0.01))
+        ax.plot(pp[:, 0], pp[:, 2], ":", color="0.5", lw=1, label="last committed plan")
+    lo = np.minimum(p.min(axis=0), ends.min(axis=0)) - 0.3
+    hi = np.maximum(p.max(axis=0), ends.max(axis=0)) + 0.3
+    ax.set_xlim(lo[0], hi[0])
+    ax.set_ylim(lo[2], hi[2])
+    ax.set_aspect("equal")
+    ax.set_xlabel("x (m)")
+    ax.set_ylabel("z (m)")
+    ax.grid(alpha=0.3)
+    (trail,) = ax.plot([], [], "-", color="tab:blue", lw=1.5, label="flown path")
+    (body,) = ax.plot([], [], "o", color="k", ms=6)
+    (axis,) = ax.plot([], [], "-", color="tab:red", lw=2, label="planned thrust axis b3")
+    ax.legend(loc="upper left", fontsize=8)
+    title = ax.set_title("")
+    span = float((hi - lo).max())
+
+    def draw(k: int) -> tuple[Any, ...]:
+        i = int(idx[k])
+        trail.set_data(p[: i + 1, 0], p[: i + 1, 2])
+        body.set_data([p[i, 0]], [p[i, 2]])
+        body.set_color("tab:green" if run.visible[i] else "k")
+        # the run records positions only: draw the committed plan's b3 where it covers this time
+        if plan is not None and plan.t0 <= run.path_t[i] <= plan.tf:
+            b3 = plan.attitude(run.path_t[i])[:, 2]
+            axis.set_data([p[i, 0], p[i, 0] + 0.08 * span * b3[0]], [p[i, 2], p[i, 2] + 0.08 * span * b3[2]])
+        else:
+            axis.set_data([], [])
+        title.set_text(f"{run.mode.name.lower()}, seed {run.seed}: t = {t[i]:.2f} s "
+                       f"({'pad in view' if run.visible[i] else 'pad out of view'}); {run.outcome}")
+        return trail, body, axis, title
+
+    anim = FuncAnimation(fig, draw, frames=n_frames, blit=False)
+    out = Path(path)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    anim.save(out, writer=PillowWriter(fps=fps))
+    plt.close(fig)
+    return out

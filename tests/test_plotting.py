@@ -17,7 +17,15 @@ import avp
 
 pytest.importorskip("matplotlib")
 
-from avp.plotting import PAD_HALF_SIZE, euler_zxy, figure_plan, pad_corners, plot_plan, pyplot
+from avp.plotting import (
+    PAD_HALF_SIZE,
+    animate_run,
+    euler_zxy,
+    figure_plan,
+    pad_corners,
+    plot_plan,
+    pyplot,
+)
 
 
 def _find(fig, gid):
@@ -120,3 +128,15 @@ def test_core_plans_and_cli_runs_without_matplotlib(tmp_path: Path) -> None:
     assert proc.returncode == 0, proc.stderr
     assert 'pip install "avp[plot]"' in proc.stderr
     assert not (tmp_path / "x.png").exists()
+
+
+def test_closed_loop_run_animates(tmp_path: Path) -> None:
+    from PIL import Image
+
+    from avp.sim.run import SimScenario, simulate
+
+    run = simulate(SimScenario(distance=1.5), "avp", seed=2)
+    out = animate_run(run, tmp_path / "run.gif", fps=4)
+    with Image.open(out) as im:
+        duration = run.path_t[-1] - run.path_t[0]
+        assert im.format == "GIF" and im.n_frames == int(duration / 0.5 * 4) + 1
