@@ -198,6 +198,17 @@ def test_failed_plan_exits_nonzero_with_a_short_log(tmp_path: Path) -> None:
     assert len((loud.stdout + loud.stderr).splitlines()) > n_lines
 
 
+def test_relaxed_plan_exits_3_and_says_what_was_relaxed(capsys) -> None:
+    """A 3 m wall with a 3 rad/s tilt-rate limit certifies only after freeing the slide and
+    using the cone band: solved, but relaxed."""
+    code = main(["demo", "--no-plot", "--distance", "3", "--tilt-rate-max", "3", "--json"])
+    doc = json.loads(capsys.readouterr().out)
+    assert code == doc["exit_code"] == EXIT_RELAXED
+    assert doc["label"] == "RELAXED" and doc["relaxations"] and doc["trajectory"] is not None
+    assert main(["demo", "--no-plot", "--distance", "3", "--tilt-rate-max", "3", "-q"]) == EXIT_RELAXED
+    assert "relaxations" in capsys.readouterr().err
+
+
 def test_quiet_prints_nothing_on_success(capsys) -> None:
     assert main(["demo", "--no-plot", "-q"]) == EXIT_SOLVED
     captured = capsys.readouterr()
@@ -225,6 +236,19 @@ def test_export_flag_writes_a_loadable_plan(tmp_path: Path) -> None:
 
 
 # -- simulate ---------------------------------------------------------------------------------
+
+def test_progress_bar_only_on_a_terminal(monkeypatch, caplog) -> None:
+    from avp import cli
+
+    monkeypatch.setattr(sys.stderr, "isatty", lambda: False)
+    with caplog.at_level("INFO", logger="avp.cli"):
+        assert list(cli.progress(iter(range(20)), 20, "job")) == list(range(20))
+    assert all("\r" not in r.getMessage() for r in caplog.records)
+    assert [r.getMessage() for r in caplog.records][-1].startswith("job: 20/20")
+    monkeypatch.setattr(sys.stderr, "isatty", lambda: True)
+    bar = cli.progress(iter(range(3)), 3, "job")
+    assert type(bar).__name__ == "tqdm" and list(bar) == [0, 1, 2]
+
 
 def test_paper_notes_are_removed_for_other_conditions() -> None:
     from avp.sim.evaluate import Comparison, Condition

@@ -87,10 +87,16 @@ def test_failed_and_relaxed_plans_are_stamped(wall) -> None:
         assert fig._suptitle.get_text().split("\n")[1].startswith("FAILED")
     finally:
         pyplot().close(fig)
-    fig = figure_plan(failed, target, config=tight, label="RELAXED")
+    # a 3 m wall with a 3 rad/s tilt-rate limit certifies only after relaxations
+    relaxed_cfg = dataclasses.replace(avp.PlannerConfig(), limits=avp.VehicleLimits(tilt_rate_max=3.0))
+    wall_target = avp.PerchTarget.from_incline([3.0, 0.0, 1.5], math.pi / 2)
+    relaxed = avp.plan_detailed(avp.State.hover([0.0, 0.0, 1.5]), wall_target, relaxed_cfg)
+    assert relaxed.relaxations and relaxed.trajectory is not None
+    fig = figure_plan(relaxed, wall_target, config=relaxed_cfg)
     try:
         (stamp,) = _find(fig, "stamp")
         assert stamp.get_text() == "RELAXED"
+        assert "relaxed: " in fig._suptitle.get_text()
     finally:
         pyplot().close(fig)
 
