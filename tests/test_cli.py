@@ -75,6 +75,7 @@ def test_help_shows_defaults(capsys) -> None:
         main(["demo", "--help"])
     text = " ".join(capsys.readouterr().out.split())
     assert "(default: 3.5)" in text and "(default: perch_demo.png)" in text
+    assert "along s2, m (default: 0.0)" in text  # a zero default is still shown
     assert f"default {avp.VehicleLimits().mass}" in text  # flags that default to the config say its value
 
 
