@@ -400,8 +400,20 @@ def format_summary(summary: Sequence[Mapping[str, Any]]) -> str:
     return "\n".join(lines)
 
 
+def wilson_interval(successes: int, n: int, z: float = 1.96) -> tuple[float, float]:
+    """Wilson score interval (95 % for ``z = 1.96``) of a success rate from ``n`` trials."""
+    if n == 0:
+        return 0.0, 1.0
+    p = successes / n
+    den = 1 + z * z / n
+    centre = (p + z * z / (2 * n)) / den
+    half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / den
+    return max(0.0, centre - half), min(1.0, centre + half)
+
+
 def plot_summary(summary: Sequence[Mapping[str, Any]], path: str | Path) -> Path:
-    """Success rate against stand-off, one line per incline, lateral, height and mode (PNG)."""
+    """Success rate against stand-off with 95 % Wilson intervals: one colour per incline /
+    lateral / height, solid AVP, dashed one-shot (PNG)."""
     from .plotting import pyplot
 
     plt = pyplot()
@@ -410,19 +422,27 @@ def plot_summary(summary: Sequence[Mapping[str, Any]], path: str | Path) -> Path
     for s in summary:
         key = (s["incline_deg"], s["lateral_m"], s["height_m"], s["mode"])
         lines.setdefault(key, []).append((s["distance_m"], s["success_rate"], s["trials"]))
-    for (inc, lat, h, mode), pts in sorted(lines.items(), key=lambda kv: str(kv[0])):
+    cells = sorted({k[:3] for k in lines}, key=str)
+    colours = {c: f"C{k % 10}" for k, c in enumerate(cells)}
+    dists = sorted({s["distance_m"] for s in summary})
+    shift = 0.01 * ((dists[-1] - dists[0]) or 1.0)
+    series = sorted(lines.items(), key=lambda kv: str(kv[0]))
+    for k, ((inc, lat, h, mode), pts) in enumerate(series):  # small x offsets: no series hides another
         pts.sort()
-        d, rate, _n = (np.array(x) for x in zip(*pts, strict=True))
+        d = np.array([x[0] for x in pts]) + shift * (k - (len(series) - 1) / 2)
+        rate = np.array([x[1] for x in pts])
+        ci = np.array([wilson_interval(round(r * n), n) for _, r, n in pts])
         label = f"{mode}, {inc:g} deg" + (f", lateral {lat:g} m" if lat else "") + (
             "" if isinstance(h, str) else f", height {h:g} m")
-        ax.plot(d, 100 * rate, "o-" if mode == "avp" else "s--", label=label)
+        ax.errorbar(d, 100 * rate, yerr=100 * np.abs(ci.T - rate), fmt="o-" if mode == "avp" else "s--",
+                    color=colours[(inc, lat, h)], capsize=3, label=label)
     ax.set_xlabel("stand-off (m)")
-    ax.set_ylabel("success rate (%)")
+    ax.set_ylabel("success rate (%), 95 % Wilson interval")
     ax.set_ylim(-5, 105)
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8)
     n_total = sum(s["trials"] for s in summary)
-    ax.set_title(f"Closed-loop campaign: success rate ({n_total} trials)")
+    ax.set_title(f"Closed-loop campaign: success rate ({n_total} trials; solid AVP, dashed one-shot)")
     out = Path(path)
     out.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(out, dpi=110)

@@ -118,7 +118,7 @@ def progress(iterable: Any, total: int, desc: str) -> Any:
 
 
 def _logged(iterable: Any, total: int, desc: str) -> Any:
-    step = max(1, total // 10)
+    step = max(1, math.ceil(total / 10))
     t0 = time.perf_counter()
     for k, item in enumerate(iterable, 1):
         yield item

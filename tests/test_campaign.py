@@ -126,3 +126,18 @@ def test_unknown_scenario_key_fails_before_any_trial(tmp_path: Path, capsys) -> 
     assert main(["campaign", "--config", str(cfg), "--results", str(tmp_path / "r.csv"), "--no-plot"]) == 2
     assert "scenario.pad_size" in capsys.readouterr().err
     assert not (tmp_path / "r.csv").exists()
+
+
+def test_wilson_interval_against_the_closed_form() -> None:
+    """Against an exact rational evaluation of the Wilson formula (z = 2 for exact squares)."""
+    from fractions import Fraction
+
+    for k, n in ((0, 5), (3, 10), (10, 10), (7, 50)):
+        lo, hi = campaign.wilson_interval(k, n, z=2.0)
+        p, z2 = Fraction(k, n), Fraction(4)
+        den = 1 + z2 / n
+        centre = (p + z2 / (2 * n)) / den
+        rad2 = z2 * (p * (1 - p) / n + z2 / (4 * n * n)) / den**2
+        assert (lo - float(centre)) ** 2 == pytest.approx(float(rad2), rel=1e-12, abs=1e-15) or lo == 0.0
+        assert (hi - float(centre)) ** 2 == pytest.approx(float(rad2), rel=1e-12, abs=1e-15) or hi == 1.0
+        assert 0.0 <= lo <= k / n <= hi <= 1.0
