@@ -3,7 +3,8 @@
 Two forms:
 
 - **coefficients** (exact): the knots and the ``(S, 4, N + 1)`` ascending-power coefficients of
-  x, y, z, yaw per segment (local time ``t - t_i``), and ``g``. JSON writes floats with Python's
+  x, y, z, yaw per segment (local time ``t - t_i``), and ``g``; JSON and NPZ also keep the
+  trajectory's provenance (status, relaxations, certificates) when the planner recorded one. JSON writes floats with Python's
   shortest round-trip representation, NPZ stores the float64 arrays, CSV writes one row per
   segment and flat output with ``repr`` floats, so loading back gives bit-identical coefficients.
 - **samples** at a rate (Hz): one row per time with the flat outputs and derivatives, the
@@ -109,7 +110,21 @@ def trajectory_from_dict(data: Mapping[str, Any]) -> Trajectory:
     for key in ("knots", "coefficients", "g"):
         if key not in data:
             raise ConfigError(key, "missing from the trajectory document")
-    return Trajectory(data["coefficients"], data["knots"], g=float(data["g"]))
+    traj = Trajectory(data["coefficients"], data["knots"], g=float(data["g"]))
+    _restore_provenance(traj, data.get("provenance"))
+    return traj
+
+
+def _restore_provenance(traj: Trajectory, data: Any) -> None:
+    """Set ``traj.provenance`` from its exported mapping (planners that record one)."""
+    if data is None:
+        return
+    from . import trajectory as tr_mod
+    from .configfile import from_mapping
+
+    cls = getattr(tr_mod, "Provenance", None)
+    if cls is not None:
+        traj.provenance = from_mapping(cls, data, "provenance")  # type: ignore[attr-defined]
 
 
 def write_json(traj: Trajectory, path: str | Path | None = None, rate: float | None = None,
@@ -134,6 +149,11 @@ def write_npz(traj: Trajectory, path: str | Path, rate: float | None = None) -> 
     """``coefficients``, ``knots``, ``g`` and, with ``rate``, ``samples`` plus ``columns``."""
     arrays: dict[str, Any] = {"format": np.array(FORMAT), "version": np.array(VERSION),
                               "coefficients": traj.coefficients, "knots": traj.knots, "g": np.array(traj.g)}
+    prov = getattr(traj, "provenance", None)
+    if prov is not None:
+        from .configfile import to_mapping
+
+        arrays["provenance"] = np.array(json.dumps(to_mapping(prov)))
     if rate is not None:
         arrays["samples"] = sample_table(traj, rate)
         arrays["columns"] = np.array(SAMPLE_COLUMNS)
@@ -149,7 +169,10 @@ def read_npz(path: str | Path) -> Trajectory:
     with np.load(path, allow_pickle=False) as z:
         if "format" not in z.files or str(z["format"]) != FORMAT:
             raise ConfigError("path", f"{str(path)!r} is not an {FORMAT} NPZ file")
-        return Trajectory(z["coefficients"], z["knots"], g=float(z["g"]))
+        traj = Trajectory(z["coefficients"], z["knots"], g=float(z["g"]))
+        if "provenance" in z.files:
+            _restore_provenance(traj, json.loads(str(z["provenance"])))
+        return traj
 
 
 COEFFICIENT_HEADER = ("segment", "output", "t_start", "t_end", "g")

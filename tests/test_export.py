@@ -44,6 +44,16 @@ def test_coefficient_round_trip_is_exact(tmp_path_factory, seed: int, n_seg: int
     assert back.knots.tobytes() == tr.knots.tobytes() and back.g == tr.g
 
 
+@pytest.mark.parametrize("fmt", ["json", "npz"])
+def test_provenance_travels_with_the_plan(traj: avp.Trajectory, tmp_path: Path, fmt: str) -> None:
+    if getattr(traj, "provenance", None) is None:
+        pytest.skip("this planner records no provenance")
+    path = tmp_path / f"p.{fmt}"
+    getattr(traj, f"to_{fmt}")(path)
+    back = getattr(avp.Trajectory, f"from_{fmt}")(path)
+    assert back.provenance == traj.provenance and repr(back) == repr(traj)
+
+
 def test_json_text_round_trip(traj: avp.Trajectory) -> None:
     text = traj.to_json()
     back = avp.Trajectory.from_json(text)
