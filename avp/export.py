@@ -124,7 +124,7 @@ def _restore_provenance(traj: Trajectory, data: Any) -> None:
 
     cls = getattr(tr_mod, "Provenance", None)
     if cls is not None:
-        traj.provenance = from_mapping(cls, data, "provenance")  # type: ignore[attr-defined]
+        traj.provenance = from_mapping(cls, data, "provenance")
 
 
 def write_json(traj: Trajectory, path: str | Path | None = None, rate: float | None = None,
