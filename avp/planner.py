@@ -350,7 +350,12 @@ def plan_detailed(
             if warm_start is not None and cfg.solver in WARM_START_SOLVERS:
                 knots = state.time + np.concatenate([[0.0], np.cumsum(T)])
                 initvals = _fit_initvals(warm_start, layout_for(cfg.n_segments, cfg.degree), knots)
-            attempt = _solve_at(state, target, stage_cfg, T, log, previous, initvals)
+            # The search runs without the FoV rows after the first solve; the rows are added back
+            # once a duration certifies (they change the plan little and cost 2-3 QPs each).
+            first = stage is None and factor == 1.0
+            attempt_cfg = stage_cfg if first or not stage_cfg.fov.enabled else replace(
+                stage_cfg, fov=replace(stage_cfg.fov, enabled=False))
+            attempt = _solve_at(state, target, attempt_cfg, T, log, previous, initvals)
             attempts += 1
             build += attempt.build
             solve += attempt.solve
@@ -372,6 +377,15 @@ def plan_detailed(
             certify += time.perf_counter() - t_cert
             if report.certified and attempt.safe:
                 log.append("bounds certified (Algorithm 1, exact)")
+                if attempt_cfg is not stage_cfg:
+                    with_fov, fov_report = _with_fov(state, target, stage_cfg, T, log, previous, initvals)
+                    attempts += 1
+                    build, solve, certify = (build + with_fov.build, solve + with_fov.solve,
+                                             certify + with_fov.certify + fov_report[1])
+                    if fov_report[0] is not None:
+                        report = fov_report[0]
+                        return finish(solved(with_fov), with_fov, T)
+                    attempt.fov_dropped = True
                 return finish(solved(attempt), attempt, T)
             if report.certified:
                 unsafe = attempt
@@ -389,6 +403,26 @@ def plan_detailed(
         return finish(PlanStatus.WORKSPACE_NOT_CERTIFIED, unsafe, unsafe.trajectory.durations)
     log.append(f"no duration in the search and no relaxation gave certified bounds ({attempts} solves)")
     return finish(PlanStatus.BOUNDS_NOT_CERTIFIED, last, last.trajectory.durations)
+
+
+def _with_fov(
+    state: State, target: PerchTarget, cfg: PlannerConfig, T: Array, log: list[str],
+    previous: Trajectory | None, initvals: Array | None,
+) -> tuple[_Attempt, tuple[BoundReport | None, float]]:
+    """Re-solve a certified search step with the FoV rows; ``(attempt, (report, seconds))`` with
+    ``report`` set only when that plan certifies too (bounds and workspace)."""
+    attempt = _solve_at(state, target, cfg, T, log, previous, initvals)
+    if attempt.trajectory is None or not attempt.safe or attempt.fov_dropped:
+        log.append("FoV rows dropped (16): the plan with them did not solve or certify")
+        return attempt, (None, 0.0)
+    t0 = time.perf_counter()
+    report = _certify(attempt.trajectory, cfg)
+    seconds = time.perf_counter() - t0
+    if not report.certified:
+        log.append("FoV rows dropped: the plan with them did not certify the bounds")
+        return attempt, (None, seconds)
+    log.append("FoV rows added back: bounds certified")
+    return attempt, (report, seconds)
 
 
 def _infeasible(attempt: _Attempt) -> bool:
