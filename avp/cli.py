@@ -602,6 +602,9 @@ def main(argv: Sequence[str] | None = None) -> int:
             return run_campaign(args)
     except AvpError as exc:
         log.error("%s", exc)
+        if args.json:
+            _emit_json({"command": args.command, "exit_code": EXIT_USAGE, "error": str(exc),
+                        "field": getattr(exc, "field", None)})
         return EXIT_USAGE
     except KeyboardInterrupt:  # pragma: no cover - interactive
         log.error("interrupted")

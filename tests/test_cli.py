@@ -160,6 +160,9 @@ def test_config_errors_name_the_key(tmp_path: Path, text: str, field: str, capsy
     assert exc.value.field == field
     assert main(["demo", "--config", str(path), "--no-plot"]) == EXIT_USAGE
     assert field in capsys.readouterr().err
+    assert main(["demo", "--config", str(path), "--json"]) == EXIT_USAGE
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["exit_code"] == EXIT_USAGE and doc["field"] == field
 
 
 # -- exit codes -------------------------------------------------------------------------------
