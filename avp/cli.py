@@ -28,6 +28,7 @@ import numpy as np
 
 from .configfile import Settings, load_settings, to_mapping
 from .errors import AvpError, ConfigError
+from .export import trajectory_to_dict
 
 __all__ = ["EXIT_CODES", "EXIT_FAILED", "EXIT_RELAXED", "EXIT_SOLVED", "EXIT_USAGE", "main", "plan_exit_code"]
 
@@ -373,16 +374,10 @@ def demo(args: argparse.Namespace) -> int:
             "timings_ms": {"build": tm.build * 1e3, "solve": tm.solve * 1e3, "certify": tm.certify * 1e3,
                            "total": tm.total * 1e3, "first_call": first_call * 1e3},
             "config": {"planner": to_mapping(config)},
-            "trajectory": None if traj is None else traj_to_dict(traj),
+            "trajectory": None if traj is None else trajectory_to_dict(traj),
             "plot": None if plot is None else str(plot), "export": None if exported is None else str(exported),
         })
     return code
-
-
-def traj_to_dict(traj: Any) -> dict[str, Any]:
-    from .export import trajectory_to_dict
-
-    return trajectory_to_dict(traj)
 
 
 def _workspace_certified(result: Any) -> bool | None:

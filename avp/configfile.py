@@ -143,17 +143,13 @@ def _convert(tp: Any, value: Any, where: str) -> Any:
     raise ConfigError(where, f"cannot be set from a file (type {tp})")  # pragma: no cover
 
 
-def _hints(cls: type) -> dict[str, Any]:
-    return typing.get_type_hints(cls)
-
-
 def from_mapping(cls: type, data: Mapping[str, Any], where: str = "") -> Any:
     """An instance of the dataclass ``cls`` from a (TOML) mapping; fields not given keep their
     defaults, nested dataclasses come from sub-tables. ``where`` prefixes key paths in errors."""
     if not isinstance(data, Mapping):
         raise _bad(where or cls.__name__, cls, data)
     fields = {f.name: f for f in dataclasses.fields(cls) if f.init}
-    hints = _hints(cls)
+    hints = typing.get_type_hints(cls)
     kwargs: dict[str, Any] = {}
     for key, value in data.items():
         path = f"{where}.{key}" if where else key
@@ -330,7 +326,7 @@ def _rows(cls: type, table: str) -> tuple[list[str], list[tuple[str, type]]]:
     """Markdown rows of ``cls``'s scalar knobs and its nested dataclass fields."""
     default = cls()
     docs = _param_docs(cls)
-    hints = _hints(cls)
+    hints = typing.get_type_hints(cls)
     rows: list[str] = []
     nested: list[tuple[str, type]] = []
     for f in dataclasses.fields(cls):
