@@ -1,4 +1,4 @@
-"""The body-rate certificate at every attitude (issue 8, item 7) and the contact attitude (13).
+"""The body-rate certificate at every attitude and the contact attitude (13).
 
 Every check compares with an independent computation of the attitude: ``oracles.attitude_zyx``
 builds ``R_WB = Rz(yaw) Ry(pitch) Rx(roll)`` from Euler angles with scipy and the body rate is
@@ -106,7 +106,7 @@ def _planted_tilt(tilt_deg: float, yaw_rate: float) -> tuple[np.ndarray, np.ndar
 
 
 def test_the_45_degree_inequality_is_unsound_at_75_degrees_and_the_kernel_refuses() -> None:
-    """The bug of issue 8: at 75 deg roll ``3|j|^2 + (4 psidot^2 - w^2)|f|^2 < 0`` holds while
+    """The bug this certificate fixes: at 75 deg roll ``3|j|^2 + (4 psidot^2 - w^2)|f|^2 < 0`` holds while
     the true rate exceeds ``w``. The certificate now proves the roll level first."""
     c, knots = _planted_tilt(75.0, 1.0)
     traj = avp.Trajectory(c, knots)

@@ -1,4 +1,4 @@
-"""Requests that make no physical sense are ConfigErrors naming the field (issue 8, item 6)."""
+"""Requests that make no physical sense are ConfigErrors naming the field."""
 
 from __future__ import annotations
 
