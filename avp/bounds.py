@@ -32,7 +32,7 @@ class Certificate(Enum):
     VIOLATED = "violated"
     """``F(t) >= 0`` somewhere on the segment: proven (touching counts)."""
     UNKNOWN = "unknown"
-    """Not decided (only when the exact fallback is disabled)."""
+    """Not decided: the exact fallback was disabled or ran out of its time budget."""
     NOT_CHECKED = "not checked"
     """The limit is ``inf``: the bound was skipped."""
 
@@ -161,6 +161,7 @@ def certify_spline(
     body_rate_max: float = math.inf,
     g: float = 9.81,
     exact: bool = True,
+    budget: float = math.inf,
 ) -> BoundReport:
     """Certifies the actuator bounds of a flat-output spline on every segment (Algorithm 1).
 
@@ -186,6 +187,12 @@ def certify_spline(
     exact:
         Fall back to exact arithmetic when the floating-point path is unsure (default). With
         ``False`` undecided cells are :attr:`Certificate.UNKNOWN`.
+    budget:
+        Seconds the exact fallbacks of this call may take together (``inf``: no limit, never
+        UNKNOWN with ``exact=True``). Cells still undecided when it runs out are
+        :attr:`Certificate.UNKNOWN`: never a wrong WITHIN, never a needless VIOLATED. The fast
+        path alone decides realistic trajectories (``benchmarks/bench_bounds.py``); the budget
+        bounds the rare near-tangent case. See ``docs/bounds.md`` for measured costs.
 
     Returns
     -------
@@ -210,6 +217,7 @@ def certify_spline(
     g = float(g)
     if not math.isfinite(g):
         raise ConfigError("g", f"must be finite, got {g!r}")
+    budget = _limit("budget", budget)
     c = np.ascontiguousarray(coeffs, dtype=np.float64)
     k = np.ascontiguousarray(knots, dtype=np.float64)
     if c.ndim != 3 or c.shape[1] != 4:
@@ -219,10 +227,9 @@ def certify_spline(
     # The kernel's limits vector and its output rows share one order: Bound (= BOUND_NAMES).
     row = np.array([limits[b] for b in _BOUNDS], dtype=np.float64)
     try:
-        codes, times = _avp_rust.certify_spline(c, k, row, g, exact)
-    except ValueError as exc:
-        field = str(exc).split(":", 1)[0] or "coeffs"
-        raise ConfigError(field, str(exc).split(":", 1)[-1].strip()) from exc
+        codes, times = _avp_rust.certify_spline(c, k, row, g, exact, budget)
+    except _avp_rust.KernelError as exc:
+        raise ConfigError(exc.arg, exc.detail) from exc
     verdicts = {b: tuple(_CODES[int(x)] for x in codes[i]) for i, b in enumerate(_BOUNDS)}
     tmap = {b: tuple(float(x) for x in times[i]) for i, b in enumerate(_BOUNDS)}
     return BoundReport(verdicts=verdicts, times=tmap, limits=limits)

@@ -6,10 +6,16 @@
 //! multipliers (`|lc|^k`, positive contents), which keeps the sign pattern of the true
 //! `S_{i+1} = -rem(S_{i-1}, S_i)` sequence (paper eq. (17)) while the integers stay small.
 //! Signs at rational points come from homogenised Horner evaluation, so nothing rounds.
+//!
+//! The certificate ([`certify_unit_budgeted`]) no longer builds a Sturm chain: it decides the
+//! inside of `[0, 1]` by exact Bernstein subdivision ([`crate::descartes`]), under a budget.
+//! The chain stays for root counting ([`count_roots`]) and as [`certify_unit_sturm`].
 use num_bigint::BigInt;
 use num_integer::Integer;
 use num_rational::BigRational;
 use num_traits::{One, Signed, ToPrimitive, Zero};
+
+use crate::descartes::{self, Budget, Isolation};
 
 /// Integer polynomial, ascending powers, no trailing zeros (the zero polynomial is empty).
 pub type IntPoly = Vec<BigInt>;
@@ -253,22 +259,53 @@ pub enum UnitExact {
     ViolatedInside,
 }
 
-/// Decides `p(u) < 0 for all u in [0, 1]` exactly (Algorithm 1 with `F = p`).
-pub fn certify_unit(p: &[BigInt]) -> UnitExact {
+/// The ends of Algorithm 1 (line 2) exactly: `Err(verdict)` when an end decides, `Ok(p)` (the
+/// trimmed polynomial, degree >= 1, negative at both ends) when the inside must be checked.
+fn unit_ends(p: &[BigInt]) -> std::result::Result<IntPoly, UnitExact> {
     let p = trim_int(p.to_vec());
     let Some(p0) = p.first() else {
-        return UnitExact::ViolatedAt0;
-    }; // F == 0
+        return Err(UnitExact::ViolatedAt0); // F == 0
+    };
     if !p0.is_negative() {
-        return UnitExact::ViolatedAt0;
+        return Err(UnitExact::ViolatedAt0);
     }
     let p1: BigInt = p.iter().sum();
     if !p1.is_negative() {
-        return UnitExact::ViolatedAt1;
+        return Err(UnitExact::ViolatedAt1);
     }
     if p.len() == 1 {
-        return UnitExact::Within;
+        return Err(UnitExact::Within);
     }
+    Ok(p)
+}
+
+/// Decides `p(u) < 0 for all u in [0, 1]` exactly (Algorithm 1 with `F = p`), by Bernstein
+/// subdivision ([`crate::descartes`]); `None` when `budget` runs out first.
+pub fn certify_unit_budgeted(p: &[BigInt], budget: &Budget) -> Option<UnitExact> {
+    let p = match unit_ends(p) {
+        Ok(p) => p,
+        Err(v) => return Some(v),
+    };
+    match descartes::root_in_unit(&p, budget) {
+        Isolation::NoRoot => Some(UnitExact::Within),
+        Isolation::Root { .. } => Some(UnitExact::ViolatedInside),
+        Isolation::Unsure if *budget == Budget::UNLIMITED => Some(certify_unit_sturm(&p)),
+        Isolation::Unsure => None,
+    }
+}
+
+/// Decides `p(u) < 0 for all u in [0, 1]` exactly, without a budget (never undecided).
+pub fn certify_unit(p: &[BigInt]) -> UnitExact {
+    certify_unit_budgeted(p, &Budget::UNLIMITED).unwrap_or_else(|| certify_unit_sturm(p))
+}
+
+/// The previous exact path, kept for comparisons: Algorithm 1 with a Sturm chain of primitive
+/// pseudo-remainders (a coefficient gcd per element).
+pub fn certify_unit_sturm(p: &[BigInt]) -> UnitExact {
+    let p = match unit_ends(p) {
+        Ok(p) => p,
+        Err(v) => return v,
+    };
     let chain = sturm_chain(&p);
     let (zero, one) = (BigInt::zero(), BigInt::one());
     let v0 = variations(&chain, &zero, &one);

@@ -14,6 +14,7 @@
 pub mod anticipation;
 pub mod bounds;
 pub mod certify;
+pub mod descartes;
 pub mod error;
 pub mod exact;
 pub mod poly;

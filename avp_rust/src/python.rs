@@ -1,5 +1,6 @@
 //! Thin PyO3 wrappers: convert NumPy arrays to slices, call a kernel, convert back. Every
-//! kernel error becomes `ValueError`; kernels return `Result` and do not panic on input paths.
+//! kernel error becomes [`KernelError`] (a `ValueError` with `.arg` and `.detail`); kernels
+//! return `Result` and do not panic on input paths.
 #![allow(clippy::useless_conversion)]
 use numpy::{
     IntoPyArray, PyArray2, PyArray3, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3,
@@ -11,15 +12,38 @@ use pyo3::prelude::*;
 use crate::error::{guarded, Error};
 use crate::spline::{self, SplineView};
 
+pyo3::create_exception!(
+    _avp_rust,
+    KernelError,
+    PyValueError,
+    "A kernel rejected an argument: `.arg` names it, `.detail` says why and what to do."
+);
+
+/// A [`KernelError`] naming the offending argument (message `"{arg}: {detail}"`).
+pub(crate) fn kernel_err(arg: &str, detail: impl Into<String>) -> PyErr {
+    let detail = detail.into();
+    Python::attach(|py| {
+        let err = KernelError::new_err(format!("{arg}: {detail}"));
+        let value = err.value(py);
+        match value
+            .setattr("arg", arg)
+            .and_then(|()| value.setattr("detail", detail))
+        {
+            Ok(()) => err,
+            Err(e) => e,
+        }
+    })
+}
+
 pub(crate) fn to_py_err(e: Error) -> PyErr {
-    PyValueError::new_err(e.to_string())
+    kernel_err(e.arg(), e.detail())
 }
 
 pub(crate) fn contiguous<'a>(
     arg: &'static str,
     slice: std::result::Result<&'a [f64], numpy::NotContiguousError>,
 ) -> PyResult<&'a [f64]> {
-    slice.map_err(|_| PyValueError::new_err(format!("{arg}: must be a C-contiguous float64 array")))
+    slice.map_err(|_| kernel_err(arg, "must be a C-contiguous float64 array"))
 }
 
 /// Borrows a `(segments, axes, coeffs)` array and its knots as a validated [`SplineView`].
@@ -49,9 +73,10 @@ fn eval_spline_py<'py>(
     let view = spline_view(&coeffs, &knots)?;
     let t = contiguous("times", times.as_slice())?;
     if let Some(&bad) = orders.iter().find(|&&o| o > 64) {
-        return Err(PyValueError::new_err(format!(
-            "orders: derivative order {bad} is too large (at most 64)"
-        )));
+        return Err(kernel_err(
+            "orders",
+            format!("derivative order {bad} is too large (at most 64)"),
+        ));
     }
     let n_times = t.len();
     let n_orders = orders.len();
@@ -59,7 +84,7 @@ fn eval_spline_py<'py>(
         .detach(|| guarded(|| spline::evaluate(&view, t, &orders)))
         .map_err(to_py_err)?;
     let arr = numpy::ndarray::Array3::from_shape_vec((n_orders, n_times, view.n_axes()), out)
-        .map_err(|e| PyValueError::new_err(format!("internal shape error: {e}")))?;
+        .map_err(|e| kernel_err("kernel", format!("internal shape error: {e}")))?;
     Ok(arr.into_pyarray(py))
 }
 
@@ -79,24 +104,28 @@ fn anticipate_py<'py>(
     let n_axes = view.n_axes();
     let odo_shape = odometry.shape().to_vec();
     if odo_shape != [crate::anticipation::ORDERS, n_axes] {
-        return Err(PyValueError::new_err(format!(
-            "odometry: expected shape ({}, {}), got {:?}",
-            crate::anticipation::ORDERS,
-            n_axes,
-            odo_shape
-        )));
+        return Err(kernel_err(
+            "odometry",
+            format!(
+                "expected shape ({}, {}), got {:?}",
+                crate::anticipation::ORDERS,
+                n_axes,
+                odo_shape
+            ),
+        ));
     }
     let o = contiguous("odometry", odometry.as_slice())?;
     let out =
         guarded(|| crate::anticipation::anticipate(&view, o, t_rp, t_ex)).map_err(to_py_err)?;
     let arr = numpy::ndarray::Array2::from_shape_vec((crate::anticipation::ORDERS, n_axes), out)
-        .map_err(|e| PyValueError::new_err(format!("internal shape error: {e}")))?;
+        .map_err(|e| kernel_err("kernel", format!("internal shape error: {e}")))?;
     Ok(arr.into_pyarray(py))
 }
 
 #[pymodule]
 pub fn _avp_rust(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    m.add("KernelError", m.py().get_type::<KernelError>())?;
     m.add_function(wrap_pyfunction!(eval_spline_py, m)?)?;
     m.add_function(wrap_pyfunction!(anticipate_py, m)?)?;
     crate::python_bounds::register(m)?;
