@@ -204,9 +204,10 @@ def exact_worst_case(n: int) -> None:
 
 def planner_exact_path_rate(repeats: int) -> None:
     """Cells of the planner's own certificates that the fast path leaves to the exact path."""
+    from bench_plan import scenarios
+
     import avp
     import avp.planner as planner
-    from bench_plan import scenarios
 
     counts = {"calls": 0, "cells": 0, "exact": 0}
     original = planner.certify_spline

@@ -7,6 +7,7 @@ import dataclasses
 import math
 
 import numpy as np
+import numpy.typing as npt
 import pytest
 import qpsolvers
 from hypothesis import given, settings
@@ -23,11 +24,23 @@ from avp import (
     plan_detailed,
     visibility,
 )
+from avp.camera import FovConfig as _FovConfig
 from avp.errors import ConfigError
-from avp.frames import attitude
-from avp.qp.assemble import build_perching_qp
-from avp.qp.fov import fov_blocks, fov_gradient, fov_h, fov_times
+from avp.frames import GRAVITY, attitude
+from avp.qp.assemble import ConstraintBlock, build_perching_qp
+from avp.qp.fov import (
+    FOV_PREFIX,
+    FovGradient,
+    FovLinearisation,
+    fov_blocks,
+    fov_gradient,
+    fov_h,
+    fov_times,
+)
+from avp.qp.layout import YAW, DecisionLayout
+from avp.qp.rows import point_rows
 
+Array = npt.NDArray[np.float64]
 CAM = Camera()
 floats = st.floats(allow_nan=False, allow_infinity=False)
 
@@ -221,3 +234,181 @@ def test_disabled_fov_is_plain_qp() -> None:
     result = plan_detailed(state, target, PlannerConfig(fov=FovConfig(enabled=False)))
     assert result.ok and not result.fov_dropped
     assert not any("FoV" in line for line in result.log)
+
+
+# ---------------------------------------------------------------- previous NumPy implementation
+# Kept as the reference the Rust kernel and the shared-basis rows must reproduce (to 1e-12).
+
+E3 = np.array([0.0, 0.0, 1.0])
+
+
+def _ref_skew(w: Array) -> Array:
+    """``hat(w)`` for ``w`` of shape ``(..., 3)`` -> ``(..., 3, 3)`` with ``hat(w) u = w x u``."""
+    z = np.zeros(w.shape[:-1])
+    return np.stack([
+        np.stack([z, -w[..., 2], w[..., 1]], -1),
+        np.stack([w[..., 2], z, -w[..., 0]], -1),
+        np.stack([-w[..., 1], w[..., 0], z], -1),
+    ], -2)
+
+
+def _ref_axis_and_jacobians(psi: Array, a: Array, axis_B: Array, g: float) -> tuple[Array, Array, Array]:
+    """``e_c``, ``d e_c / d psi`` (m, 3) and ``d e_c / d a`` (m, 3, 3) for the construction (13)."""
+    f = a + g * E3
+    fn = np.linalg.norm(f, axis=-1, keepdims=True)
+    b3 = f / fn
+    eye = np.eye(3)
+    J_b3 = (eye - b3[..., :, None] * b3[..., None, :]) / fn[..., None]  # d b3 / d a
+    b2d = np.stack([-np.sin(psi), np.cos(psi), np.zeros_like(psi)], -1)
+    b2d_psi = np.stack([-np.cos(psi), -np.sin(psi), np.zeros_like(psi)], -1)
+    v = np.cross(b2d, b3)
+    vn = np.linalg.norm(v, axis=-1, keepdims=True)
+    b1 = v / vn
+    b2 = np.cross(b3, b1)
+    P1 = (eye - b1[..., :, None] * b1[..., None, :]) / vn[..., None]  # d b1 / d v
+    dv_a = _ref_skew(b2d) @ J_b3
+    dv_psi = np.cross(b2d_psi, b3)
+    J_b1_a = P1 @ dv_a
+    J_b1_psi = np.einsum("mij,mj->mi", P1, dv_psi)
+    # b2 = b3 x b1: d b2 = hat(b3) d b1 - hat(b1) d b3
+    J_b2_a = _ref_skew(b3) @ J_b1_a - _ref_skew(b1) @ J_b3
+    J_b2_psi = np.cross(b3, J_b1_psi)
+    d1, d2, d3 = axis_B
+    e_c = d1 * b1 + d2 * b2 + d3 * b3
+    de_psi = d1 * J_b1_psi + d2 * J_b2_psi
+    de_a = d1 * J_b1_a + d2 * J_b2_a + d3 * J_b3
+    return e_c, de_psi, de_a
+
+
+def _ref_fov_gradient(
+    x: npt.ArrayLike, psi: npt.ArrayLike, a: npt.ArrayLike, s: npt.ArrayLike,
+    camera: Camera, g: float = GRAVITY,
+) -> FovGradient:
+    """The previous NumPy implementation of ``fov_gradient``."""
+    xx = np.atleast_2d(np.asarray(x, dtype=float))
+    aa = np.atleast_2d(np.asarray(a, dtype=float))
+    pp = np.atleast_1d(np.asarray(psi, dtype=float))
+    n_d = np.asarray(s, dtype=float) - xx
+    dist = np.linalg.norm(n_d, axis=-1)
+    e_c, de_psi, de_a = _ref_axis_and_jacobians(pp, aa, camera.axis_B, g)
+    c = math.cos(camera.half_fov)
+    h = c * dist - np.sum(n_d * e_c, axis=-1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        unit = n_d / dist[:, None]
+    d_x = e_c - c * unit
+    d_psi = -np.sum(n_d * de_psi, axis=-1)
+    d_a = -np.einsum("mi,mij->mj", n_d, de_a)
+    return FovGradient(h=h, d_x=d_x, d_psi=d_psi, d_a=d_a, distance=dist)
+
+
+def _ref_fov_blocks(
+    layout: DecisionLayout,
+    knots_rel: Array,
+    times: Array,
+    x0: Array,
+    psi0: Array,
+    a0: Array,
+    target_point: Array,
+    fov: _FovConfig,
+    g: float = GRAVITY,
+) -> FovLinearisation:
+    """The previous implementation (three point_rows calls, einsum products)."""
+    t = np.asarray(times, dtype=float)
+    m = t.size
+    empty = np.zeros(0)
+    if m == 0:
+        return FovLinearisation((), t, empty, empty, np.zeros(0, bool), np.zeros(0, bool))
+    grad = _ref_fov_gradient(x0, psi0, a0, target_point, fov.camera, g)
+    Rx = point_rows(layout, knots_rel, 0, t, (0, 1, 2))  # (m, 3, n)
+    Ra = point_rows(layout, knots_rel, 2, t, (0, 1, 2))
+    Rpsi = point_rows(layout, knots_rel, 0, t, (YAW,))[:, 0, :]  # (m, n)
+    ok = np.isfinite(grad.h) & np.all(np.isfinite(grad.d_a), axis=1) & np.isfinite(grad.d_psi) & (grad.distance > 1e-6)
+    dist = np.where(ok, grad.distance, 1.0)
+    gx = np.where(ok[:, None], grad.d_x, 0.0) / dist[:, None]
+    ga = np.where(ok[:, None], grad.d_a, 0.0) / dist[:, None]
+    gp = np.where(ok, grad.d_psi, 0.0) / dist
+    h0 = np.where(ok, grad.h, np.inf) / dist
+    # Largest linearised decrease inside the box (9): sum |grad_i| r_i.
+    decrease = (np.abs(gx).sum(1) * fov.trust_position + np.abs(ga).sum(1) * fov.trust_acceleration
+                + np.abs(gp) * fov.trust_yaw)
+    reachable = h0 - decrease
+    # Row: grad.z <= grad.z0 - h0 - margin, i.e. h0 + grad.(z - z0) <= -margin.
+    G = np.einsum("mi,min->mn", gx, Rx) + np.einsum("mi,min->mn", ga, Ra) + gp[:, None] * Rpsi
+    lin0 = np.sum(gx * x0, 1) + np.sum(ga * a0, 1) + gp * psi0
+    rhs = lin0 - h0 - fov.margin
+    placed = ok.copy()
+    progress = np.zeros(m, bool)
+    # A row needing more than reach_fraction of the box's decrease is treated as out of reach:
+    # a thin feasible set makes first-order back-ends (proxqp, osqp) declare infeasibility.
+    hopeless = ok & (h0 - fov.reach_fraction * decrease > -fov.margin)
+    if fov.point_policy is FovPointPolicy.SKIP:
+        placed &= ~hopeless
+    elif fov.point_policy is FovPointPolicy.PROGRESS:
+        # Ask for a fraction of the reachable decrease: h0 + grad.(z - z0) <= h0 - f * decrease.
+        rhs = np.where(hopeless, lin0 - fov.progress_fraction * decrease, rhs)
+        progress = hopeless.copy()
+    blocks = []
+    if placed.any():
+        blocks.append(ConstraintBlock(
+            f"{FOV_PREFIX} rows (8)", G[placed], np.full(int(placed.sum()), -np.inf), rhs[placed]))
+        sel = placed
+        for label, R, z0, r in (
+            ("x", Rx[sel].reshape(-1, layout.n_variables), np.asarray(x0)[sel].reshape(-1), fov.trust_position),
+            ("a", Ra[sel].reshape(-1, layout.n_variables), np.asarray(a0)[sel].reshape(-1), fov.trust_acceleration),
+            ("yaw", Rpsi[sel], np.asarray(psi0)[sel], fov.trust_yaw),
+        ):
+            if math.isfinite(r):
+                blocks.append(ConstraintBlock(f"{FOV_PREFIX} trust region (9) {label}", R, z0 - r, z0 + r))
+    return FovLinearisation(tuple(blocks), t, h0, reachable, placed, progress)
+
+
+def _random_fov_case(rng: np.random.Generator, m: int):
+    x = rng.normal(0.0, 2.0, (m, 3))
+    a = rng.normal(0.0, 3.0, (m, 3))
+    psi = rng.uniform(-math.pi, math.pi, m)
+    s = rng.normal(0.0, 2.0, 3)
+    x[0] = s  # a degenerate point (|n_d| = 0): both implementations give the same non-finite
+    return x, psi, a, s
+
+
+@pytest.mark.parametrize("mount", range(3))
+def test_rust_gradient_equals_previous_numpy_implementation(mount: int) -> None:
+    R_BC = [avp.camera.FRONT_CAMERA_R_BC, np.eye(3),
+            np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]]) @ avp.camera.FRONT_CAMERA_R_BC][mount]
+    cam = Camera(R_BC=R_BC, half_fov=math.radians(30 + 10 * mount))
+    rng = np.random.default_rng(mount)
+    for _ in range(20):
+        x, psi, a, s = _random_fov_case(rng, 9)
+        new, old = fov_gradient(x, psi, a, s, cam), _ref_fov_gradient(x, psi, a, s, cam)
+        for name in ("h", "d_x", "d_psi", "d_a", "distance"):
+            u, v = getattr(new, name), getattr(old, name)
+            assert np.array_equal(np.isfinite(u), np.isfinite(v)), name
+            fin = np.isfinite(v)
+            np.testing.assert_allclose(u[fin], v[fin], rtol=1e-12, atol=1e-12, err_msg=name)
+    # broadcasting: one position against many accelerations, as before
+    x, psi, a, s = _random_fov_case(rng, 4)
+    np.testing.assert_allclose(fov_gradient(x[1], psi, a, s, cam).d_a, _ref_fov_gradient(x[1], psi, a, s, cam).d_a,
+                               rtol=1e-12, atol=1e-12)
+
+
+@pytest.mark.parametrize("policy", list(FovPointPolicy))
+def test_fov_blocks_equal_previous_implementation(policy: FovPointPolicy) -> None:
+    rng = np.random.default_rng(hash(policy.name) % 2**32)
+    for trial in range(10):
+        n_seg, degree = int(rng.integers(1, 5)), int(rng.choice([5, 7, 9]))
+        layout = avp.qp.layout.layout_for(n_seg, degree)
+        knots = np.concatenate([[0.0], np.cumsum(rng.uniform(0.2, 2.0, n_seg))])
+        times = np.sort(rng.uniform(0.0, knots[-1], 8))
+        x, psi, a, s = _random_fov_case(rng, 8)
+        x[0] += 0.5  # keep every point regular here (the degenerate one is tested above)
+        fov = FovConfig(point_policy=policy, trust_yaw=math.inf if trial % 3 == 0 else 0.1,
+                        margin=0.01 * (trial % 2))
+        new = fov_blocks(layout, knots, times, x, psi, a, s, fov)
+        old = _ref_fov_blocks(layout, knots, times, x, psi, a, s, fov)
+        assert [b.name for b in new.blocks] == [b.name for b in old.blocks]
+        for nb, ob in zip(new.blocks, old.blocks, strict=True):
+            for f in ("matrix", "lower", "upper"):
+                np.testing.assert_allclose(getattr(nb, f), getattr(ob, f), rtol=1e-12, atol=1e-12)
+        for f in ("times", "h0", "reachable"):
+            np.testing.assert_allclose(getattr(new, f), getattr(old, f), rtol=1e-12, atol=1e-12)
+        assert np.array_equal(new.placed, old.placed) and np.array_equal(new.progress, old.progress)

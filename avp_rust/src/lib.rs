@@ -17,6 +17,7 @@ pub mod certify;
 pub mod descartes;
 pub mod error;
 pub mod exact;
+pub mod fov;
 pub mod poly;
 pub mod spline;
 pub mod sturm;
