@@ -13,6 +13,7 @@ __all__ = [
     "certify_below_many",
     "certify_spline",
     "eval_spline",
+    "fov_gradient",
     "sturm_count",
 ]
 
@@ -51,6 +52,26 @@ def anticipate(
     ``odometry`` has shape ``(5, axes)`` (orders 0..4). Both times must lie in the plan's domain
     with ``t_ex >= t_rp``; otherwise ``ValueError``.
     """
+
+def fov_gradient(
+    x: npt.NDArray[np.float64],
+    psi: npt.NDArray[np.float64],
+    a: npt.NDArray[np.float64],
+    s: npt.NDArray[np.float64],
+    axis_B: npt.NDArray[np.float64],
+    cos_half: float,
+    g: float,
+) -> tuple[
+    npt.NDArray[np.float64],
+    npt.NDArray[np.float64],
+    npt.NDArray[np.float64],
+    npt.NDArray[np.float64],
+    npt.NDArray[np.float64],
+]:
+    """FoV cone (7) and its gradient at ``m`` points (``x``, ``a``: ``(m, 3)``, ``psi``: ``(m,)``):
+    ``(h (m,), d_x (m, 3), d_psi (m,), d_a (m, 3), distance (m,))``; non-finite where the
+    construction (13) is singular. Raises ``KernelError`` on bad shapes or non-finite ``s``,
+    ``axis_B``, ``cos_half``, ``g``."""
 
 # --- bound certificates (sturm.rs, exact.rs, certify.rs, bounds.rs) ---------------------------
 
