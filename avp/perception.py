@@ -15,14 +15,14 @@ Policy (:func:`solve_with_fov`), at fixed segment durations:
 Incompatibility (16) is declared when the back-end reports no solution, raises, or returns a point
 whose KKT residuals are out of tolerance: primal violation above
 :data:`avp.solve.FEASIBILITY_TOL` (checked by :func:`~avp.solve.solve_perching_qp`), or dual
-residual / duality gap of the returned ``qpsolvers.Solution`` above :data:`KKT_TOL`. For the FoV
-attempts iterative back-ends (proxqp, osqp) get ``max_iter = fov.fallback_max_iter`` so an
-infeasible problem is declared quickly (docs/perception.md has the measurements).
+residual / duality gap of the returned ``qpsolvers.Solution`` above :data:`KKT_TOL`
+(:func:`avp.solve.incompatibility`, next to the back-end table :data:`avp.solve.BACKENDS`). For
+the FoV attempts iterative back-ends (proxqp, osqp) get ``max_iter = fov.fallback_max_iter`` so
+an infeasible problem is declared quickly (docs/perception.md has the measurements).
 """
 
 from __future__ import annotations
 
-import math
 import time
 import warnings
 from dataclasses import dataclass, replace
@@ -35,19 +35,20 @@ from .errors import InfeasibleError, SolverError
 from .metrics import visibility_many
 from .qp.assemble import PerchingQp, build_perching_qp
 from .qp.fov import FovLinearisation, fov_blocks, fov_times
-from .solve import QpOutcome, solve_perching_qp
+from .solve import (
+    ITERATIVE_SOLVERS,
+    KKT_TOL,
+    QpOutcome,
+    backend,
+    incompatibility,
+    solve_perching_qp,
+)
 from .trajectory import Trajectory
 from .types import PerchTarget, State
 
 Array = npt.NDArray[np.float64]
 
-__all__ = ["ITERATIVE_SOLVERS", "KKT_TOL", "FovSolve", "linearise_on", "solve_with_fov"]
-
-KKT_TOL = 1e-5
-"""Largest accepted dual residual and duality gap (of the unit-diagonal scaled reduced QP)."""
-
-ITERATIVE_SOLVERS = ("proxqp", "osqp", "scs", "clarabel")
-"""Back-ends that accept ``max_iter`` and may iterate to their limit on an infeasible QP."""
+__all__ = ["ITERATIVE_SOLVERS", "KKT_TOL", "FovSolve", "incompatibility", "linearise_on", "solve_with_fov"]
 
 _SCORE_GRID = 200
 """Samples of the coarse visibility grid used to accept an SQP step."""
@@ -95,28 +96,9 @@ def linearise_on(
 
 def _fov_config(cfg: PlannerConfig) -> PlannerConfig:
     cap = cfg.fov.fallback_max_iter
-    if cap is None or cfg.solver not in ITERATIVE_SOLVERS:
+    if cap is None or not backend(cfg.solver).iterative:
         return cfg
     return replace(cfg, solver_options=(("max_iter", int(cap)),) + tuple(cfg.solver_options))
-
-
-def incompatibility(outcome: QpOutcome | None) -> str | None:
-    """Why a FoV-constrained solve counts as incompatible (16), or ``None`` if it is accepted."""
-    if outcome is None:
-        return "no outcome"
-    if not outcome.ok:
-        return f"{outcome.status.value} (max violation {outcome.max_violation:.1e})"
-    sol = outcome.solution
-    if sol is None:
-        return None
-    for name in ("dual_residual", "duality_gap"):
-        try:
-            val = float(getattr(sol, name)())
-        except (ValueError, TypeError, AttributeError):  # no multipliers: the primal check stands
-            continue
-        if math.isfinite(val) and val > KKT_TOL:
-            return f"KKT {name.replace('_', ' ')} {val:.1e} > {KKT_TOL:.0e}"
-    return None
 
 
 def _scores(trajs: tuple[Trajectory, ...], target: PerchTarget, cfg: PlannerConfig) -> list[float]:

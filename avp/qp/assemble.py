@@ -5,16 +5,25 @@
 ``c = c_p + Z z``. The reduced QP in ``z`` has only inequalities and a positive-definite Hessian
 (the initial position..jerk and yaw, yaw-rate rows pin the cost-free polynomials), and the
 equalities then hold to rounding whatever the solver's tolerance.
+
+The factorisation depends on the equality *matrix* ``A`` (durations and constraint pattern) and
+the cost ``P``, not on the right-hand side ``b`` (the state and target values): it is cached per
+``(A, P)`` (:data:`ELIMINATION_CACHE_SIZE` entries, found by a cheap fingerprint and confirmed by
+exact comparison, so a hit is exact), and only ``c_p`` and the linear cost term are recomputed
+for a new ``b``.
 """
 
 from __future__ import annotations
 
+import threading
+from collections import OrderedDict
 from dataclasses import dataclass, field, replace
 from functools import cached_property
 
 import numpy as np
 import numpy.typing as npt
 import scipy.linalg
+import scipy.linalg.lapack
 
 from ..config import PlannerConfig
 from ..errors import InfeasibleError
@@ -29,6 +38,64 @@ Array = npt.NDArray[np.float64]
 
 RANK_TOL = 1e-10
 """Relative tolerance on the QR diagonal below which equality rows count as dependent."""
+
+ELIMINATION_CACHE_SIZE = 256
+"""Factorisations kept (least recently used first out); each holds a few ``n x n`` arrays."""
+
+
+@dataclass(frozen=True)
+class _Factor:
+    """What the elimination needs from ``A`` and ``P`` alone (independent of ``b``)."""
+
+    A: Array  # the equality matrix and cost this factor belongs to (exact-hit check)
+    P: Array
+    Q1: Array  # (n, rank): orthonormal basis of the row space of A
+    R1: Array  # (rank, rank): triangular factor
+    piv: npt.NDArray[np.intp]  # (rank,) pivoted row indices of A
+    Z: Array  # (n, n - rank): null-space basis
+    PZ: Array  # P @ Z
+    H: Array  # scaled, symmetrised Z^T P Z
+    scale: float
+
+
+_FACTORS: OrderedDict[tuple[object, ...], _Factor] = OrderedDict()
+_FACTORS_LOCK = threading.Lock()
+_WEIGHTS = np.random.default_rng(0).uniform(0.5, 1.5, 1 << 16)
+
+
+def _fingerprint(M: Array) -> float:
+    """A cheap, position-sensitive checksum of ``M`` (hits are confirmed exactly)."""
+    flat = M.reshape(-1)
+    n = min(flat.size, _WEIGHTS.size)
+    return float(flat[:n] @ _WEIGHTS[:n]) + float(flat[n:].sum())
+
+
+def _factor(A: Array, P: Array) -> _Factor:
+    """Pivoted QR of ``A^T`` and the reduced Hessian, cached per exact ``(A, P)``."""
+    key = (A.shape, P.shape, _fingerprint(A), _fingerprint(P))
+    with _FACTORS_LOCK:
+        hit = _FACTORS.get(key)
+        if hit is not None and np.array_equal(hit.A, A) and np.array_equal(hit.P, P):
+            _FACTORS.move_to_end(key)
+            return hit
+    Q, R, piv = scipy.linalg.qr(A.T, pivoting=True, check_finite=False)
+    diag = np.abs(np.diag(R))
+    rank = int(np.sum(diag > RANK_TOL * max(diag[0] if diag.size else 0.0, 1.0)))
+    Z = Q[:, rank:]
+    PZ = P @ Z
+    H = Z.T @ PZ
+    # Scale the objective to unit Hessian diagonal: the minimiser is unchanged and the
+    # back-ends' absolute dual tolerances become meaningful (raw entries reach 1e7).
+    scale = 1.0 / max(float(np.max(np.abs(np.diag(H)))) if H.size else 1.0, 1e-300)
+    H = (0.5 * scale) * (H + H.T)
+    f = _Factor(A.copy(), P.copy(), Q[:, :rank], R[:rank, :rank], piv[:rank], Z, PZ, H, scale)
+    for arr in (f.A, f.P, f.Q1, f.R1, f.piv, f.Z, f.PZ, f.H):
+        arr.setflags(write=False)
+    with _FACTORS_LOCK:
+        _FACTORS[key] = f
+        while len(_FACTORS) > ELIMINATION_CACHE_SIZE:
+            _FACTORS.popitem(last=False)
+    return f
 
 
 @dataclass(frozen=True)
@@ -122,27 +189,21 @@ class PerchingQp:
         """
         A, b = self.stacked_equalities()
         m = A.shape[0]
-        Q, R, piv = scipy.linalg.qr(A.T, pivoting=True, check_finite=False)
-        diag = np.abs(np.diag(R))
-        rank = int(np.sum(diag > RANK_TOL * max(diag[0] if diag.size else 0.0, 1.0)))
+        f = _factor(A, self.P)
         # Particular solution on the rank-revealing basis; dependent rows must then agree.
-        y = scipy.linalg.solve_triangular(R[:rank, :rank], b[piv[:rank]], trans="T", check_finite=False)
-        c_p = Q[:, :rank] @ y
+        # R1^T y = b[piv] (LAPACK trtrs directly: what solve_triangular calls, minus its overhead)
+        y, info = scipy.linalg.lapack.dtrtrs(f.R1, b[f.piv], lower=0, trans=1)
+        if info != 0:
+            raise InfeasibleError(f"the equality elimination failed (LAPACK trtrs info {info})")
+        c_p = f.Q1 @ y
         residual = float(np.max(np.abs(A @ c_p - b))) if m else 0.0
         if residual > 1e-8 * max(1.0, float(np.max(np.abs(b)))):
             raise InfeasibleError(
                 f"the equality constraints are inconsistent (residual {residual:.2e}): the spline has "
                 f"too few degrees of freedom; raise config.n_segments or config.degree"
             )
-        Z = Q[:, rank:]
-        PZ = self.P @ Z
-        H = Z.T @ PZ
-        # Scale the objective to unit Hessian diagonal: the minimiser is unchanged and the
-        # back-ends' absolute dual tolerances become meaningful (raw entries reach 1e7).
-        scale = 1.0 / max(float(np.max(np.abs(np.diag(H)))) if H.size else 1.0, 1e-300)
-        H = (0.5 * scale) * (H + H.T)
-        g = scale * (PZ.T @ c_p)
-        return Z, c_p, H, g
+        g = f.scale * (f.PZ.T @ c_p)
+        return f.Z, c_p, f.H, g
 
     def reduce(self) -> ReducedQp:
         """The QP in ``z`` (see :attr:`elimination`): only inequalities, positive-definite Hessian."""
