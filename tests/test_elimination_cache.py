@@ -29,16 +29,28 @@ def test_right_hand_side_changes_reuse_the_factorisation_exactly() -> None:
     assemble._FACTORS.clear()
     Za, cpa, Ha, _ = a.elimination
     Zb, cpb, Hb, gb = b.elimination
-    assert Za is Zb and Ha is Hb and len(assemble._FACTORS) == 1  # one factorisation, shared
+    assert Za is Zb and Ha is Hb and assemble._cached_factors() == 1  # one factorisation, shared
     for A, rhs, cp in ((Aa, ba, cpa), (Ab, bb, cpb)):
         assert np.max(np.abs(A @ cp - rhs)) < 1e-9 * max(1.0, np.max(np.abs(rhs)))
     # the cached answer is bit for bit the one computed from scratch
     assemble._FACTORS.clear()
     Z2, cp2, H2, g2 = _qp([-2.0, 0.4, 2.0], T).elimination
     assert np.array_equal(Z2, Zb) and np.array_equal(cp2, cpb) and np.array_equal(H2, Hb) and np.array_equal(g2, gb)
-    # other durations: another factorisation
+    # other durations: another factorisation (equal segments at another total give a matrix equal
+    # up to rounding, often with the same fingerprint: kept side by side, told apart exactly)
+    c = _qp([-2.0, 0.4, 2.0], [0.9, 0.9, 0.9])
+    d = _qp([-2.0, 0.4, 2.0], [1.3, 1.3, 1.3])
+    Ac, Ad = c.stacked_equalities()[0], d.stacked_equalities()[0]
+    assert np.max(np.abs(Ac - Ad)) < 1e-12 and not np.array_equal(Ac, Ad)
+    assert assemble._fingerprint(Ac) == assemble._fingerprint(Ad)  # the hard case: one bucket
+    assert d.elimination[0] is not c.elimination[0]
+    assert _qp([0.0, 0.0, 2.0], [0.9, 0.9, 0.9]).elimination[0] is c.elimination[0]
+    assert _qp([0.0, 0.0, 2.0], [1.3, 1.3, 1.3]).elimination[0] is d.elimination[0]
+    assemble._FACTORS.clear()
+    b.__dict__.pop("elimination")
+    Zb = b.elimination[0]
     assert _qp([-2.0, 0.4, 2.0], [0.9, 0.8, 0.75]).elimination[0] is not Zb
-    assert len(assemble._FACTORS) == 2
+    assert assemble._cached_factors() == 2
 
 
 def test_cache_is_bounded(monkeypatch) -> None:
@@ -46,7 +58,7 @@ def test_cache_is_bounded(monkeypatch) -> None:
     assemble._FACTORS.clear()
     for k in range(assemble.ELIMINATION_CACHE_SIZE + 5):
         assert _qp([-3.0, 0.0, 2.5], [0.9, 0.8, 0.7 + 1e-3 * k]).elimination[0].shape[0] > 0
-    assert len(assemble._FACTORS) == assemble.ELIMINATION_CACHE_SIZE
+    assert assemble._cached_factors() == assemble.ELIMINATION_CACHE_SIZE
 
 
 def test_cost_matrix_matches_its_definition_and_is_read_only() -> None:

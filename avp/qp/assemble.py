@@ -58,26 +58,33 @@ class _Factor:
     scale: float
 
 
-_FACTORS: OrderedDict[tuple[object, ...], _Factor] = OrderedDict()
+_FACTORS: OrderedDict[tuple[object, ...], list[_Factor]] = OrderedDict()
+"""Buckets of factorisations by ``(shapes, fingerprints)``; a bucket can hold matrices that are
+equal up to rounding (QPs of similar durations), told apart by exact comparison."""
 _FACTORS_LOCK = threading.Lock()
 _WEIGHTS = np.random.default_rng(0).uniform(0.5, 1.5, 1 << 16)
 
 
 def _fingerprint(M: Array) -> float:
-    """A cheap, position-sensitive checksum of ``M`` (hits are confirmed exactly)."""
+    """A cheap, position-sensitive checksum of ``M`` (hits are confirmed by exact comparison)."""
     flat = M.reshape(-1)
     n = min(flat.size, _WEIGHTS.size)
     return float(flat[:n] @ _WEIGHTS[:n]) + float(flat[n:].sum())
+
+
+def _cached_factors() -> int:
+    """Number of factorisations held."""
+    return sum(len(b) for b in _FACTORS.values())
 
 
 def _factor(A: Array, P: Array) -> _Factor:
     """Pivoted QR of ``A^T`` and the reduced Hessian, cached per exact ``(A, P)``."""
     key = (A.shape, P.shape, _fingerprint(A), _fingerprint(P))
     with _FACTORS_LOCK:
-        hit = _FACTORS.get(key)
-        if hit is not None and np.array_equal(hit.A, A) and np.array_equal(hit.P, P):
-            _FACTORS.move_to_end(key)
-            return hit
+        for hit in _FACTORS.get(key, ()):
+            if np.array_equal(hit.A, A) and np.array_equal(hit.P, P):
+                _FACTORS.move_to_end(key)
+                return hit
     Q, R, piv = scipy.linalg.qr(A.T, pivoting=True, check_finite=False)
     diag = np.abs(np.diag(R))
     rank = int(np.sum(diag > RANK_TOL * max(diag[0] if diag.size else 0.0, 1.0)))
@@ -92,9 +99,13 @@ def _factor(A: Array, P: Array) -> _Factor:
     for arr in (f.A, f.P, f.Q1, f.R1, f.piv, f.Z, f.PZ, f.H):
         arr.setflags(write=False)
     with _FACTORS_LOCK:
-        _FACTORS[key] = f
-        while len(_FACTORS) > ELIMINATION_CACHE_SIZE:
-            _FACTORS.popitem(last=False)
+        _FACTORS.setdefault(key, []).append(f)
+        _FACTORS.move_to_end(key)
+        while _cached_factors() > ELIMINATION_CACHE_SIZE:
+            oldest = next(iter(_FACTORS))
+            _FACTORS[oldest].pop(0)
+            if not _FACTORS[oldest]:
+                del _FACTORS[oldest]
     return f
 
 
