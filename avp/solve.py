@@ -210,7 +210,8 @@ def solve_perching_qp(qp: PerchingQp, config: PlannerConfig, initvals: Array | N
         red = None
         A, b = qp.stacked_equalities()
         Gs, hs = _one_sided(G_full, lo_full, hi_full)
-        problem = qpsolvers.Problem(P=_writable(qp.P), q=np.zeros(qp.layout.n_variables), G=Gs, h=hs, A=A, b=b)
+        problem = qpsolvers.Problem(P=_writable(qp.P), q=np.zeros(qp.layout.n_variables), G=Gs, h=hs,
+                                    A=_writable(A), b=_writable(b))
         init = initvals
     if config.solver not in qpsolvers.dense_solvers:  # sparse-only back-ends (OSQP...)
         problem = qpsolvers.Problem(*[  # type: ignore[arg-type]

@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import itertools
 import time
 from collections import defaultdict
 from collections.abc import Callable, Iterator
@@ -30,6 +31,7 @@ from typing import Any
 
 import numpy as np
 import qpsolvers
+from bench_plan import scenarios
 from numpy.polynomial import polynomial as P
 
 import avp
@@ -39,7 +41,6 @@ from avp.qp import assemble, boundary, perching
 from avp.qp.cost import gram
 from avp.qp.layout import N_AXES, YAW, layout_for
 from avp.timing import initial_durations
-from bench_plan import scenarios
 
 STAGES = ("build", "elimination", "FoV", "solve", "certify")
 
@@ -126,7 +127,7 @@ def numpy_sturm_roots(F: np.ndarray, a: float, b: float) -> int:
     def changes(x: float) -> int:
         v = [P.polyval(x, s) for s in seq]
         v = [s for s in v if s != 0.0]
-        return int(sum(1 for u, w in zip(v, v[1:], strict=False) if u * w < 0))
+        return int(sum(1 for u, w in itertools.pairwise(v) if u * w < 0))
 
     return changes(a) - changes(b)
 

@@ -65,6 +65,11 @@ _FACTORS_LOCK = threading.Lock()
 _WEIGHTS = np.random.default_rng(0).uniform(0.5, 1.5, 1 << 16)
 
 
+def _read_only(M: Array) -> Array:
+    M.setflags(write=False)
+    return M
+
+
 def _fingerprint(M: Array) -> float:
     """A cheap, position-sensitive checksum of ``M`` (hits are confirmed by exact comparison)."""
     flat = M.reshape(-1)
@@ -155,17 +160,28 @@ class PerchingQp:
         return np.concatenate([[0.0], np.cumsum(self.durations)])
 
     def stacked_equalities(self) -> tuple[Array, Array]:
-        A = np.vstack([b.matrix for b in self.equalities])
-        return A, np.concatenate([b.lower for b in self.equalities])
+        """``(A, b)`` of all equality blocks (stacked once per QP, read-only)."""
+        return self._stacked_equalities
 
     def stacked_inequalities(self) -> tuple[Array, Array, Array]:
+        """``(G, lower, upper)`` of all inequality blocks (stacked once per QP, read-only)."""
+        return self._stacked_inequalities
+
+    @cached_property
+    def _stacked_equalities(self) -> tuple[Array, Array]:
+        A = np.vstack([b.matrix for b in self.equalities])
+        b = np.concatenate([b.lower for b in self.equalities])
+        return _read_only(A), _read_only(b)
+
+    @cached_property
+    def _stacked_inequalities(self) -> tuple[Array, Array, Array]:
         n = self.layout.n_variables
         if not self.inequalities:
-            return np.zeros((0, n)), np.zeros(0), np.zeros(0)
+            return _read_only(np.zeros((0, n))), _read_only(np.zeros(0)), _read_only(np.zeros(0))
         return (
-            np.vstack([b.matrix for b in self.inequalities]),
-            np.concatenate([b.lower for b in self.inequalities]),
-            np.concatenate([b.upper for b in self.inequalities]),
+            _read_only(np.vstack([b.matrix for b in self.inequalities])),
+            _read_only(np.concatenate([b.lower for b in self.inequalities])),
+            _read_only(np.concatenate([b.upper for b in self.inequalities])),
         )
 
     def trajectory(self, c_hat: Array, g: float) -> Trajectory:
@@ -185,8 +201,9 @@ class PerchingQp:
 
     def _same_equalities(self, other: PerchingQp) -> PerchingQp:
         """``other`` has this QP's cost and equalities: hand over the elimination if computed."""
-        if "elimination" in self.__dict__:
-            other.__dict__["elimination"] = self.__dict__["elimination"]
+        for name in ("elimination", "_stacked_equalities"):
+            if name in self.__dict__:
+                other.__dict__[name] = self.__dict__[name]
         return other
 
     @cached_property

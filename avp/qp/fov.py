@@ -27,7 +27,6 @@ from ..camera import Camera, FovConfig, FovPointPolicy
 from ..frames import GRAVITY
 from .assemble import ConstraintBlock
 from .layout import YAW, DecisionLayout
-from .rows import scatter_rows
 
 Array = npt.NDArray[np.float64]
 
@@ -162,14 +161,20 @@ def fov_blocks(
     if m == 0:
         return FovLinearisation((), t, empty, empty, np.zeros(0, bool), np.zeros(0, bool))
     grad = fov_gradient(x0, psi0, a0, target_point, fov.camera, g)
-    # One location and two basis evaluations serve the rows of x, a and yaw.
+    # One location, one column table and two basis evaluations serve the rows of x, a and yaw.
     seg, u = layout.locate(knots_rel, t)
     T = knots_rel[seg + 1] - knots_rel[seg]
     b0 = layout.basis(0, u)  # (m, C)
     b2 = layout.basis(2, u) / (T**2)[:, None]
-    Rx = scatter_rows(layout, seg, b0, (0, 1, 2))  # (m, 3, n)
-    Ra = scatter_rows(layout, seg, b2, (0, 1, 2))
-    Rpsi = scatter_rows(layout, seg, b0, (YAW,))[:, 0, :]  # (m, n)
+    cols = layout.columns(np.arange(4)[None, :], seg[:, None])  # (m, 4 axes, C)
+    mi = np.arange(m)[:, None, None]
+    ai = np.arange(3)[None, :, None]
+    Rx = np.zeros((m, 3, layout.n_variables))
+    Rx[mi, ai, cols[:, :3]] = b0[:, None, :]
+    Ra = np.zeros((m, 3, layout.n_variables))
+    Ra[mi, ai, cols[:, :3]] = b2[:, None, :]
+    Rpsi = np.zeros((m, layout.n_variables))
+    Rpsi[mi[:, 0], cols[:, YAW]] = b0
     ok = np.isfinite(grad.h) & np.all(np.isfinite(grad.d_a), axis=1) & np.isfinite(grad.d_psi) & (grad.distance > 1e-6)
     dist = np.where(ok, grad.distance, 1.0)
     gx = np.where(ok[:, None], grad.d_x, 0.0) / dist[:, None]
@@ -182,8 +187,9 @@ def fov_blocks(
     reachable = h0 - decrease
     # Row: grad.z <= grad.z0 - h0 - margin, i.e. h0 + grad.(z - z0) <= -margin. Each point's
     # row touches only its segment's columns: x/a columns get gx_i b0 + ga_i b2, yaw gp b0.
-    G = scatter_rows(layout, seg, gx[:, :, None] * b0[:, None, :] + ga[:, :, None] * b2[:, None, :],
-                     (0, 1, 2)).sum(axis=1) + scatter_rows(layout, seg, gp[:, None] * b0, (YAW,))[:, 0, :]
+    G = np.zeros((m, layout.n_variables))
+    G[mi, cols[:, :3]] = gx[:, :, None] * b0[:, None, :] + ga[:, :, None] * b2[:, None, :]
+    G[mi[:, 0], cols[:, YAW]] = gp[:, None] * b0
     lin0 = np.sum(gx * x0, 1) + np.sum(ga * a0, 1) + gp * psi0
     rhs = lin0 - h0 - fov.margin
     placed = ok.copy()

@@ -28,22 +28,12 @@ def point_rows(
     seg, u = layout.locate(knots_rel, t)
     T = knots_rel[seg + 1] - knots_rel[seg]
     local = layout.basis(order, u) / (T**order)[:, None]  # (m, C)
-    return scatter_rows(layout, seg, local, axes)
-
-
-def scatter_rows(
-    layout: DecisionLayout, seg: npt.NDArray[np.intp], local: Array, axes: Sequence[int]
-) -> Array:
-    """Rows of shape ``(m, len(axes), n_variables)`` holding ``local`` in the columns of
-    ``(axis, seg[j])``: ``local`` is ``(m, C)`` (the same values for every axis) or
-    ``(m, len(axes), C)``."""
     ax = np.asarray(axes)
-    m = seg.shape[0]
-    rows = np.zeros((m, ax.size, layout.n_variables))
+    rows = np.zeros((t.size, ax.size, layout.n_variables))
     cols = layout.columns(ax[None, :], seg[:, None])  # (m, A, C)
-    m_idx = np.arange(m)[:, None, None]
+    m_idx = np.arange(t.size)[:, None, None]
     a_idx = np.arange(ax.size)[None, :, None]
-    rows[m_idx, a_idx, cols] = local[:, None, :] if local.ndim == 2 else local
+    rows[m_idx, a_idx, cols] = local[:, None, :]
     return rows
 
 
