@@ -9,14 +9,18 @@ order, interleaved so both see the same machine load:
   into stages by wrapping the functions that do the work: **build** (QP assembly), **elimination**
   (``PerchingQp.reduce``: equality elimination and the reduced matrices), **FoV** (linearising the
   rows (8)-(9) and scoring visibility), **solve** (the back-end call, ``qpsolvers.solve_problem``),
-  **certify** (Algorithm 1, ``certify_spline``) and **other** (the rest: Python glue, checks,
-  trajectory objects);
+  **certify** (Algorithm 1, ``certify_spline``), **workspace** (the clearance/workspace
+  certificates and rows of ``avp.safety``, when the planner has them) and **other** (the rest:
+  Python glue, checks, trajectory objects);
 * a naive pipeline: the same perching QP assembled with NumPy (the row builders of ``avp.qp``
   without any cache), solved in full form by DAQP through qpsolvers, and a floating-point Sturm
   check (``numpy.polynomial``, not sound) of the thrust bounds; no FoV rows.
 
 Prints medians, p95, p99 and max (ms) of both, their ratio, and the per-stage medians and mean
-shares. Nothing is asserted; the numbers are for this machine and this load.
+shares; then the floor of the solve stage: the reduced QP of each scenario (no FoV rows) solved
+through avp's path (``solve_perching_qp``), through ``qpsolvers.solve_problem`` alone, and by
+``daqp.solve`` called directly with two-sided rows (what DAQP itself costs). Nothing is asserted;
+the numbers are for this machine and this load.
 """
 
 from __future__ import annotations
@@ -42,7 +46,7 @@ from avp.qp.cost import gram
 from avp.qp.layout import N_AXES, YAW, layout_for
 from avp.timing import initial_durations
 
-STAGES = ("build", "elimination", "FoV", "solve", "certify")
+STAGES = ("build", "elimination", "FoV", "solve", "certify", "workspace")
 
 
 class StageTimer:
@@ -83,6 +87,9 @@ def instrumented(timer: StageTimer) -> Iterator[None]:
         (perception, "_score", "FoV"),  # before: one plan at a time
         (qpsolvers, "solve_problem", "solve"),
         (planner, "certify_spline", "certify"),
+        (planner, "certify_workspace", "workspace"),  # clearance/workspace certificates (issue 8)
+        (planner, "workspace_blocks", "workspace"),
+        (planner, "refinement_blocks", "workspace"),
     ]
     saved = []
     for obj, name, stage in targets:
@@ -204,6 +211,38 @@ def main() -> None:
     per["other"] = totals_a - sum(per.values())
     for s, v in per.items():
         print(f"{s:<24} {stats(v)} {v.sum() / totals_a.sum():>10.1%}")
+    solve_floor(args.repeats)
+
+
+def solve_floor(repeats: int) -> None:
+    import daqp
+
+    from avp.solve import _one_sided, solve_perching_qp
+
+    cfg = avp.PlannerConfig()
+    rows: dict[str, list[float]] = defaultdict(list)
+    for state, target in scenarios():
+        qp = assemble.build_perching_qp(state, target, cfg, initial_durations(state, target, cfg))
+        red = qp.reduce()
+        Gs, hs = _one_sided(red.G, red.lower, red.upper)
+        problem = qpsolvers.Problem(P=red.H.copy(), q=red.g, G=Gs, h=hs)
+        H, f, A = np.array(red.H), np.array(red.g), np.array(red.G)  # writable copies
+        hi = np.where(np.isfinite(red.upper), red.upper, 1e30)
+        lo = np.where(np.isfinite(red.lower), red.lower, -1e30)
+        sense = np.zeros(A.shape[0], dtype=np.int32)
+        calls = {
+            "avp solve_perching_qp (reduced QP)": lambda: solve_perching_qp(qp, cfg),
+            "qpsolvers.solve_problem (daqp)": lambda: qpsolvers.solve_problem(problem, solver="daqp"),
+            "daqp.solve direct, two-sided rows": lambda: daqp.solve(H, f, A, hi, lo, sense),
+        }
+        for _ in range(repeats):
+            for name, fn in calls.items():
+                t0 = time.perf_counter()
+                fn()
+                rows[name].append(time.perf_counter() - t0)
+    print(f"\n{'solve floor, no FoV rows (ms)':<44} {'median':>8} {'p95':>8} {'p99':>8} {'max':>8}")
+    for name, v in rows.items():
+        print(f"{name:<44} {stats(np.array(v))}")
 
 
 if __name__ == "__main__":
