@@ -24,12 +24,13 @@ from .errors import ConfigError
 __all__ = ["EXACT_BUDGET", "Bound", "BoundReport", "Certificate", "Violation", "certify_spline"]
 
 EXACT_BUDGET = 0.01
-"""Default time budget (s) of the exact fallback per :func:`certify_spline` call. Measured with
-``benchmarks/bench_bounds.py``: the planner's own polynomials never needed the exact path on the
-standard scenarios; on adversarial near-tangent, mixed-magnitude polynomials (degree 10-40) the
-exact path (Bernstein subdivision) has a median of ~0.3 ms and a p99 of ~12 ms, and a 10 ms
-budget leaves ~1 % of those undecided (UNKNOWN, never a wrong verdict). ``inf`` restores the
-unbounded, never-UNKNOWN behaviour."""
+"""Default time budget (s, wall clock) of the exact fallback per :func:`certify_spline` call.
+Measured with ``benchmarks/bench_bounds.py``: the planner's own polynomials never needed the
+exact path on the standard scenarios; on adversarial near-tangent, mixed-magnitude polynomials
+(degree 10-40) the exact path (Bernstein subdivision) takes a median of ~0.3 ms and at most
+~0.8 ms of CPU time (the previous Sturm path: median ~16 ms, max ~75 ms CPU), so 10 ms leaves
+room for a loaded machine; a cell still undecided then is UNKNOWN, never a wrong verdict. ``inf``
+restores the unbounded, never-UNKNOWN behaviour."""
 
 
 class Certificate(Enum):
