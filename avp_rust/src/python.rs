@@ -126,14 +126,14 @@ fn anticipate_py<'py>(
 /// target `s (3,)`, optical axis `axis_B (3,)`. Returns `(h (m,), d_x (m, 3), d_psi (m,),
 /// d_a (m, 3), distance (m,))`.
 #[pyfunction(name = "fov_gradient")]
-#[allow(clippy::type_complexity, clippy::too_many_arguments)]
+#[allow(clippy::type_complexity, clippy::too_many_arguments, non_snake_case)]
 fn fov_gradient_py<'py>(
     py: Python<'py>,
     x: PyReadonlyArray2<'py, f64>,
     psi: PyReadonlyArray1<'py, f64>,
     a: PyReadonlyArray2<'py, f64>,
     s: PyReadonlyArray1<'py, f64>,
-    axis_b: PyReadonlyArray1<'py, f64>,
+    axis_B: PyReadonlyArray1<'py, f64>,
     cos_half: f64,
     g: f64,
 ) -> PyResult<(
@@ -147,7 +147,7 @@ fn fov_gradient_py<'py>(
     let ps = contiguous("psi", psi.as_slice())?;
     let as_ = contiguous("a", a.as_slice())?;
     let ss = contiguous("s", s.as_slice())?;
-    let ds = contiguous("axis_B", axis_b.as_slice())?;
+    let ds = contiguous("axis_B", axis_B.as_slice())?;
     let pts = guarded(|| crate::fov::fov_gradient(xs, ps, as_, ss, ds, cos_half, g))
         .map_err(to_py_err)?;
     let m = pts.len();
