@@ -25,7 +25,7 @@ use num_bigint::BigInt;
 use num_integer::Integer;
 use num_traits::{One, Signed, ToPrimitive, Zero};
 
-use crate::exact::IntPoly;
+use crate::exact::{primitive, trim_int as trim, IntPoly};
 
 /// A deadline for the exact path. `Budget::UNLIMITED` never runs out.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -78,22 +78,6 @@ pub enum Isolation {
     Root { u: f64 },
     /// The budget ran out (or, never seen in practice, the bisection depth guard was reached).
     Unsure,
-}
-
-fn trim(mut p: IntPoly) -> IntPoly {
-    while p.last().is_some_and(|c| c.is_zero()) {
-        p.pop();
-    }
-    p
-}
-
-fn primitive(p: IntPoly) -> IntPoly {
-    let p = trim(p);
-    let g = p.iter().fold(BigInt::zero(), |g, c| g.gcd(c));
-    if g.is_zero() || g.is_one() {
-        return p;
-    }
-    p.into_iter().map(|c| c / &g).collect()
 }
 
 // ------------------------------------------------------------------ squarefreeness modulo a prime
@@ -451,6 +435,26 @@ mod tests {
         let want = mul(&ints(&[-1, 1]), &ints(&[-1, 2]));
         assert!(g == want || g.iter().map(|c| -c).collect::<Vec<_>>() == want);
         assert_eq!(divide_exact(&a, &want).len(), 3);
+    }
+
+    #[test]
+    fn halves_are_the_bernstein_coefficients_of_the_halved_polynomial() {
+        // p(u) = 3 - 7u + 2u^2 + 5u^3 - u^4; left half p(x/2), right half p((x + 1)/2)
+        let p = ints(&[3, -7, 2, 5, -1]);
+        let n = p.len() - 1;
+        let left_poly: IntPoly = p.iter().enumerate().map(|(k, c)| c << (n - k)).collect();
+        let mut right_poly = left_poly.clone(); // Taylor shift by 1
+        for i in 0..n {
+            for k in (i..n).rev() {
+                let (lo, hi) = right_poly.split_at_mut(k + 1);
+                lo[k] += &hi[0];
+            }
+        }
+        let (l, r, mid) = split(&bernstein_coefficients(&p));
+        assert_eq!(primitive(l), primitive(bernstein_coefficients(&left_poly)));
+        assert_eq!(primitive(r), primitive(bernstein_coefficients(&right_poly)));
+        // p(1/2) = 3 - 3.5 + 0.5 + 0.625 - 0.0625 > 0
+        assert_eq!(mid, 1);
     }
 
     #[test]

@@ -43,7 +43,7 @@ pub fn rational(x: f64) -> BigRational {
     }
 }
 
-fn trim_int(mut p: IntPoly) -> IntPoly {
+pub(crate) fn trim_int(mut p: IntPoly) -> IntPoly {
     while p.last().is_some_and(|c| c.is_zero()) {
         p.pop();
     }
@@ -51,7 +51,7 @@ fn trim_int(mut p: IntPoly) -> IntPoly {
 }
 
 /// Divides by the (positive) gcd of the coefficients.
-fn primitive(p: IntPoly) -> IntPoly {
+pub(crate) fn primitive(p: IntPoly) -> IntPoly {
     let p = trim_int(p);
     let g = p.iter().fold(BigInt::zero(), |g, c| g.gcd(c));
     if g.is_zero() || g.is_one() {
