@@ -10,6 +10,7 @@ import numpy as np
 
 import avp
 import avp.qp.assemble as assemble
+import avp.solve
 from avp.qp.assemble import build_perching_qp
 from avp.qp.cost import cost_matrix, gram
 from avp.qp.layout import layout_for
@@ -36,21 +37,34 @@ def test_right_hand_side_changes_reuse_the_factorisation_exactly() -> None:
     assemble._FACTORS.clear()
     Z2, cp2, H2, g2 = _qp([-2.0, 0.4, 2.0], T).elimination
     assert np.array_equal(Z2, Zb) and np.array_equal(cp2, cpb) and np.array_equal(H2, Hb) and np.array_equal(g2, gb)
-    # other durations: another factorisation (equal segments at another total give a matrix equal
-    # up to rounding, often with the same fingerprint: kept side by side, told apart exactly)
-    c = _qp([-2.0, 0.4, 2.0], [0.9, 0.9, 0.9])
-    d = _qp([-2.0, 0.4, 2.0], [1.3, 1.3, 1.3])
-    Ac, Ad = c.stacked_equalities()[0], d.stacked_equalities()[0]
-    assert np.max(np.abs(Ac - Ad)) < 1e-12 and not np.array_equal(Ac, Ad)
-    assert assemble._fingerprint(Ac) == assemble._fingerprint(Ad)  # the hard case: one bucket
-    assert d.elimination[0] is not c.elimination[0]
-    assert _qp([0.0, 0.0, 2.0], [0.9, 0.9, 0.9]).elimination[0] is c.elimination[0]
-    assert _qp([0.0, 0.0, 2.0], [1.3, 1.3, 1.3]).elimination[0] is d.elimination[0]
-    assemble._FACTORS.clear()
-    b.__dict__.pop("elimination")
-    Zb = b.elimination[0]
+    # other durations: another factorisation
     assert _qp([-2.0, 0.4, 2.0], [0.9, 0.8, 0.75]).elimination[0] is not Zb
     assert assemble._cached_factors() == 2
+
+
+def test_time_scaled_durations_reuse_the_factorisation_to_rounding() -> None:
+    """Scaling every duration (the time search) changes the normalised A and P by rounding only:
+    the factorisation is reused, the equalities of the new QP still hold, and the plan equals the
+    one computed from scratch to rounding."""
+    config = avp.PlannerConfig(fov=avp.FovConfig(enabled=False))
+    state = avp.State.hover(np.array([-2.5, 0.3, 2.2]))
+    target = avp.PerchTarget.from_incline(np.array([0.0, 0.0, 1.5]), math.radians(60.0))
+    T = np.array([0.7, 0.55, 0.4])
+    assemble._FACTORS.clear()
+    base = build_perching_qp(state, target, config, T)
+    scaled = build_perching_qp(state, target, config, 1.15 * T)
+    A0, A1 = base.stacked_equalities()[0], scaled.stacked_equalities()[0]
+    assert not np.array_equal(A0, A1) and np.max(np.abs(A0 - A1)) <= assemble.REUSE_TOL * np.max(np.abs(A0))
+    assert base.elimination[0] is scaled.elimination[0] and assemble._cached_factors() == 1
+    Z, c_p, _, _ = scaled.elimination
+    A1, b1 = scaled.stacked_equalities()
+    assert np.max(np.abs(A1 @ Z)) < 1e-12 * np.max(np.abs(A1))
+    assert np.max(np.abs(A1 @ c_p - b1)) < 1e-12 * max(1.0, np.max(np.abs(b1)))
+    reused = avp.solve.solve_perching_qp(scaled, config)
+    assemble._FACTORS.clear()
+    fresh = avp.solve.solve_perching_qp(build_perching_qp(state, target, config, 1.15 * T), config)
+    assert reused.ok and fresh.ok
+    np.testing.assert_allclose(reused.c_hat, fresh.c_hat, rtol=0, atol=1e-9 * np.max(np.abs(fresh.c_hat)))
 
 
 def test_cache_is_bounded(monkeypatch) -> None:

@@ -8,9 +8,13 @@ equalities then hold to rounding whatever the solver's tolerance.
 
 The factorisation depends on the equality *matrix* ``A`` (durations and constraint pattern) and
 the cost ``P``, not on the right-hand side ``b`` (the state and target values): it is cached per
-``(A, P)`` (:data:`ELIMINATION_CACHE_SIZE` entries, found by a cheap fingerprint and confirmed by
-exact comparison, so a hit is exact), and only ``c_p`` and the linear cost term are recomputed
-for a new ``b``.
+``(A, P)`` (:data:`ELIMINATION_CACHE_SIZE` entries, found by a cheap fingerprint), and only
+``c_p`` and the linear cost term are recomputed for a new ``b``. Because rows and cost are
+normalised by the mean duration, scaling every duration by one factor (the time search, a
+replan with the same split) changes ``A`` and ``P`` only by rounding: a cached factorisation
+whose ``A`` and ``P`` are within :data:`REUSE_TOL` (relative, entrywise) of the new ones is
+reused. Its null space then satisfies the new equalities to the same rounding level, and the
+particular solution ``c_p`` is checked against the new ``A`` as always.
 """
 
 from __future__ import annotations
@@ -42,6 +46,11 @@ RANK_TOL = 1e-10
 ELIMINATION_CACHE_SIZE = 256
 """Factorisations kept (least recently used first out); each holds a few ``n x n`` arrays."""
 
+REUSE_TOL = 1e-13
+"""Largest entrywise difference, relative to the largest entry, between a cached ``(A, P)`` and
+a new one for the cached factorisation to be reused (rounding of the duration normalisation is
+~1e-16 relative)."""
+
 
 @dataclass(frozen=True)
 class _Factor:
@@ -59,8 +68,8 @@ class _Factor:
 
 
 _FACTORS: OrderedDict[tuple[object, ...], list[_Factor]] = OrderedDict()
-"""Buckets of factorisations by ``(shapes, fingerprints)``; a bucket can hold matrices that are
-equal up to rounding (QPs of similar durations), told apart by exact comparison."""
+"""Buckets of factorisations by ``(shapes, fingerprints to 9 digits)``; a bucket can hold
+several matrices that the fingerprint does not tell apart."""
 _FACTORS_LOCK = threading.Lock()
 _WEIGHTS = np.random.default_rng(0).uniform(0.5, 1.5, 1 << 16)
 
@@ -71,7 +80,7 @@ def _read_only(M: Array) -> Array:
 
 
 def _fingerprint(M: Array) -> float:
-    """A cheap, position-sensitive checksum of ``M`` (hits are confirmed by exact comparison)."""
+    """A cheap, position-sensitive checksum of ``M`` (hits are confirmed by comparison)."""
     flat = M.reshape(-1)
     n = min(flat.size, _WEIGHTS.size)
     return float(flat[:n] @ _WEIGHTS[:n]) + float(flat[n:].sum())
@@ -82,12 +91,20 @@ def _cached_factors() -> int:
     return sum(len(b) for b in _FACTORS.values())
 
 
+def _close(M: Array, N: Array) -> bool:
+    """``M`` equals ``N``, or differs by at most :data:`REUSE_TOL` relative (entrywise)."""
+    if np.array_equal(M, N):
+        return True
+    scale = max(1.0, float(np.max(np.abs(M)))) if M.size else 1.0
+    return bool(np.max(np.abs(M - N)) <= REUSE_TOL * scale)
+
+
 def _factor(A: Array, P: Array) -> _Factor:
-    """Pivoted QR of ``A^T`` and the reduced Hessian, cached per exact ``(A, P)``."""
-    key = (A.shape, P.shape, _fingerprint(A), _fingerprint(P))
+    """Pivoted QR of ``A^T`` and the reduced Hessian, cached per ``(A, P)`` up to rounding."""
+    key = (A.shape, P.shape, f"{_fingerprint(A):.9e}", f"{_fingerprint(P):.9e}")
     with _FACTORS_LOCK:
         for hit in _FACTORS.get(key, ()):
-            if np.array_equal(hit.A, A) and np.array_equal(hit.P, P):
+            if _close(hit.A, A) and _close(hit.P, P):
                 _FACTORS.move_to_end(key)
                 return hit
     Q, R, piv = scipy.linalg.qr(A.T, pivoting=True, check_finite=False)
