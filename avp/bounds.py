@@ -227,7 +227,12 @@ def certify_spline(
     g = float(g)
     if not math.isfinite(g):
         raise ConfigError("g", f"must be finite, got {g!r}")
-    budget = _limit("budget", budget)
+    try:
+        budget = float(budget)
+    except (TypeError, ValueError):
+        raise ConfigError("budget", f"must be a number of seconds, got {budget!r}") from None
+    if math.isnan(budget) or budget < 0.0:
+        raise ConfigError("budget", f"must be >= 0 s (inf for no limit), got {budget!r}")
     c = np.ascontiguousarray(coeffs, dtype=np.float64)
     k = np.ascontiguousarray(knots, dtype=np.float64)
     if c.ndim != 3 or c.shape[1] != 4:
