@@ -21,6 +21,7 @@ pub mod exact;
 pub mod fov;
 pub mod poly;
 pub mod regions;
+pub mod roll;
 pub mod spline;
 pub mod sturm;
 
