@@ -23,9 +23,9 @@ use std::time::{Duration, Instant};
 
 use num_bigint::BigInt;
 use num_integer::Integer;
-use num_traits::{One, Signed, ToPrimitive, Zero};
+use num_traits::{One, ToPrimitive, Zero};
 
-use crate::exact::{primitive, trim_int as trim, IntPoly};
+use crate::exact::{primitive, sign, sign_variations, trim_int as trim, IntPoly};
 
 /// A deadline for the exact path. `Budget::UNLIMITED` never runs out.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -253,25 +253,8 @@ pub fn bernstein_coefficients(p: &[BigInt]) -> IntPoly {
     (0..=n).map(|j| &r[n - j] * (&l / &binoms[j])).collect()
 }
 
-fn sign_variations(b: &[BigInt]) -> usize {
-    let mut count = 0;
-    let mut last = 0i8;
-    for c in b {
-        let s = if c.is_positive() {
-            1
-        } else if c.is_negative() {
-            -1
-        } else {
-            0
-        };
-        if s != 0 {
-            if last != 0 && s != last {
-                count += 1;
-            }
-            last = s;
-        }
-    }
-    count
+fn variations(b: &[BigInt]) -> usize {
+    sign_variations(b.iter().map(sign))
 }
 
 /// Divides every coefficient by the largest common power of two.
@@ -306,13 +289,7 @@ fn split(b: &[BigInt]) -> (IntPoly, IntPoly, i8) {
         left[k] = &w[0] << (n - k);
         right[n - k] = &w[n - k] << (n - k);
     }
-    let mid = if w[0].is_positive() {
-        1
-    } else if w[0].is_negative() {
-        -1
-    } else {
-        0
-    };
+    let mid = sign(&w[0]);
     remove_twos(&mut left);
     remove_twos(&mut right);
     (left, right, mid)
@@ -329,7 +306,7 @@ fn bisect(b0: IntPoly, same_sign: bool, budget: &Budget) -> Isolation {
     // (coefficients, left end, depth): the interval [lo, lo + 2^-depth] (lo only estimates)
     let mut stack: Vec<(IntPoly, f64, u32)> = vec![(b0, 0.0, 0)];
     while let Some((b, lo, d)) = stack.pop() {
-        let v = sign_variations(&b);
+        let v = variations(&b);
         let half = 0.5f64.powi(d as i32 + 1);
         if v == 0 {
             continue;
@@ -359,7 +336,7 @@ pub fn root_in_unit(p: &[BigInt], budget: &Budget) -> Isolation {
     }
     // Cheap exits first: all Bernstein coefficients of one sign.
     let b = bernstein_coefficients(&p);
-    let v = sign_variations(&b);
+    let v = variations(&b);
     if v == 0 {
         return Isolation::NoRoot;
     }
@@ -391,6 +368,7 @@ pub fn root_in_unit(p: &[BigInt], budget: &Budget) -> Isolation {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use num_traits::Signed;
 
     fn ints(v: &[i64]) -> IntPoly {
         v.iter().map(|&x| BigInt::from(x)).collect()

@@ -162,26 +162,34 @@ pub fn sturm_chain(p: &[BigInt]) -> Vec<IntPoly> {
     chain
 }
 
-fn variations(chain: &[IntPoly], num: &BigInt, den: &BigInt) -> usize {
+/// Sign of a big integer as `-1`, `0` or `1`.
+pub(crate) fn sign(c: &BigInt) -> i8 {
+    if c.is_positive() {
+        1
+    } else if c.is_negative() {
+        -1
+    } else {
+        0
+    }
+}
+
+/// Sign variations of a sequence of signs, zeros skipped (Sturm's and Descartes' rules).
+pub(crate) fn sign_variations(signs: impl IntoIterator<Item = i8>) -> usize {
     let mut count = 0;
     let mut last = 0i8;
-    for s in chain {
-        let v = eval_hom(s, num, den);
-        let sg: i8 = if v.is_positive() {
-            1
-        } else if v.is_negative() {
-            -1
-        } else {
-            0
-        };
-        if sg != 0 {
-            if last != 0 && sg != last {
+    for s in signs {
+        if s != 0 {
+            if last != 0 && s != last {
                 count += 1;
             }
-            last = sg;
+            last = s;
         }
     }
     count
+}
+
+fn variations(chain: &[IntPoly], num: &BigInt, den: &BigInt) -> usize {
+    sign_variations(chain.iter().map(|s| sign(&eval_hom(s, num, den))))
 }
 
 /// Number of distinct real roots of `p` in the closed interval `[a, b]`, exactly. Roots at the
