@@ -87,7 +87,7 @@ def instrumented(timer: StageTimer) -> Iterator[None]:
         (perception, "_score", "FoV"),  # before: one plan at a time
         (qpsolvers, "solve_problem", "solve"),
         (planner, "certify_spline", "certify"),
-        (planner, "certify_workspace", "workspace"),  # clearance/workspace certificates (issue 8)
+        (planner, "certify_workspace", "workspace"),  # clearance/workspace certificates (avp.safety)
         (planner, "workspace_blocks", "workspace"),
         (planner, "refinement_blocks", "workspace"),
     ]
