@@ -46,20 +46,21 @@ from .config import (
     BoundsPolicy,
     ContactVelocity,
     HalfSpace,
+    OverhangFlip,
     PlannerConfig,
     PreImpactMode,
     QpForm,
     Relaxation,
-    TimeAllocation,
     Sphere,
+    TimeAllocation,
     TimeSearch,
     VehicleLimits,
     Workspace,
 )
 from .metrics import Visibility, visibility
 from .planner import PlanResult, PlanStatus, PlanTimings, plan, plan_detailed
-from .safety import SafetyReport
 from .replan import ReplanAction, ReplanConfig, Replanner, ReplanStep
+from .safety import SafetyReport
 from .trajectory import Derivative, FlatOutput, Provenance, Trajectory
 from .types import PerchTarget, State
 
@@ -75,6 +76,7 @@ __all__ += [
     "FovConfig",
     "FovPointPolicy",
     "HalfSpace",
+    "OverhangFlip",
     "PerchTarget",
     "PlanResult",
     "PlanStatus",

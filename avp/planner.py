@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass, field, replace
 from enum import Enum
@@ -13,6 +14,7 @@ import numpy.typing as npt
 
 from .bounds import BoundReport, certify_spline
 from .config import PlannerConfig, PreImpactMode, Relaxation
+from .frames import MAX_CONTACT_ROLL, contact_frame_error
 from .errors import (
     BoundsNotCertifiedError,
     ConfigError,
@@ -24,7 +26,14 @@ from .errors import (
 )
 from .qp.assemble import ConstraintBlock, build_perching_qp
 from .qp.layout import DecisionLayout, layout_for
-from .safety import SafetyReport, certify_workspace, check_endpoints, refinement_blocks, workspace_blocks
+from .request import check_request
+from .safety import (
+    SafetyReport,
+    certify_workspace,
+    check_endpoints,
+    refinement_blocks,
+    workspace_blocks,
+)
 from .solve import WARM_START_SOLVERS, QpOutcome, solve_perching_qp
 from .timing import check_durations, initial_durations
 from .trajectory import Provenance, Trajectory
@@ -92,8 +101,9 @@ class PlanResult:
     bounds:
         The :class:`~avp.bounds.BoundReport` of the returned (or last) trajectory.
     relaxations:
-        What was relaxed to obtain certified bounds (:class:`~avp.config.Relaxation`); non-empty
-        exactly when the status is ``SOLVED_RELAXED``.
+        What was relaxed for the returned (or, on failure, the last) trajectory
+        (:class:`~avp.config.Relaxation`); a certified plan has it non-empty exactly when the
+        status is ``SOLVED_RELAXED``.
     safety:
         The :class:`~avp.safety.SafetyReport` (workspace certificates) of the returned (or last)
         trajectory; ``None`` when no workspace limit is active or nothing was solved.
@@ -148,6 +158,7 @@ class _Attempt:
     solve: float
     certify: float = 0.0
     safety: SafetyReport | None = None
+    relaxations: tuple[Relaxation, ...] = ()
 
     @property
     def safe(self) -> bool:
@@ -301,7 +312,13 @@ def plan_detailed(
     t_start = time.perf_counter()
     cfg = _check_inputs(state, target, config)
     T0 = check_durations(durations, cfg) if durations is not None else initial_durations(state, target, cfg)
+    check_request(state, target, cfg, float(T0.sum()))  # physical sense of the request
     log: list[str] = [f"durations {np.round(T0, 4).tolist()} s ({'given' if durations is not None else 'allocated'})"]
+    frame_error = contact_frame_error(target.R_WS, cfg.g)
+    if frame_error > 1e-6:
+        log.append(f"contact attitude: R_WS is not representable by the attitude construction (13) (roll "
+                   f"beyond {math.degrees(MAX_CONTACT_ROLL):.1f} deg); b3 = s3 exactly, the rotation about s3 "
+                   f"differs from R_WS by {math.degrees(frame_error):.2f} deg")
     build = solve = certify = 0.0
     attempts = 0
     relaxed: list[Relaxation] = []
@@ -314,7 +331,7 @@ def plan_detailed(
         if traj is not None:
             traj.provenance = Provenance(
                 status=status.value,
-                relaxations=tuple(r.name for r in relaxed) if status.has_trajectory else (),
+                relaxations=tuple(r.name for r in attempt.relaxations) if attempt else (),
                 bounds_certified=bool(report is not None and report.certified and status.has_trajectory),
                 workspace_certified=bool(attempt is not None and attempt.safe and attempt.safety is not None),
                 fov_dropped=bool(attempt and attempt.fov_dropped),
@@ -323,7 +340,7 @@ def plan_detailed(
             status, traj, T, attempt.outcome if attempt else None,
             tuple(log), PlanTimings(build, solve, certify, time.perf_counter() - t_start),
             bool(attempt and attempt.fov_dropped), max(attempts - 1, 0),
-            report, tuple(relaxed) if status.has_trajectory else (),
+            report, attempt.relaxations if attempt else (),
             attempt.safety if attempt else None,
         )
 
@@ -356,6 +373,7 @@ def plan_detailed(
             attempt_cfg = stage_cfg if first or not stage_cfg.fov.enabled else replace(
                 stage_cfg, fov=replace(stage_cfg.fov, enabled=False))
             attempt = _solve_at(state, target, attempt_cfg, T, log, previous, initvals)
+            attempt.relaxations = tuple(relaxed)
             attempts += 1
             build += attempt.build
             solve += attempt.solve
@@ -379,6 +397,7 @@ def plan_detailed(
                 log.append("bounds certified (Algorithm 1, exact)")
                 if attempt_cfg is not stage_cfg:
                     with_fov, fov_report = _with_fov(state, target, stage_cfg, T, log, previous, initvals)
+                    with_fov.relaxations = attempt.relaxations
                     attempts += 1
                     build, solve, certify = (build + with_fov.build, solve + with_fov.solve,
                                              certify + with_fov.certify + fov_report[1])
@@ -401,8 +420,20 @@ def plan_detailed(
         log.append(f"no duration in the search and no relaxation kept the workspace certified "
                    f"({attempts} solves): {failed} could not be met")
         return finish(PlanStatus.WORKSPACE_NOT_CERTIFIED, unsafe, unsafe.trajectory.durations)
-    log.append(f"no duration in the search and no relaxation gave certified bounds ({attempts} solves)")
+    log.append(f"no duration in the search and no relaxation gave certified bounds ({attempts} solves); "
+               + _measured(last.trajectory, target, cfg))
     return finish(PlanStatus.BOUNDS_NOT_CERTIFIED, last, last.trajectory.durations)
+
+
+def _measured(traj: Trajectory, target: PerchTarget, cfg: PlannerConfig) -> str:
+    """The last plan's extremes on a 1 ms grid against the limits, for the failure message."""
+    t = traj.sample(1e-3)
+    f = traj.thrust(t)
+    lim = cfg.limits
+    tilt = float(np.linalg.norm(traj.body_rates(t)[:, :2], axis=1).max())
+    return (f"the last plan ({traj.duration:.2f} s, incline {np.degrees(target.incline):.0f} deg) measured "
+            f"thrust {f.min():.2f}..{f.max():.2f} m/s^2 against limits {lim.accel_min:.2f}..{lim.accel_max:.2f}, "
+            f"tilt rate up to {tilt:.1f} rad/s against {lim.tilt_rate_max:g}")
 
 
 def _with_fov(

@@ -1,5 +1,5 @@
 """Public value types at the planner boundary: the vehicle :class:`State` and the
-:class:`PerchTarget` with its frame S (DESIGN.md "Frames and conventions").
+:class:`PerchTarget` with its frame S (``docs/conventions.md``).
 
 All vectors are in the world frame W (z up) unless a name says otherwise; SI units.
 """
@@ -69,7 +69,16 @@ class PerchTarget:
     pad is level). Incline is the angle between ``s3`` and ``e3``: 0 floor, 90 deg wall,
     180 deg ceiling.
 
-    The target is static; :meth:`at` is the hook a moving target (roadmap, seed 004) overrides.
+    A plan ends with ``attitude(t_f)[:, 2] == s3`` (thrust axis along the normal) for every
+    target, and with ``attitude(t_f) == R_WS`` exactly (to rounding) whenever the frame's roll in
+    the attitude construction (13) (yaw-pitch-roll, ``cos(roll) = |s3z| / sqrt(s2z^2 + s3z^2)``) is
+    at most :data:`avp.frames.MAX_CONTACT_ROLL` (75.5 deg); ``from_incline`` and ``from_normal``
+    without ``up_slope`` always give roll 0. Beyond it (a horizontal normal with a tilted or
+    vertical ``s2``) the rotation about ``s3`` is the closest the construction reaches, off by
+    :func:`avp.frames.contact_frame_error` (the plan's log says so).
+
+    The target is static; :meth:`at` is the hook a moving target overrides (roadmap: moving
+    platforms, as in Gao et al., "Adaptive Tracking and Perching for Quadrotor in Dynamic Scenarios").
     """
 
     point: Array
@@ -116,14 +125,20 @@ class PerchTarget:
     @classmethod
     def from_incline(cls, point: Any, incline: float, heading: float = 0.0) -> PerchTarget:
         """A pad inclined by ``incline`` (rad, 0 floor .. pi/2 wall .. pi ceiling) that faces a
-        vehicle flying horizontally along ``heading`` (rad): ``s3 = cos(i) e3 - sin(i) h``."""
+        vehicle flying horizontally along ``heading`` (rad): ``s3 = cos(i) e3 - sin(i) h``,
+        ``s1 = sin(i) e3 + cos(i) h`` and ``s2 = e3 x h``, continuous in ``i`` on ``[0, pi]``
+        (a floor has ``s1 = h``, a ceiling ``s1 = -h``)."""
         inc = v.finite_float("target.incline", incline)
         if not 0.0 <= inc <= math.pi:
             raise ConfigError("target.incline", f"must be in [0, pi] rad (0 floor, pi ceiling), got {inc}")
         hd = v.finite_float("target.heading", heading)
         h = np.array([math.cos(hd), math.sin(hd), 0.0])
-        s3 = math.cos(inc) * np.array([0.0, 0.0, 1.0]) - math.sin(inc) * h
-        return cls.from_normal(point, s3, approach_heading=hd)
+        e3 = np.array([0.0, 0.0, 1.0])
+        # The frame turns about s2 = e3 x h with the incline, continuously up to a ceiling
+        # (s1 = -h at pi): from_normal's level-pad fallback (s1 = +h) would flip it at pi.
+        s3 = math.cos(inc) * e3 - math.sin(inc) * h
+        s1 = math.sin(inc) * e3 + math.cos(inc) * h
+        return cls(point=point, R_WS=np.column_stack([s1, np.cross(s3, s1), s3]))
 
     # -- frame axes -----------------------------------------------------------------------
     @property

@@ -15,10 +15,13 @@
 pub mod anticipation;
 pub mod bounds;
 pub mod certify;
+pub mod descartes;
 pub mod error;
 pub mod exact;
+pub mod fov;
 pub mod poly;
 pub mod regions;
+pub mod roll;
 pub mod spline;
 pub mod sturm;
 
