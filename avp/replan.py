@@ -108,7 +108,8 @@ class ReplanConfig:
         20 ms motor lag (up to 8 cm at the end of a wall perch), far above the 3 mm / 1 cm/s
         odometry noise, so noise never re-anchors. With anchoring, exact-estimate runs hold the
         first plan and match one-shot exactly (100 % vs 100 % over 15 seeds x 6 conditions);
-        issue 9 reported 1/5 such perches when every replan re-anchored on noisy odometry.
+        a closed-loop report from an independent simulator measured 1/5 such perches when every
+        replan re-anchored on noisy odometry.
     target_tolerance:
         Change (m) of the estimated pad centre (and ``target_tolerance`` rad of its normal)
         below which, when anchored, the step holds the committed plan without solving. 5 mm:

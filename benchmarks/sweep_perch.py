@@ -1,7 +1,7 @@
 """One-shot vs AVP in the realistic simulator: success with Wilson 95 % intervals over a grid
 of conditions and one-at-a-time noise axes, errors in s1/s2/normal, plots, replan step latency.
 
-    python benchmarks/sweep_perch.py --trials 100                       # base grid (issue 9 target)
+    python benchmarks/sweep_perch.py --trials 100                       # base grid (the target)
     python benchmarks/sweep_perch.py --trials 30 --axes --out sweep_out  # + success vs each knob
     python benchmarks/sweep_perch.py --trials 20 --perfect               # perfect estimate
 

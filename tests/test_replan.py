@@ -1,4 +1,4 @@
-"""The robust replanner (issue 9): anchoring, hold, reach budget, CANNOT_REACH, certified commits,
+"""The robust replanner: anchoring, hold, reach budget, CANNOT_REACH, certified commits,
 no exception for solver failures; the trackability certificate; one vehicle and one camera."""
 
 from __future__ import annotations

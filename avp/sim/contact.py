@@ -161,7 +161,7 @@ def detect_contact(
 
 @dataclass(frozen=True)
 class PerchCriteria:
-    """Success of a perch judged at the plan's contact time (issue 9's definition).
+    """Success of a perch judged at the plan's contact time (the evaluation's definition).
 
     At ``t_eval`` = the final committed plan's contact time ``t_f`` (or the moment the centre of
     mass reaches the pad plane, if that comes first, since the vehicle cannot pass the wall):

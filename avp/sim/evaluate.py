@@ -299,7 +299,7 @@ def compare(
     return comp
 
 
-# -- sweeps over realism knobs (issue 9) ---------------------------------------------------------
+# -- sweeps over realism knobs -----------------------------------------------------------------------
 
 
 def wilson_interval(successes: int, n: int, z: float = 1.959964) -> tuple[float, float]:
@@ -317,7 +317,7 @@ def wilson_interval(successes: int, n: int, z: float = 1.959964) -> tuple[float,
 class SimConfig:
     """Every realism knob of a sweep, as flat scalars (for CLI flags or a TOML table).
 
-    The defaults are issue 9's "realistic" point: 20 ms motor lag through a rotor mixer,
+    The defaults are the "realistic" point: 20 ms motor lag through a rotor mixer,
     odometry at 200 Hz with 3 mm / 1 cm/s white noise and 5 mm/sqrt(s) drift, detections at
     10 Hz in the FoV with 50 ms latency, 10 % dropouts, range-growing noise (Fig. 9), a 3 %
     range scale bias of random sign and a 2 deg tilt of the measured normal.
@@ -541,7 +541,7 @@ def sweep(
     Parameters
     ----------
     config:
-        :class:`SimConfig` (default: issue 9's realistic point).
+        :class:`SimConfig` (default: the realistic point).
     vary:
         One-at-a-time axes: ``{field: values}`` with ``field`` a numeric :class:`SimConfig` field
         (e.g. ``{"camera_scale_bias": (0, 0.03, 0.06), "motor_time_constant": (0, 0.02, 0.04)}``);
