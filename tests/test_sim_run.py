@@ -64,7 +64,8 @@ def test_avp_beats_one_shot_under_localisation_noise_at_7_5_m():
     assert sum(r.success for r in avp_) >= sum(r.success for r in one)
     # far detections are noisier than near ones (Fig. 9): the fused estimate improves in flight
     for r in avp_:
-        assert r.detections[-1, 3] < np.linalg.norm(r.initial_estimate_error)
+        if r.final_plan is not None:  # a run without a (non-relaxed) first plan never flies
+            assert r.detections[-1, 3] < np.linalg.norm(r.initial_estimate_error)
 
 
 def _poly_eval(coeffs, knots, t, order):

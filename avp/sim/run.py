@@ -7,7 +7,8 @@ measure. One run:
    (:class:`~avp.sim.camera.CameraSensor`) takes ``initial_frames`` detections of the pad and the
    user-side :class:`~avp.sim.estimator.TargetEstimator` fuses them: that is the first target
    estimate. If the pad is not visible from the start there is no run.
-2. ``Mode.ONE_SHOT`` plans once from that estimate and odometry and flies the plan.
+2. ``Mode.ONE_SHOT`` plans once from that estimate and odometry and flies the plan (a relaxed
+   plan only with ``ReplanConfig.allow_relaxed``, the same rule as AVP's and ``avp.plan``'s).
    ``Mode.AVP`` hands the estimate to a :class:`~avp.replan.Replanner` and calls
    :meth:`~avp.replan.Replanner.step` every ``1 / replan_rate_hz`` s (30 Hz) with the odometry
    estimate and the current fused target; the camera keeps detecting while the pad is in view.
@@ -475,6 +476,9 @@ def simulate(
         except AvpError as exc:
             result, reason = None, f"{type(exc).__name__}: {exc}"
         solve_times.append(time.perf_counter() - w0)
+        if result is not None and result.ok and result.relaxations and not rcfg.allow_relaxed:
+            reason = "relaxed plan (allow_relaxed is off)"  # as avp.plan(...) refuses it by default
+            result = None
         if result is None or not result.ok or result.trajectory is None:
             return finish(f"no plan: {reason}", solve_times=np.array(solve_times))
         plan0 = result.trajectory
