@@ -97,7 +97,7 @@ class LineOptions:
     recovery_distance: float = 1.0
     recovery_height_margin: float = 0.3
     ground_margin: float = 0.02
-    flip_window: tuple[float, float] = (0.6, 0.2)
+    flip_window: tuple[float, float] = (0.5, 0.15)
     flip_thrust: float = 4.0
 
     def __post_init__(self) -> None:
