@@ -250,10 +250,12 @@ def clearance_poly(pos: list[DyadicPoly], A: Array, B: Array, r: float) -> tuple
     a = [DyadicPoly.const(float(x)) for x in A]
     v = [DyadicPoly.const(float(B[i])) - a[i] for i in range(3)]
     e = [pos[i] - a[i] for i in range(3)]
-    cross = [e[1] * v[2] - e[2] * v[1], e[2] * v[0] - e[0] * v[2], e[0] * v[1] - e[1] * v[0]]
+    # |e x v|^2 = |e|^2 |v|^2 - (e . v)^2 (Lagrange's identity): 4 products of polynomials
     vv = v[0] * v[0] + v[1] * v[1] + v[2] * v[2]
+    ev = e[0] * v[0] + e[1] * v[1] + e[2] * v[2]
+    ee = e[0] * e[0] + e[1] * e[1] + e[2] * e[2]
     rr = DyadicPoly.const(r) * DyadicPoly.const(r)
-    F = rr * vv - (cross[0] * cross[0] + cross[1] * cross[1] + cross[2] * cross[2])
+    F = (rr - ee) * vv + ev * ev
     vv_f = _round_down_pos(vv.c[0], vv.e)
     return F, math.nextafter(1.0 / vv_f, math.inf)
 

@@ -83,6 +83,9 @@ class LineOptions:
         contact (after the start of the recovery, in reverse), with at least ``flip_thrust``
         (m/s^2) along ``w`` meanwhile (:func:`avp.qp.line.flip_blocks`). The upside-down phase
         is a coast faster than free fall, so it must be short in absolute time.
+    flip_time:
+        Time (s) added to the allocated perch duration for a 180 deg pitch, pro rata above
+        90 deg (the allocation rule of :class:`~avp.config.TimeAllocation` knows no attitude).
     """
 
     ground_z: float | None = None
@@ -99,6 +102,7 @@ class LineOptions:
     ground_margin: float = 0.02
     flip_window: tuple[float, float] = (0.5, 0.15)
     flip_thrust: float = 4.0
+    flip_time: float = 0.8
 
     def __post_init__(self) -> None:
         if self.ground_z is not None:
@@ -367,6 +371,9 @@ def _search(build: Any, certify: Any, factors: tuple[float, ...], T0: Array, cfg
             continue
         traj = qp.trajectory(outcome.c_hat, cfg.g)
         report = _bounds(traj, cfg)
+        if not report.certified and best[0] is not None:  # the line checks cannot rescue it
+            log.append(f"{label} x{factor:g} (T = {T.sum():.3f} s): bounds NOT certified")
+            continue
         certs = certify(traj)
         bad = [c for c in certs if not c.ok]
         ok = report.certified and not bad
@@ -421,6 +428,8 @@ def plan_line(
     if distance < cfg.min_distance and float(np.linalg.norm(state.velocity)) < 0.1:
         raise ConfigError("line", f"the contact point is {distance:.3f} m from a start at rest; nothing to plan")
     total = duration if duration is not None else cfg.time_allocation.total(distance, float(np.linalg.norm(state.velocity)))
+    if duration is None:
+        total += opts.flip_time * max(0.0, line.pitch - math.pi / 2) / (math.pi / 2)
     total = v.positive_float("duration", total)
     T0 = np.full(cfg.n_segments, total / cfg.n_segments)
     factors = (1.0,) + (cfg.bounds.schedule() if cfg.bounds.certify else ())
@@ -457,8 +466,11 @@ def plan_line(
             return run_checks(checks, {"recovery": traj.knots})
 
         build = lambda T: _recovery_qp(perch, point, contact, line, cfg, opts, T)  # noqa: E731
-        recovery, rec_ok, rec_report, rcerts, _rf = _search(build, certify_recovery, (1.0,), rT0, cfg, log, "recovery")
+        recovery, rec_ok, rec_report, rcerts = None, False, None, []
+        if contact.n[2] >= 0.0 or line.contact_speed != 0.0:
+            recovery, rec_ok, rec_report, rcerts, _rf = _search(build, certify_recovery, (1.0,), rT0, cfg, log, "recovery")
         if not rec_ok and line.contact_speed == 0.0:
+            # Upside down (or when the QP recovery fails): fly the perch backwards to its start.
             back = reversed_trajectory(perch, perch.tf)
             back_report = _bounds(back, cfg)
             back_certs = certify_recovery(back)
