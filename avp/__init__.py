@@ -88,3 +88,10 @@ __all__ += [
     "plan_detailed",
     "visibility",
 ]
+
+# Line and powerline perches (docs/lines.md)
+from .line import LineTarget, LineYaw
+from .line_planner import LineOptions, LinePlanResult, LineStatus, plan_line
+
+__all__ += ["LineOptions", "LinePlanResult", "LineStatus", "LineTarget", "LineYaw", "plan_line"]
+
