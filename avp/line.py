@@ -267,8 +267,11 @@ def _contact_yaw(mode: LineYaw, d: Array, n: Array, near: float) -> float | None
     else:
         # b2 along d: b2_des is the horizontal vector of span(d, n).
         b2 = n[2] * d - d[2] * n
-        if np.linalg.norm(b2) < 1e-9:
-            b2 = d
+        nb = float(np.linalg.norm(b2))
+        if nb < 1e-9 or np.linalg.norm(np.cross(b2 / nb, n)) < 0.1:
+            # (13) is singular when b2_des is parallel to b3 (n horizontal, line inclined):
+            # take the line's horizontal projection, orthogonal to a horizontal n.
+            b2 = np.array([d[0], d[1], 0.0])
     b2 = np.asarray(b2, dtype=float)
     best: float | None = None
     for sign in (1.0, -1.0):
