@@ -19,7 +19,7 @@ import avp
 
 LIMITS = avp.VehicleLimits(mass=1.0, thrust_min=5.0, thrust_max=17.0, tilt_rate_max=3.0)
 CASES = {
-    "paper contact velocity (0.3 in, slide)": dict(alpha=5.5),
+    "paper contact velocity (0.3 in, slide)": dict(),
     "rest-to-rest (zero contact velocity)": dict(
         alpha=5.5,
         contact_velocity=avp.ContactVelocity(normal=0.0, slope=0.0, lateral=0.0),
