@@ -2,8 +2,9 @@
 
 :func:`plan_line` solves one minimum-snap QP (the cost (4) and boundary rows of :mod:`avp.qp`)
 with the line's terminal conditions (:mod:`avp.qp.line`), certifies the vehicle limits with
-:func:`avp.bounds.certify_spline` and the line clearance, minimum height and wedge corridor with
-:mod:`avp.line_certify`, searching the total duration (``config.bounds`` factors) until every
+:func:`avp.bounds.certify_spline`, the workspace limits of ``config.workspace`` (ground, extra
+half-spaces, spheres, speed) with :func:`avp.safety.certify_workspace`, and the line clearance
+and wedge corridor with :mod:`avp.line_certify`, searching the total duration (``config.bounds`` factors) until every
 certificate holds. It then plans the **recovery**: a second spline that starts at the perch's
 final state (continuous up to snap on all four flat outputs) and ends at rest at a safe hover
 point, with the same certificates, as Paneque et al., "Perception-Aware Perching on Powerlines
@@ -14,7 +15,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from enum import Enum
 from typing import Any
 
@@ -22,19 +23,20 @@ import numpy as np
 import numpy.typing as npt
 
 from . import _validate as v
-from .bounds import BoundReport, certify_spline
-from .config import PlannerConfig
+from .bounds import BoundReport, Certificate, certify_spline
+from .config import PlannerConfig, Workspace
 from .errors import ConfigError, InfeasibleError
 from .line import LineContact, LineTarget
 from .line_certify import LineCertificate, PolyCheck, clearance_poly, halfplane_poly, position_polys, run_checks
 from .qp.assemble import ConstraintBlock, PerchingQp
+from .safety import certify_workspace, workspace_blocks
 from .qp.boundary import continuity_rows, initial_state_rows
 from .qp.cost import cost_matrix
 from .qp.layout import N_AXES, DecisionLayout, layout_for
 from .qp.line import contact_com, flip_blocks, halfspace_rows, line_terminal_blocks, snap_away_row, wedge_normals
 from .solve import solve_perching_qp
 from .trajectory import Trajectory
-from .types import State
+from .types import PerchTarget, State
 
 __all__ = ["LineOptions", "LinePlanResult", "LineStatus", "plan_line"]
 
@@ -50,8 +52,6 @@ class LineOptions:
 
     Parameters
     ----------
-    ground_z:
-        Minimum height of the CoM (m), certified on perch and recovery; ``None`` = none.
     approach_deceleration:
         Minimum of ``n . a(t_f)`` (m/s^2): at zero contact speed the CoM must decelerate towards
         the line (otherwise it was closer to it just before contact). Sets the lower end of the
@@ -71,12 +71,12 @@ class LineOptions:
         Plan the recovery.
     recovery_point:
         Hover point (m) the recovery ends at; ``None`` = ``recovery_distance`` along ``n`` from
-        the contact CoM (raised to ``ground_z + recovery_height_margin`` if needed).
+        the contact CoM (raised to ``config.workspace.ground_z + recovery_height_margin``).
     recovery_distance, recovery_height_margin:
         See ``recovery_point`` (m).
     ground_margin:
-        The sampled height rows keep this much (m) above ``ground_z`` (the certificate checks
-        ``ground_z`` itself between the samples).
+        The sampled height rows keep this much (m) above ``config.workspace.ground_z`` (the
+        certificate checks ``ground_z`` itself, everywhere).
     flip_window, flip_thrust:
         For a contact thrust pointing below the horizontal (pitch > 90 deg): the thrust turns
         through the horizontal between ``flip_window[0]`` and ``flip_window[1]`` seconds before
@@ -88,7 +88,6 @@ class LineOptions:
         90 deg (the allocation rule of :class:`~avp.config.TimeAllocation` knows no attitude).
     """
 
-    ground_z: float | None = None
     approach_deceleration: float = 1.0
     thrust_fraction: float = 0.9
     guide_dt: float = 0.05
@@ -105,8 +104,6 @@ class LineOptions:
     flip_time: float = 0.8
 
     def __post_init__(self) -> None:
-        if self.ground_z is not None:
-            object.__setattr__(self, "ground_z", v.finite_float("options.ground_z", self.ground_z))
         v.positive_float("options.approach_deceleration", self.approach_deceleration)
         if not 0.0 < self.thrust_fraction <= 1.0:
             raise ConfigError("options.thrust_fraction", f"must be in (0, 1], got {self.thrust_fraction}")
@@ -213,9 +210,12 @@ def _perch_qp(state: State, line: LineTarget, contact: LineContact, cfg: Planner
     if float(contact.n @ (state.position - contact.A)) >= r - ON_LINE_TOL:
         times = _guide_times(tf, opts.guide_dt, include_end=False)
         ineq.append(halfspace_rows(layout, knots_rel, times, contact.A, contact.n, r, "line: guide half-space (clearance)"))
-    if opts.ground_z is not None:
+    ground = cfg.workspace.ground_z
+    if ground is not None:
         times = _guide_times(tf, opts.guide_dt, include_end=True)
-        ineq.append(halfspace_rows(layout, knots_rel, times, np.array([0.0, 0.0, opts.ground_z]), np.array([0.0, 0.0, 1.0]), opts.ground_margin, "line: minimum height"))
+        ineq.append(halfspace_rows(layout, knots_rel, times, np.array([0.0, 0.0, ground]), np.array([0.0, 0.0, 1.0]), opts.ground_margin, "line: minimum height"))
+    pseudo, ws = _workspace_view(contact_com(line, contact, line.grasp if line.grasp is not None else 0.5), contact.n, r, cfg.workspace)
+    ineq += workspace_blocks(layout, knots_rel, state, pseudo, replace(cfg, workspace=replace(ws, ground_z=None)))
     if contact.n[2] < 0.0:
         tflip = _guide_times(tf, opts.guide_dt / 2.0, include_end=True)
         ineq += flip_blocks(layout, knots_rel, tflip, (tf - opts.flip_window[0], tf - opts.flip_window[1]), np.array([0.0, 0.0, 1.0]), contact.w, contact.n,
@@ -260,8 +260,12 @@ def _recovery_qp(perch: Trajectory, target_point: Array, contact: LineContact, l
     tf = float(knots_rel[-1])
     times = _guide_times(tf, opts.guide_dt, include_end=True)
     ineq = [halfspace_rows(layout, knots_rel, times, contact.A, contact.n, line.gripper_offset, "recovery: guide half-space (clearance)")]
-    if opts.ground_z is not None:
-        ineq.append(halfspace_rows(layout, knots_rel, times, np.array([0.0, 0.0, opts.ground_z]), np.array([0.0, 0.0, 1.0]), opts.ground_margin, "recovery: minimum height"))
+    ground = cfg.workspace.ground_z
+    if ground is not None:
+        ineq.append(halfspace_rows(layout, knots_rel, times, np.array([0.0, 0.0, ground]), np.array([0.0, 0.0, 1.0]), opts.ground_margin, "recovery: minimum height"))
+    pseudo, ws = _workspace_view(np.asarray(target_point, dtype=float), np.array([0.0, 0.0, 1.0]), 0.0, cfg.workspace)
+    start = State(position=end[0, :3], velocity=end[1, :3], acceleration=end[2, :3], jerk=end[3, :3])
+    ineq += workspace_blocks(layout, knots_rel, start, pseudo, replace(cfg, workspace=replace(ws, ground_z=None)))
     if contact.n[2] < 0.0:
         ineq += flip_blocks(layout, knots_rel, _guide_times(tf, opts.guide_dt / 2.0, include_end=True), opts.flip_window[::-1],
                             contact.n, contact.w, np.array([0.0, 0.0, 1.0]), opts.flip_thrust, opts.flip_thrust, cfg.g, t_scale)
@@ -272,7 +276,7 @@ def _recovery_qp(perch: Trajectory, target_point: Array, contact: LineContact, l
 
 def line_checks(traj: Trajectory, name: str, line: LineTarget, contact: LineContact, opts: LineOptions, *,
                 contact_at_end: bool, start_root: tuple[int, int] | None) -> list[PolyCheck]:
-    """Clearance from every piece (infinite lines), minimum height and wedge polynomials.
+    """Clearance from every piece (infinite lines) and wedge polynomials.
 
     ``start_root = (piece, order)`` marks a start on the clearance boundary of ``piece``.
     """
@@ -292,10 +296,6 @@ def line_checks(traj: Trajectory, name: str, line: LineTarget, contact: LineCont
                     raise ConfigError("config.n_segments", "a start on the line needs at least 2 segments")
                 root_at, order = 0, start_root[1]
             checks.append(PolyCheck(f"clearance piece {k}", name, i, F, root_at=root_at, order=order, scale=scale))
-    if opts.ground_z is not None:
-        for i in range(S):
-            checks.append(PolyCheck("minimum height", name, i,
-                                    halfplane_poly(pos[i], np.array([0.0, 0.0, opts.ground_z]), np.array([0.0, 0.0, 1.0]))))
     if opts.wedge_angle is not None and contact_at_end:
         ts = traj.tf - opts.wedge_window
         for i in range(S):
@@ -306,6 +306,32 @@ def line_checks(traj: Trajectory, name: str, line: LineTarget, contact: LineCont
             for k, m in enumerate(wedge_normals(contact, opts.wedge_angle / 2.0)):
                 checks.append(PolyCheck(f"wedge {k}", name, i, halfplane_poly(pos[i], contact.A, m), a=a, b=1.0))
     return checks
+
+
+def _workspace_view(com_end: Array, normal: Array, offset: float, workspace: Workspace) -> tuple[PerchTarget, Workspace]:
+    """The line plan's end point as the "target" of :mod:`avp.safety`: a pad with normal
+    ``normal`` whose contact CoM (``point + body_offset * s3``) is ``com_end``, and the
+    workspace without the pad-plane clearance (a line is not a plane; its clearance is
+    :mod:`avp.line_certify`'s)."""
+    target = PerchTarget.from_normal(com_end - offset * normal, normal)
+    return target, replace(workspace, perch_clearance=False, body_offset=offset)
+
+
+def workspace_certificates(traj: Trajectory, name: str, com_end: Array, normal: Array, offset: float,
+                           workspace: Workspace) -> list[LineCertificate]:
+    """:func:`avp.safety.certify_workspace` verdicts as :class:`LineCertificate` rows
+    (``slack`` = the certified contact residual in m)."""
+    target, ws = _workspace_view(com_end, normal, offset, workspace)
+    if not (ws.ground_z is not None or ws.half_spaces or ws.spheres or math.isfinite(ws.max_speed)):
+        return []
+    report = certify_workspace(traj, target, ws)
+    out = []
+    for chk in report.checks:
+        for i, (verdict, t) in enumerate(zip(chk.verdicts, chk.times, strict=True)):
+            if verdict is Certificate.WITHIN and not chk.certified:  # residual too large
+                verdict = Certificate.VIOLATED
+            out.append(LineCertificate(f"workspace: {chk.region.name}", name, i, verdict, float(t), chk.residual))
+    return out
 
 
 def _bounds(traj: Trajectory, cfg: PlannerConfig) -> BoundReport:
@@ -416,8 +442,9 @@ def plan_line(
     if d0 < r - ON_LINE_TOL:
         raise ConfigError("state.position", f"is {d0:.4f} m from the line, inside its clearance radius (the gripper "
                           f"offset {r} m): start the perch farther from the line")
-    if opts.ground_z is not None and state.position[2] <= opts.ground_z:
-        raise ConfigError("state.position", f"is at or below the minimum height options.ground_z = {opts.ground_z} m")
+    ground = cfg.workspace.ground_z
+    if ground is not None and state.position[2] <= ground:
+        raise ConfigError("state.position", f"is at or below the minimum height config.workspace.ground_z = {ground} m")
     contact = line.contact(state.position, state.yaw)
     on_line = _start_on_line(state, line)
     if on_line is not None and cfg.n_segments < 2:
@@ -439,7 +466,8 @@ def plan_line(
 
     def certify_perch(traj: Trajectory) -> list[LineCertificate]:
         checks = line_checks(traj, "perch", line, contact, opts, contact_at_end=True, start_root=start_root)
-        return run_checks(checks, {"perch": traj.knots})
+        com = traj(traj.tf)
+        return run_checks(checks, {"perch": traj.knots}) + workspace_certificates(traj, "perch", com, contact.n, r, cfg.workspace)
 
     perch, ok, report, certs, _f = _search(
         lambda T: _perch_qp(state, line, contact, cfg, opts, T, on_normal), certify_perch, factors, T0, cfg, log, "perch")
@@ -456,14 +484,15 @@ def plan_line(
         end = perch(perch.tf)
         point = opts.recovery_point if opts.recovery_point is not None else end + opts.recovery_distance * contact.n
         point = np.array(point, dtype=float)
-        if opts.ground_z is not None:
-            point[2] = max(point[2], opts.ground_z + opts.recovery_height_margin)
+        if ground is not None:
+            point[2] = max(point[2], ground + opts.recovery_height_margin)
         rT0 = np.full(cfg.n_segments, cfg.time_allocation.total(float(np.linalg.norm(point - end)), 0.0) / cfg.n_segments)
 
         def certify_recovery(traj: Trajectory) -> list[LineCertificate]:
             checks = line_checks(traj, "recovery", line, contact, opts, contact_at_end=False,
                                  start_root=(line.grasp_piece, 2 if line.contact_speed == 0.0 else 1))
-            return run_checks(checks, {"recovery": traj.knots})
+            return run_checks(checks, {"recovery": traj.knots}) + workspace_certificates(
+                traj, "recovery", traj(traj.tf), np.array([0.0, 0.0, 1.0]), 0.0, cfg.workspace)
 
         build = lambda T: _recovery_qp(perch, point, contact, line, cfg, opts, T)  # noqa: E731
         recovery, rec_ok, rec_report, rcerts = None, False, None, []

@@ -35,7 +35,7 @@ import time
 import numpy as np
 
 import avp
-from avp.config import PlannerConfig, VehicleLimits
+from avp.config import PlannerConfig, VehicleLimits, Workspace
 from avp.line import LineTarget, LineYaw
 from avp.line_planner import LineOptions, LinePlanResult, plan_line
 
@@ -73,7 +73,6 @@ PANEQUE_MS = {20: (457, 351), 80: (432, 221), 180: (532, 1214)}  # Table I: tp, 
 
 def case_000(reps: int) -> None:
     lim = VehicleLimits(mass=0.8, thrust_min=0.5, thrust_max=4.0 * 0.8 * G)  # T/W 4:1
-    cfg = PlannerConfig(limits=lim)
     # Assumed geometry (the paper shows three lines of different inclination, the 180 deg one at
     # 3.7 m; inclinations and distances are not given): lines across the flight direction.
     setups = {
@@ -90,7 +89,8 @@ def case_000(reps: int) -> None:
     print("|---|---|---|---|---|---|---|---|---|---|---|---|")
     for pitch, (line, start, ground) in setups.items():
         state = avp.State.hover(start)
-        opts = LineOptions(ground_z=ground)
+        cfg = PlannerConfig(limits=lim, workspace=Workspace(ground_z=ground))
+        opts = LineOptions()
         res = plan_line(state, line, cfg, opts)  # first call (imports, caches)
         times, cpu = [], []
         for _ in range(reps):
@@ -122,11 +122,11 @@ def case_002(n: int, seed: int = 2) -> None:
     # Assumed: a 3.5 kg robot (the paper's) with thrust-to-weight 2:1; guide opening 60 deg
     # (not given numerically); guide height = gripper offset 0.1 m; the wire 1 m above the floor.
     lim = VehicleLimits(mass=3.5, thrust_min=0.1 * 3.5 * G, thrust_max=2.0 * 3.5 * G)
-    cfg = PlannerConfig(limits=lim)
+    cfg = PlannerConfig(limits=lim, workspace=Workspace(ground_z=0.0))
     line = LineTarget.segment([-3.0, 0.0, 1.0], [3.0, 0.0, 1.0], pitch=0.0, yaw=LineYaw.ALONG,
                               gripper_offset=0.1, grasp=3.5 / 6.0)  # target 0.5 m along +x
     half = math.radians(30.0)
-    opts = LineOptions(wedge_angle=2 * half, wedge_window=0.4, ground_z=0.0)
+    opts = LineOptions(wedge_angle=2 * half, wedge_window=0.4)
     starts = []
     for _ in range(n // 5):  # perched on the line (CoM at the offset above it), away from the target
         x = rng.uniform(-2.5, -0.5)

@@ -18,7 +18,7 @@ from hypothesis import strategies as st
 
 import avp
 from avp.bounds import Certificate
-from avp.config import PlannerConfig, VehicleLimits
+from avp.config import PlannerConfig, VehicleLimits, Workspace
 from avp.errors import ConfigError
 from avp.line import LineTarget, LineYaw
 from avp.line_certify import DyadicPoly, PolyCheck, clearance_poly, position_polys, run_checks
@@ -28,6 +28,10 @@ from avp.trajectory import Trajectory
 # A 0.8 kg vehicle with thrust-to-weight 4 (Paneque et al.'s), default tilt-rate limit 10 rad/s.
 LIMITS = VehicleLimits(mass=0.8, thrust_min=0.5, thrust_max=4 * 0.8 * 9.81)
 CFG = PlannerConfig(limits=LIMITS)
+
+
+def with_ground(z: float) -> PlannerConfig:
+    return PlannerConfig(limits=LIMITS, workspace=Workspace(ground_z=z))
 
 
 def horizontal_line(z: float = 2.5, incline_deg: float = 0.0, x: float = 3.0, **kw: object) -> LineTarget:
@@ -68,7 +72,7 @@ def check_contact(res, line: LineTarget) -> None:  # noqa: ANN001
 def test_terminal_conditions_and_clearance_on_random_lines(pitch: float, incline: float, dx: float, dz: float, lam: float) -> None:
     line = horizontal_line(z=3.0, incline_deg=incline, pitch=math.radians(pitch), grasp=lam)
     start = np.array([3.0 + dx, 0.3, 3.0 + dz - (1.2 if pitch > 90 else 0.0)])
-    res = plan_line(avp.State.hover(start), line, CFG, LineOptions(ground_z=0.5))
+    res = plan_line(avp.State.hover(start), line, with_ground(0.5))
     if pitch <= 90.0:
         assert res.status is LineStatus.SOLVED, res.log
     if not res.status.has_trajectory:
@@ -214,7 +218,7 @@ def test_free_grasp_point_goes_where_it_is_cheapest() -> None:
 def test_recovery_is_continuous_up_to_snap_and_certified(pitch: float) -> None:
     line = horizontal_line(z=3.7 if pitch == 180 else 2.5, pitch=math.radians(pitch))
     start = [1.0, 0.0, 2.2 if pitch == 180 else 2.6]
-    res = plan_line(avp.State.hover(start), line, CFG, LineOptions(ground_z=0.8))
+    res = plan_line(avp.State.hover(start), line, with_ground(0.8))
     assert res.ok, res.log
     p, r = res.perch, res.recovery
     assert r.t0 == p.tf
@@ -304,6 +308,6 @@ def test_start_inside_the_clearance_radius_is_rejected() -> None:
         plan_line(avp.State.hover([0.3, 0.05, 1.05]), line, CFG)
     assert exc.value.field == "state.position"
     with pytest.raises(ConfigError):
-        plan_line(avp.State.hover([0.3, 0.0, 1.5]), line, CFG, LineOptions(ground_z=2.0))
+        plan_line(avp.State.hover([0.3, 0.0, 1.5]), line, with_ground(2.0))
     with pytest.raises(ConfigError):
         LineOptions(wedge_angle=math.pi)
