@@ -27,13 +27,27 @@ from .bounds import BoundReport, Certificate, certify_spline
 from .config import PlannerConfig, Workspace
 from .errors import ConfigError, InfeasibleError
 from .line import LineContact, LineTarget
-from .line_certify import LineCertificate, PolyCheck, clearance_poly, halfplane_poly, position_polys, run_checks
+from .line_certify import (
+    LineCertificate,
+    PolyCheck,
+    clearance_poly,
+    halfplane_poly,
+    position_polys,
+    run_checks,
+)
 from .qp.assemble import ConstraintBlock, PerchingQp
-from .safety import certify_workspace, workspace_blocks
 from .qp.boundary import continuity_rows, initial_state_rows
 from .qp.cost import cost_matrix
 from .qp.layout import N_AXES, DecisionLayout, layout_for
-from .qp.line import contact_com, flip_blocks, halfspace_rows, line_terminal_blocks, snap_away_row, wedge_normals
+from .qp.line import (
+    contact_com,
+    flip_blocks,
+    halfspace_rows,
+    line_terminal_blocks,
+    snap_away_row,
+    wedge_normals,
+)
+from .safety import certify_workspace, workspace_blocks
 from .solve import solve_perching_qp
 from .trajectory import Trajectory
 from .types import PerchTarget, State
@@ -351,7 +365,7 @@ def reversed_trajectory(traj: Trajectory, t0: float) -> Trajectory:
     """
     c = traj.coefficients
     T = traj.durations
-    S, A, C = c.shape
+    S, _axes, C = c.shape
     out = np.empty_like(c)
     k = np.arange(C)
     for i in range(S):
@@ -494,8 +508,9 @@ def plan_line(
             return run_checks(checks, {"recovery": traj.knots}) + workspace_certificates(
                 traj, "recovery", traj(traj.tf), np.array([0.0, 0.0, 1.0]), 0.0, cfg.workspace)
 
-        build = lambda T: _recovery_qp(perch, point, contact, line, cfg, opts, T)  # noqa: E731
-        recovery, rec_ok, rec_report, rcerts = None, False, None, []
+        build = lambda T: _recovery_qp(perch, point, contact, line, cfg, opts, T)
+        rcerts: list[LineCertificate] = []
+        recovery, rec_ok, rec_report = None, False, None
         if contact.n[2] >= 0.0 or line.contact_speed != 0.0:
             recovery, rec_ok, rec_report, rcerts, _rf = _search(build, certify_recovery, (1.0,), rT0, cfg, log, "recovery")
         if not rec_ok and line.contact_speed == 0.0:

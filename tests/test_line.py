@@ -46,7 +46,7 @@ def sampled_distance(traj: Trajectory, line: LineTarget, n: int = 2000) -> np.nd
     return np.array([line.distance(p) for p in traj(tt)])
 
 
-def check_contact(res, line: LineTarget) -> None:  # noqa: ANN001
+def check_contact(res, line: LineTarget) -> None:
     """Gripper within 1 mm of the grasp point on the line, b3 within 0.5 deg of n, speed within
     1 mm/s of the request (the issue's contact tolerances), from the spline itself."""
     tr = res.perch
@@ -123,13 +123,13 @@ def test_clearance_certificate_matches_exact_oracle_near_tangency(eps_exp: int, 
     side = np.cross(d, up)
     A = np.array([0.3, -0.2, 1.0])
     B = A + 2.0 * d
-    # p(t) = A + d (t - 0.4) + up (r + delta + (t - 1)^2) + 0.5 side (t - 1)^2 ... min distance at t = 1
+    # p(t) = A + d (t - 0.4) + up (r + delta + (t - 1)^2) + 0.5 side (t - 1)^2: min distance r + delta at t = 1
     delta = sign * 10.0**eps_exp
     coeffs = np.zeros((1, 4, 3))
     # (t - 1)^2 = 1 - 2t + t^2
     for ax in range(3):
-        coeffs[0, ax] = [A[ax] - 0.4 * d[ax] + up[ax] * (r + delta + 1.0) + 0.0,
-                         d[ax] - 2.0 * up[ax], up[ax]]
+        coeffs[0, ax] = [A[ax] - 0.4 * d[ax] + up[ax] * (r + delta + 1.0) + 0.5 * side[ax],
+                         d[ax] - 2.0 * up[ax] - side[ax], up[ax] + 0.5 * side[ax]]
     traj = Trajectory(coeffs, [0.0, 2.0])
     F, scale = clearance_poly(position_polys(traj, 0), A, B, r)
     (cert,) = run_checks([PolyCheck("clearance", "t", 0, F, scale=scale)], {"t": traj.knots})
@@ -165,7 +165,7 @@ def test_contact_root_certificate_is_sound_against_exact_evaluation(dz: float, d
     seg = tr.n_segments - 1
     F = _sympy_clearance(tr, seg, A, B, line.gripper_offset)
     coeffs = [Fraction(int(c.p), int(c.q)) for c in F.all_coeffs()[::-1]]
-    clear = [c for c in res.certificates if c.name == "clearance piece 0" and c.segment == seg][0]
+    clear = next(c for c in res.certificates if c.name == "clearance piece 0" and c.segment == seg)
     assert clear.ok
     vv = sum(Fraction(float(x)) ** 2 for x in (B - A))
     bound = Fraction(clear.slack) * vv  # slack is in m^2, F in m^2 |v|^2
@@ -206,12 +206,23 @@ def test_free_grasp_point_stays_on_the_segment(x0: float, y0: float, lo: float, 
 
 
 def test_free_grasp_point_goes_where_it_is_cheapest() -> None:
-    """A start above one end: the free grasp point moves towards it (the fixed midpoint costs more)."""
-    free = LineTarget.segment([-1.0, 0.0, 1.0], [1.0, 0.0, 1.0], grasp=None, grasp_range=(0.0, 1.0), yaw=LineYaw.FREE)
-    fixed = LineTarget.segment([-1.0, 0.0, 1.0], [1.0, 0.0, 1.0], grasp=0.5, yaw=LineYaw.FREE)
+    """A start above one end: the free grasp point moves towards it, and its snap cost (4),
+    integrated independently on a dense grid, is below the fixed midpoint's at the same duration."""
+    ends = ([-1.0, 0.0, 1.0], [1.0, 0.0, 1.0])
+    free = LineTarget.segment(*ends, grasp=None, grasp_range=(0.0, 1.0), yaw=LineYaw.FREE)
+    fixed = LineTarget.segment(*ends, grasp=0.5, yaw=LineYaw.FREE)
     st0 = avp.State.hover([0.8, 0.0, 1.8])
-    rf = plan_line(st0, free, CFG, LineOptions(recovery=False))
+    rf = plan_line(st0, free, CFG, LineOptions(recovery=False), duration=1.5)
+    rx = plan_line(st0, fixed, CFG, LineOptions(recovery=False), duration=1.5)
     assert rf.grasp > 0.6
+
+    def snap_cost(tr: Trajectory) -> float:
+        t = np.linspace(tr.t0, tr.tf, 20001)
+        s4 = np.sum(tr(t, 4) ** 2, axis=1)
+        return float(np.sum((s4[1:] + s4[:-1]) / 2.0 * np.diff(t)))
+
+    assert rf.perch.duration == rx.perch.duration
+    assert snap_cost(rf.perch) < snap_cost(rx.perch)
 
 
 @pytest.mark.parametrize("pitch", [0.0, 80.0, 180.0])
