@@ -24,7 +24,7 @@ import numpy.typing as npt
 
 from . import _validate as v
 from .bounds import BoundReport, Certificate, certify_spline
-from .config import PlannerConfig, Workspace
+from .config import ContactVelocity, PlannerConfig, Workspace
 from .errors import ConfigError, InfeasibleError
 from .line import LineContact, LineTarget
 from .line_certify import (
@@ -52,7 +52,7 @@ from .solve import solve_perching_qp
 from .trajectory import Trajectory
 from .types import PerchTarget, State
 
-__all__ = ["LineOptions", "LinePlanResult", "LineStatus", "plan_line"]
+__all__ = ["LineOptions", "LinePlanResult", "LineStatus", "perch_equivalent", "plan_line"]
 
 Array = npt.NDArray[np.float64]
 
@@ -535,3 +535,36 @@ def plan_line(
     status = LineStatus.SOLVED if ok and rec_ok else LineStatus.NOT_CERTIFIED
     return LinePlanResult(status, perch, recovery, contact, grasp, tuple(certs), report, rec_report, tuple(log),
                           {"perch": t_perch, "recovery": t_rec, "total": time.perf_counter() - t_start})
+
+
+def perch_equivalent(
+    state: State, line: LineTarget, config: PlannerConfig | None = None, options: LineOptions | None = None
+) -> tuple[PerchTarget, PlannerConfig]:
+    """A plane perch that the plane planner, :class:`~avp.Replanner` and the simulator accept,
+    whose own certificates imply the line's clearance (an adapter, conservative).
+
+    The pad is the plane through the line with normal ``n`` (it contains the line, ``n ⟂ d``),
+    centred at the grasp point (the middle of ``grasp_range`` when free), with
+    ``R_WS = [d x n, d, n]`` so the terminal yaw (13) puts ``b2`` along the line (``ACROSS``).
+    The workspace gets ``perch_clearance`` with ``body_offset = gripper_offset``: the certified
+    ``n . (p - point) > r`` before contact keeps the CoM farther than ``r`` from every point of
+    the plane, hence from the line. The contact velocity is ``-contact_speed n``, the contact
+    thrust ``g n_z + approach_deceleration`` (the CoM decelerates towards the line). What it
+    does not carry over: a free grasp point, ``ALONG``/``FREE`` yaw, the wedge and the flip
+    corridor; use :func:`plan_line` for those.
+    """
+    cfg = config if config is not None else PlannerConfig()
+    opts = options if options is not None else LineOptions()
+    contact = line.contact(state.position, state.yaw)
+    lam = line.grasp if line.grasp is not None else 0.5 * sum(line.grasp_range)
+    n, d = contact.n, contact.d
+    target = PerchTarget(point=contact.grasp_point(lam), R_WS=np.column_stack([np.cross(d, n), d, n]))
+    lim = cfg.limits
+    margin = 0.05 * (lim.accel_max - lim.accel_min)
+    alpha = min(max(cfg.g * float(n[2]) + opts.approach_deceleration, lim.accel_min + margin), lim.accel_max - margin)
+    out = replace(
+        cfg, alpha=alpha, alpha_range=None,
+        contact_velocity=ContactVelocity(normal=-line.contact_speed, slope=0.0, lateral=0.0, scale_slope_with_incline=False),
+        workspace=replace(cfg.workspace, perch_clearance=True, body_offset=line.gripper_offset),
+    )
+    return target, out

@@ -71,7 +71,8 @@ def plane_baseline(state: avp.State, res: LinePlanResult, line: LineTarget, cfg:
 PANEQUE_MS = {20: (457, 351), 80: (432, 221), 180: (532, 1214)}  # Table I: tp, tr (ms, TX2)
 
 
-def case_000(reps: int) -> None:
+def paneque_setups() -> tuple[VehicleLimits, dict[int, tuple[LineTarget, list[float], float | None]]]:
+    """The vehicle and, per final pitch, (line, start hover point, minimum height)."""
     lim = VehicleLimits(mass=0.8, thrust_min=0.5, thrust_max=4.0 * 0.8 * G)  # T/W 4:1
     # Assumed geometry (the paper shows three lines of different inclination, the 180 deg one at
     # 3.7 m; inclinations and distances are not given): lines across the flight direction.
@@ -83,6 +84,11 @@ def case_000(reps: int) -> None:
         180: (LineTarget.segment([2.0, -1.5, 3.7], [2.0, 1.5, 3.7], pitch=math.pi, gripper_offset=0.15),
               [0.0, 0.0, 2.5], 0.8),
     }
+    return lim, setups
+
+
+def case_000(reps: int) -> None:
+    lim, setups = paneque_setups()
     print("\n## 000 Paneque et al.: 0.8 kg, T/W 4:1, perch + recovery")
     print("| pitch | line incl. | status | gripper err (mm) | b3 err (deg) | speed err (mm/s) | clearance slack (m^2) "
           "| min height (m) | T perch / rec (s) | plan ms median / p95 (CPU ms median) | plane-perch ms (ratio) | seed tp+tr ms (TX2) |")

@@ -322,3 +322,27 @@ def test_start_inside_the_clearance_radius_is_rejected() -> None:
         plan_line(avp.State.hover([0.3, 0.0, 1.5]), line, with_ground(2.0))
     with pytest.raises(ConfigError):
         LineOptions(wedge_angle=math.pi)
+
+
+@pytest.mark.parametrize("pitch", [20.0, 80.0])
+def test_plane_perch_equivalent_keeps_the_line_clearance(pitch: float) -> None:
+    """The adapter for the plane planner / Replanner: its certified plan also passes the line
+    certificates (exact) and meets the line's contact conditions."""
+    from avp.line_planner import line_checks, perch_equivalent
+
+    line = horizontal_line(z=2.5, incline_deg=8.0, pitch=math.radians(pitch))
+    state = avp.State.hover([0.5, 0.2, 2.4])
+    target, cfg = perch_equivalent(state, line, CFG)
+    result = avp.plan_detailed(state, target, cfg)
+    assert result.ok, result.log
+    tr = result.trajectory
+    contact = line.contact(state.position, state.yaw)
+    checks = line_checks(tr, "perch", line, contact, LineOptions(), contact_at_end=True, start_root=None)
+    certs = run_checks(checks, {"perch": tr.knots})
+    assert all(c.ok for c in certs), [str(c) for c in certs if not c.ok]
+    b3 = tr.attitude(tr.tf)[:, 2]
+    assert math.degrees(math.acos(min(1.0, float(b3 @ contact.n)))) < 0.5
+    assert np.linalg.norm(tr(tr.tf) - line.gripper_offset * b3 - contact.grasp_point(0.5)) < 1e-3
+    replanner = avp.Replanner(target, cfg)
+    step = replanner.step(0.0, state)
+    assert step.trajectory is not None
