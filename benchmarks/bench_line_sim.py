@@ -34,10 +34,10 @@ from avp.sim.odometry import OdometryNoise
 from avp.sim.vehicle import RigidBodyState, VehicleParams
 
 sys.path.insert(0, str(Path(__file__).parent))
-from bench_line import paneque_setups  # noqa: E402
+from bench_line import paneque_setups
 
 
-def reference(traj: avp.Trajectory):  # noqa: ANN201
+def reference(traj: avp.Trajectory):
     def ref(t: float) -> FlatReference:
         f = traj.flat_output(min(max(t, traj.t0), traj.tf))
         return FlatReference(f.position, f.velocity, f.acceleration, f.jerk, f.snap,
