@@ -346,3 +346,15 @@ def test_plane_perch_equivalent_keeps_the_line_clearance(pitch: float) -> None:
     replanner = avp.Replanner(target, cfg)
     step = replanner.step(0.0, state)
     assert step.trajectory is not None
+
+
+def test_line_perch_example_runs(tmp_path: object) -> None:
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    example = Path(__file__).resolve().parent.parent / "examples" / "line_perch.py"
+    proc = subprocess.run([sys.executable, str(example)], capture_output=True, text=True, timeout=120, cwd=str(tmp_path))
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.startswith("status: SOLVED")
+    assert "bounds certified" in proc.stdout
