@@ -274,3 +274,41 @@ def halfplane_poly(pos: list[DyadicPoly], point: Array, normal: Array, margin: f
     for i in range(3):
         out = out - DyadicPoly.const(float(normal[i])) * (pos[i] - DyadicPoly.const(float(point[i])))
     return out
+
+
+def sphere_poly(pos: list[DyadicPoly], center: Array, r: float) -> DyadicPoly:
+    """``r^2 - |p - center|^2`` exactly (negative = outside the ball)."""
+    e = [pos[i] - DyadicPoly.const(float(center[i])) for i in range(3)]
+    rr = DyadicPoly.const(r) * DyadicPoly.const(r)
+    return rr - (e[0] * e[0] + e[1] * e[1] + e[2] * e[2])
+
+
+def capsule_certificate(pos: list[DyadicPoly], A: Array, B: Array, r: float, name: str, trajectory: str,
+                        segment: int, knots: Array, lambdas: Sequence[float] = (0.25, 1.0, 4.0, 16.0)) -> LineCertificate:
+    """Clearance from the **segment** ``A -> B`` (not its infinite line), a sufficient test.
+
+    With ``sigma = e . v / |v|^2`` the distance to the segment is the distance to the line where
+    ``0 <= sigma <= 1`` and to an end point elsewhere. Proven: ``r^2 - |p - A|^2 < 0`` and
+    ``r^2 - |p - B|^2 < 0`` (the end points), and for one ``lambda >= 0``
+    ``H = F + lambda s < 0`` with ``F`` the line polynomial of :func:`clearance_poly` and
+    ``s = (e . v)(|v|^2 - e . v) = |v|^4 sigma (1 - sigma)``: where ``s >= 0`` (inside the slab)
+    ``F < -lambda s <= 0`` (an S-procedure with a constant multiplier). A failed end point is a
+    proven violation; otherwise failing every ``lambda`` is UNKNOWN (not proven either way).
+    """
+    ends = [PolyCheck(name, trajectory, segment, sphere_poly(pos, P, r)) for P in (A, B)]
+    a = [DyadicPoly.const(float(x)) for x in A]
+    v = [DyadicPoly.const(float(B[i])) - a[i] for i in range(3)]
+    e = [pos[i] - a[i] for i in range(3)]
+    ev = e[0] * v[0] + e[1] * v[1] + e[2] * v[2]
+    vv = v[0] * v[0] + v[1] * v[1] + v[2] * v[2]
+    s = ev * (vv - ev)
+    F, _ = clearance_poly(pos, A, B, r)
+    certs = run_checks(ends, {trajectory: knots})
+    bad = [c for c in certs if not c.ok]
+    if bad:
+        return bad[0]
+    slab = run_checks([PolyCheck(name, trajectory, segment, F + DyadicPoly.const(lam) * s) for lam in lambdas],
+                      {trajectory: knots})
+    if any(c.ok for c in slab):
+        return next(c for c in slab if c.ok)
+    return LineCertificate(name, trajectory, segment, Certificate.UNKNOWN, math.nan, 0.0)

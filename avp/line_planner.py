@@ -30,6 +30,7 @@ from .line import LineContact, LineTarget
 from .line_certify import (
     LineCertificate,
     PolyCheck,
+    capsule_certificate,
     clearance_poly,
     halfplane_poly,
     position_polys,
@@ -322,6 +323,23 @@ def line_checks(traj: Trajectory, name: str, line: LineTarget, contact: LineCont
     return checks
 
 
+def line_certificates(traj: Trajectory, name: str, line: LineTarget, contact: LineContact, opts: LineOptions, *,
+                      contact_at_end: bool, start_root: tuple[int, int] | None) -> list[LineCertificate]:
+    """Run :func:`line_checks`; a piece whose infinite line is not cleared (and that is not
+    touched) is re-checked against the segment itself (:func:`~avp.line_certify.capsule_certificate`):
+    on a catenary the extension of a far chord passes close to a CoM hanging below the sag."""
+    checks = line_checks(traj, name, line, contact, opts, contact_at_end=contact_at_end, start_root=start_root)
+    certs = run_checks(checks, {name: traj.knots})
+    for j, (chk, cert) in enumerate(zip(checks, certs, strict=True)):
+        if cert.ok or not chk.name.startswith("clearance piece") or chk.root_at is not None:
+            continue
+        k = int(chk.name.rsplit(" ", 1)[1])
+        A, B = line.piece(k)
+        certs[j] = capsule_certificate(position_polys(traj, chk.segment), A, B, line.gripper_offset,
+                                       chk.name + " (segment)", name, chk.segment, traj.knots)
+    return certs
+
+
 def _workspace_view(com_end: Array, normal: Array, offset: float, workspace: Workspace) -> tuple[PerchTarget, Workspace]:
     """The line plan's end point as the "target" of :mod:`avp.safety`: a pad with normal
     ``normal`` whose contact CoM (``point + body_offset * s3``) is ``com_end``, and the
@@ -479,9 +497,8 @@ def plan_line(
     on_normal = on_line[1] if on_line is not None else None
 
     def certify_perch(traj: Trajectory) -> list[LineCertificate]:
-        checks = line_checks(traj, "perch", line, contact, opts, contact_at_end=True, start_root=start_root)
-        com = traj(traj.tf)
-        return run_checks(checks, {"perch": traj.knots}) + workspace_certificates(traj, "perch", com, contact.n, r, cfg.workspace)
+        certs = line_certificates(traj, "perch", line, contact, opts, contact_at_end=True, start_root=start_root)
+        return certs + workspace_certificates(traj, "perch", traj(traj.tf), contact.n, r, cfg.workspace)
 
     perch, ok, report, certs, _f = _search(
         lambda T: _perch_qp(state, line, contact, cfg, opts, T, on_normal), certify_perch, factors, T0, cfg, log, "perch")
@@ -503,9 +520,9 @@ def plan_line(
         rT0 = np.full(cfg.n_segments, cfg.time_allocation.total(float(np.linalg.norm(point - end)), 0.0) / cfg.n_segments)
 
         def certify_recovery(traj: Trajectory) -> list[LineCertificate]:
-            checks = line_checks(traj, "recovery", line, contact, opts, contact_at_end=False,
-                                 start_root=(line.grasp_piece, 2 if line.contact_speed == 0.0 else 1))
-            return run_checks(checks, {"recovery": traj.knots}) + workspace_certificates(
+            certs = line_certificates(traj, "recovery", line, contact, opts, contact_at_end=False,
+                                      start_root=(line.grasp_piece, 2 if line.contact_speed == 0.0 else 1))
+            return certs + workspace_certificates(
                 traj, "recovery", traj(traj.tf), np.array([0.0, 0.0, 1.0]), 0.0, cfg.workspace)
 
         build = lambda T: _recovery_qp(perch, point, contact, line, cfg, opts, T)

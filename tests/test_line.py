@@ -358,3 +358,37 @@ def test_line_perch_example_runs(tmp_path: object) -> None:
     assert proc.returncode == 0, proc.stderr
     assert proc.stdout.startswith("status: SOLVED")
     assert "bounds certified" in proc.stdout
+
+
+def test_capsule_certificate_clears_the_extension_but_not_the_segment() -> None:
+    """A path crossing the infinite line beyond the segment's end: the line test fails, the
+    segment (capsule) test proves it; a path crossing the segment itself is never proven."""
+    from avp.line_certify import capsule_certificate
+
+    A, B, r = np.array([0.0, 0.0, 1.0]), np.array([1.0, 0.0, 1.0]), 0.1
+    coeffs = np.zeros((1, 4, 2))
+    coeffs[0, :3, 0] = [1.5, -1.0, 1.0]  # passes the extension at x = 1.5 (0.5 m past B)
+    coeffs[0, 1, 1] = 2.0
+    beyond = Trajectory(coeffs, [0.0, 1.0])
+    pos = position_polys(beyond, 0)
+    F, scale = clearance_poly(pos, A, B, r)
+    (line_cert,) = run_checks([PolyCheck("c", "t", 0, F, scale=scale)], {"t": beyond.knots})
+    assert line_cert.verdict is Certificate.VIOLATED
+    cap = capsule_certificate(pos, A, B, r, "c", "t", 0, beyond.knots)
+    assert cap.verdict is Certificate.WITHIN
+    seg = LineTarget.segment(A, B)
+    assert min(seg.distance(p) for p in beyond(np.linspace(0, 1, 2001))) > r
+    through = coeffs.copy()
+    through[0, 0, 0] = 0.5
+    cross = Trajectory(through, [0.0, 1.0])
+    cap2 = capsule_certificate(position_polys(cross, 0), A, B, r, "c", "t", 0, cross.knots)
+    assert cap2.verdict is not Certificate.WITHIN
+
+
+def test_hanging_below_a_catenary_is_certified() -> None:
+    line = LineTarget.catenary([2.0, -5.0, 4.3], [2.0, 5.0, 4.3], sag=0.6, pieces=8, pitch=math.pi,
+                               grasp_piece=4, grasp=0.5, gripper_offset=0.15)
+    res = plan_line(avp.State.hover([0.0, 0.0, 2.0]), line, with_ground(0.8))
+    assert res.ok, res.log
+    for traj in (res.perch, res.recovery):
+        assert sampled_distance(traj, line).min() >= 0.15 - 1e-6
