@@ -56,6 +56,8 @@ from .config import (
     VehicleLimits,
     Workspace,
 )
+from .line import LineTarget, LineYaw
+from .line_planner import LineOptions, LinePlanResult, LineStatus, plan_line
 from .metrics import Visibility, visibility
 from .planner import PlanResult, PlanStatus, PlanTimings, plan, plan_detailed
 from .safety import SafetyReport
@@ -103,8 +105,5 @@ __all__ += [
 ]
 
 # Line and powerline perches (docs/lines.md)
-from .line import LineTarget, LineYaw
-from .line_planner import LineOptions, LinePlanResult, LineStatus, plan_line
-
 __all__ += ["LineOptions", "LinePlanResult", "LineStatus", "LineTarget", "LineYaw", "plan_line"]
 
