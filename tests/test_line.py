@@ -293,6 +293,19 @@ def test_dyadic_arithmetic_is_exact() -> None:
     assert all(Fraction(float(x)) >= y for x, y in zip(up, ref, strict=True))
 
 
+@settings(max_examples=40)
+@given(
+    a=st.lists(st.floats(-1e8, 1e8, allow_subnormal=False), min_size=1, max_size=15),
+    b=st.lists(st.floats(-1e8, 1e8, allow_subnormal=False), min_size=1, max_size=15),
+)
+def test_dyadic_product_matches_fractions(a: list[float], b: list[float]) -> None:
+    """The exact product on integers with a shared exponent against Fractions."""
+    prod = DyadicPoly.from_floats(a) * DyadicPoly.from_floats(b)
+    ref = [sum(Fraction(a[i]) * Fraction(b[k - i]) for i in range(len(a)) if 0 <= k - i < len(b))
+           for k in range(len(a) + len(b) - 1)]
+    assert [Fraction(c, 2**prod.e) for c in prod.c] == ref
+
+
 @pytest.mark.parametrize(
     ("kwargs", "field"),
     [
