@@ -530,8 +530,10 @@ def plan_line(
         recovery, rec_ok, rec_report = None, False, None
         if contact.n[2] >= 0.0 or line.contact_speed != 0.0:
             recovery, rec_ok, rec_report, rcerts, _rf = _search(build, certify_recovery, (1.0,), rT0, cfg, log, "recovery")
-        if not rec_ok and line.contact_speed == 0.0:
-            # Upside down (or when the QP recovery fails): fly the perch backwards to its start.
+        at_rest = not (np.any(state.velocity) or np.any(state.acceleration) or np.any(state.jerk))
+        if not rec_ok and line.contact_speed == 0.0 and at_rest:
+            # Upside down (or when the QP recovery fails): fly the perch backwards to its start
+            # (a hover only when the perch started at rest).
             back = reversed_trajectory(perch, perch.tf)
             back_report = _bounds(back, cfg)
             back_certs = certify_recovery(back)
