@@ -46,12 +46,13 @@ from .config import (
     BoundsPolicy,
     ContactVelocity,
     HalfSpace,
+    OverhangFlip,
     PlannerConfig,
     PreImpactMode,
     QpForm,
     Relaxation,
-    TimeAllocation,
     Sphere,
+    TimeAllocation,
     TimeSearch,
     VehicleLimits,
     Workspace,
@@ -60,8 +61,8 @@ from .line import LineTarget, LineYaw
 from .line_planner import LineOptions, LinePlanResult, LineStatus, plan_line
 from .metrics import Visibility, visibility
 from .planner import PlanResult, PlanStatus, PlanTimings, plan, plan_detailed
-from .safety import SafetyReport
 from .replan import ReplanAction, ReplanConfig, Replanner, ReplanStep
+from .safety import SafetyReport
 from .trajectory import Derivative, FlatOutput, Provenance, Trajectory
 from .types import PerchTarget, State
 
@@ -77,6 +78,7 @@ __all__ += [
     "FovConfig",
     "FovPointPolicy",
     "HalfSpace",
+    "OverhangFlip",
     "PerchTarget",
     "PlanResult",
     "PlanStatus",

@@ -24,7 +24,14 @@ from .errors import (
 )
 from .qp.assemble import ConstraintBlock, build_perching_qp
 from .qp.layout import DecisionLayout, layout_for
-from .safety import SafetyReport, certify_workspace, check_endpoints, refinement_blocks, workspace_blocks
+from .request import check_request
+from .safety import (
+    SafetyReport,
+    certify_workspace,
+    check_endpoints,
+    refinement_blocks,
+    workspace_blocks,
+)
 from .solve import WARM_START_SOLVERS, QpOutcome, solve_perching_qp
 from .timing import check_durations, initial_durations
 from .trajectory import Provenance, Trajectory
@@ -301,6 +308,7 @@ def plan_detailed(
     t_start = time.perf_counter()
     cfg = _check_inputs(state, target, config)
     T0 = check_durations(durations, cfg) if durations is not None else initial_durations(state, target, cfg)
+    check_request(state, target, cfg, float(T0.sum()))  # physical sense of the request
     log: list[str] = [f"durations {np.round(T0, 4).tolist()} s ({'given' if durations is not None else 'allocated'})"]
     build = solve = certify = 0.0
     attempts = 0
@@ -401,8 +409,20 @@ def plan_detailed(
         log.append(f"no duration in the search and no relaxation kept the workspace certified "
                    f"({attempts} solves): {failed} could not be met")
         return finish(PlanStatus.WORKSPACE_NOT_CERTIFIED, unsafe, unsafe.trajectory.durations)
-    log.append(f"no duration in the search and no relaxation gave certified bounds ({attempts} solves)")
+    log.append(f"no duration in the search and no relaxation gave certified bounds ({attempts} solves); "
+               + _measured(last.trajectory, target, cfg))
     return finish(PlanStatus.BOUNDS_NOT_CERTIFIED, last, last.trajectory.durations)
+
+
+def _measured(traj: Trajectory, target: PerchTarget, cfg: PlannerConfig) -> str:
+    """The last plan's extremes on a 1 ms grid against the limits, for the failure message."""
+    t = traj.sample(1e-3)
+    f = traj.thrust(t)
+    lim = cfg.limits
+    tilt = float(np.linalg.norm(traj.body_rates(t)[:, :2], axis=1).max())
+    return (f"the last plan ({traj.duration:.2f} s, incline {np.degrees(target.incline):.0f} deg) measured "
+            f"thrust {f.min():.2f}..{f.max():.2f} m/s^2 against limits {lim.accel_min:.2f}..{lim.accel_max:.2f}, "
+            f"tilt rate up to {tilt:.1f} rad/s against {lim.tilt_rate_max:g}")
 
 
 def _with_fov(
