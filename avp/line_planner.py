@@ -567,10 +567,11 @@ def perch_equivalent(
     ``R_WS = [d x n, d, n]`` so the terminal yaw (13) puts ``b2`` along the line (``ACROSS``).
     The workspace gets ``perch_clearance`` with ``body_offset = gripper_offset``: the certified
     ``n . (p - point) > r`` before contact keeps the CoM farther than ``r`` from every point of
-    the plane, hence from the line. The contact velocity is ``-contact_speed n``, the contact
-    thrust ``g n_z + approach_deceleration`` (the CoM decelerates towards the line). What it
-    does not carry over: a free grasp point, ``ALONG``/``FREE`` yaw, the wedge and the flip
-    corridor; use :func:`plan_line` for those.
+    the plane, hence from the line. The contact velocity is ``-contact_speed n`` (with a zero
+    contact speed the normal component is left free: the plane planner rejects a contact that
+    does not move into the pad, :mod:`avp.request`), the contact thrust
+    ``g n_z + approach_deceleration``. What it does not carry over: a zero-speed contact, a free
+    grasp point, ``ALONG``/``FREE`` yaw, the wedge and the flip corridor; use :func:`plan_line`.
     """
     cfg = config if config is not None else PlannerConfig()
     opts = options if options is not None else LineOptions()
@@ -583,7 +584,8 @@ def perch_equivalent(
     alpha = min(max(cfg.g * float(n[2]) + opts.approach_deceleration, lim.accel_min + margin), lim.accel_max - margin)
     out = replace(
         cfg, alpha=alpha, alpha_range=None,
-        contact_velocity=ContactVelocity(normal=-line.contact_speed, slope=0.0, lateral=0.0, scale_slope_with_incline=False),
+        contact_velocity=ContactVelocity(normal=-line.contact_speed if line.contact_speed > 0.0 else None, slope=0.0,
+                                         lateral=0.0, scale_slope_with_incline=False),
         workspace=replace(cfg.workspace, perch_clearance=True, body_offset=line.gripper_offset),
     )
     return target, out
