@@ -1,27 +1,27 @@
 """Line perches: the three seeds' cases, with contact errors, certificates and planning times.
 
     python benchmarks/bench_line.py            # all three
-    python benchmarks/bench_line.py --case 000 --reps 30
+    python benchmarks/bench_line.py --case paneque --reps 30
 
 Cases (cited by authors and title; the set-ups are read from the papers, values the papers do
 not give are stated as assumptions below):
 
-* 000 -- Paneque et al., "Perception-Aware Perching on Powerlines with Multirotors": 0.8 kg,
+* paneque -- Paneque et al., "Perception-Aware Perching on Powerlines with Multirotors": 0.8 kg,
   thrust-to-weight 4:1; final pitch 20, 80 and 180 deg on lines of different inclination; the
   180 deg line at 3.7 m with a minimum height of 0.8 m; perch + recovery. Their Table I gives
   onboard (Jetson TX2) NLP times tp / tr.
-* 002 -- Li et al., "Model-Based Trajectory Planning of a Hybrid Robot for Powerline
+* li -- Li et al., "Model-Based Trajectory Planning of a Hybrid Robot for Powerline
   Inspection": land on top of a wire, heading along it, through a V guide; 100 random starts
   (20 perched on the line, 80 in a 1 m cube centred 1 m above it, heading +-30 deg to the
   line); they report 100 % success and < 50 ms (Xavier NX).
-* 003 -- Mohta, Kumar and Daniilidis, "Vision-based Control of a Quadrotor for Perching on
+* mohta -- Mohta, Kumar and Daniilidis, "Vision-based Control of a Quadrotor for Perching on
   Lines": lines inclined 0, 19.5 and 26.6 deg, starts within +-0.25 m laterally and 0.4-0.8 m
   above the line.
 
 Contact errors are measured on the planned spline (gripper = CoM - offset b3 against the grasp
 point on the line; b3 against the commanded normal; velocity against the request), not on a
 tracked flight: the seeds' RMSEs are tracking errors and are quoted only for context. Times are
-wall-clock on this machine (and, for 000, process CPU time, less sensitive to other jobs on a
+wall-clock on this machine (and, for Paneque et al.'s case, process CPU time, less sensitive to other jobs on a
 shared machine), first call excluded; the in-run baseline is avp's plane perch
 (``avp.plan_detailed``) to the same contact point and normal.
 """
@@ -67,7 +67,7 @@ def plane_baseline(state: avp.State, res: LinePlanResult, line: LineTarget, cfg:
     return time.perf_counter() - t0
 
 
-# -- 000 ------------------------------------------------------------------------------------
+# -- Paneque et al. ---------------------------------------------------------------------
 PANEQUE_MS = {20: (457, 351), 80: (432, 221), 180: (532, 1214)}  # Table I: tp, tr (ms, TX2)
 
 
@@ -87,9 +87,9 @@ def paneque_setups() -> tuple[VehicleLimits, dict[int, tuple[LineTarget, list[fl
     return lim, setups
 
 
-def case_000(reps: int) -> None:
+def case_paneque(reps: int) -> None:
     lim, setups = paneque_setups()
-    print("\n## 000 Paneque et al.: 0.8 kg, T/W 4:1, perch + recovery")
+    print("\n## Paneque et al.: 0.8 kg, T/W 4:1, perch + recovery")
     print("| pitch | line incl. | status | gripper err (mm) | b3 err (deg) | speed err (mm/s) | clearance slack (m^2) "
           "| min height (m) | T perch / rec (s) | plan ms median / p95 (CPU ms median) | plane-perch ms (ratio) | seed tp+tr ms (TX2) |")
     print("|---|---|---|---|---|---|---|---|---|---|---|---|")
@@ -122,8 +122,8 @@ def case_000(reps: int) -> None:
             print("    " + "; ".join(res.log[-3:]))
 
 
-# -- 002 ------------------------------------------------------------------------------------
-def case_002(n: int, seed: int = 2) -> None:
+# -- Li et al. --------------------------------------------------------------------------
+def case_li(n: int, seed: int = 2) -> None:
     rng = np.random.default_rng(seed)
     # Assumed: a 3.5 kg robot (the paper's) with thrust-to-weight 2:1; guide opening 60 deg
     # (not given numerically); guide height = gripper offset 0.1 m; the wire 1 m above the floor.
@@ -157,7 +157,7 @@ def case_002(n: int, seed: int = 2) -> None:
             b1 = tr.attitude(tr.tf)[:, 0]
             heading = math.degrees(math.acos(min(1.0, abs(float(b1[0])))))
         rows[kind].append((ok, dt, inside, heading, res))
-    print("\n## 002 Li et al.: landing on top of a wire, 100 random starts (20 on the line, 80 in the cube)")
+    print("\n## Li et al.: landing on top of a wire, 100 random starts (20 on the line, 80 in the cube)")
     print("| starts | n | planned + certified | max angle in corridor (deg, limit 30) | max heading err at contact (deg) "
           "| plan ms median / p95 / max | seed |")
     print("|---|---|---|---|---|---|---|")
@@ -172,14 +172,14 @@ def case_002(n: int, seed: int = 2) -> None:
                 break
 
 
-# -- 003 ------------------------------------------------------------------------------------
-def case_003(n: int, seed: int = 3) -> None:
+# -- Mohta et al. -----------------------------------------------------------------------
+def case_mohta(n: int, seed: int = 3) -> None:
     rng = np.random.default_rng(seed)
     # Assumed: the paper's 0.23 kg quadrotor with thrust-to-weight 2:1; gripper (Velcro pad)
     # 0.05 m below the CoM; the grasp point free on the middle 60 % of a 2 m line.
     lim = VehicleLimits(mass=0.23, thrust_min=0.1 * 0.23 * G, thrust_max=2.0 * 0.23 * G)
     cfg = PlannerConfig(limits=lim)
-    print("\n## 003 Mohta et al.: lines at 0, 19.5, 26.6 deg; starts +-0.25 m lateral, 0.4-0.8 m above")
+    print("\n## Mohta et al.: lines at 0, 19.5, 26.6 deg; starts +-0.25 m lateral, 0.4-0.8 m above")
     print("| incline (deg) | n | planned + certified | grasp lambda range | gripper err (mm) max | b3 err (deg) max | plan ms median / p95 |")
     print("|---|---|---|---|---|---|---|")
     for incl in (0.0, 19.5, 26.6):
@@ -209,16 +209,16 @@ def case_003(n: int, seed: int = 3) -> None:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--case", choices=["000", "002", "003", "all"], default="all")
-    ap.add_argument("--reps", type=int, default=30, help="repetitions per 000 manoeuvre")
-    ap.add_argument("--n", type=int, default=100, help="starts for 002 (and n/3 per line for 003)")
+    ap.add_argument("--case", choices=["paneque", "li", "mohta", "all"], default="all")
+    ap.add_argument("--reps", type=int, default=30, help="repetitions per manoeuvre of Paneque et al.")
+    ap.add_argument("--n", type=int, default=100, help="starts for Li et al. (and n/3 per line for Mohta et al.)")
     args = ap.parse_args()
-    if args.case in ("000", "all"):
-        case_000(args.reps)
-    if args.case in ("002", "all"):
-        case_002(args.n)
-    if args.case in ("003", "all"):
-        case_003(max(10, args.n // 3))
+    if args.case in ("paneque", "all"):
+        case_paneque(args.reps)
+    if args.case in ("li", "all"):
+        case_li(args.n)
+    if args.case in ("mohta", "all"):
+        case_mohta(max(10, args.n // 3))
 
 
 if __name__ == "__main__":
