@@ -5,6 +5,7 @@ import numpy.typing as npt
 
 __all__ = [
     "BOUND_NAMES",
+    "KernelError",
     "__version__",
     "anticipate",
     "bound_polynomial",
@@ -15,10 +16,19 @@ __all__ = [
     "certify_sphere_outside",
     "certify_spline",
     "eval_spline",
+    "fov_gradient",
     "sturm_count",
 ]
 
 __version__: str
+
+class KernelError(ValueError):
+    """A kernel rejected an argument. ``str(exc)`` is ``"{arg}: {detail}"``."""
+
+    arg: str
+    """Name of the offending argument (``"coeffs"``, ``"knots"``, ``"limits"``, ``"budget"``...)."""
+    detail: str
+    """What is wrong with it and what to do."""
 
 def eval_spline(
     coeffs: npt.NDArray[np.float64],
@@ -46,6 +56,26 @@ def anticipate(
     with ``t_ex >= t_rp``; otherwise ``ValueError``.
     """
 
+def fov_gradient(
+    x: npt.NDArray[np.float64],
+    psi: npt.NDArray[np.float64],
+    a: npt.NDArray[np.float64],
+    s: npt.NDArray[np.float64],
+    axis_B: npt.NDArray[np.float64],
+    cos_half: float,
+    g: float,
+) -> tuple[
+    npt.NDArray[np.float64],
+    npt.NDArray[np.float64],
+    npt.NDArray[np.float64],
+    npt.NDArray[np.float64],
+    npt.NDArray[np.float64],
+]:
+    """FoV cone (7) and its gradient at ``m`` points (``x``, ``a``: ``(m, 3)``, ``psi``: ``(m,)``):
+    ``(h (m,), d_x (m, 3), d_psi (m,), d_a (m, 3), distance (m,))``; non-finite where the
+    construction (13) is singular. Raises ``KernelError`` on bad shapes or non-finite ``s``,
+    ``axis_B``, ``cos_half``, ``g``."""
+
 # --- bound certificates (sturm.rs, exact.rs, certify.rs, bounds.rs) ---------------------------
 
 BOUND_NAMES: list[str]
@@ -54,19 +84,33 @@ def sturm_count(coeffs: npt.NDArray[np.float64], a: float, b: float) -> int:
     """Exact number of distinct real roots of ``sum coeffs[k] x^k`` in the closed ``[a, b]``.
 
     Interval-arithmetic Sturm sequence, exact big-integer fallback when unsure. Raises
-    ``ValueError`` on NaN/inf, ``a > b``, degree > 40 or the zero polynomial.
+    ``KernelError`` (a ``ValueError``) on NaN/inf, ``a > b``, degree > 40 or the zero polynomial.
     """
 
 def certify_below(
-    coeffs: npt.NDArray[np.float64], a: float, b: float, exact: bool = True
+    coeffs: npt.NDArray[np.float64],
+    a: float,
+    b: float,
+    exact: bool = True,
+    budget: float = ...,
 ) -> tuple[int, float]:
     """Algorithm 1: ``(code, t)``; 0 = ``F < 0`` on ``[a, b]`` proven, 1 = ``F >= 0`` somewhere
-    (near ``t``), 2 = unknown (only with ``exact=False``)."""
+    (near ``t``), 2 = unknown (with ``exact=False``, or when the exact fallback needs more than
+    ``budget`` seconds; default ``inf``)."""
 
 def certify_below_many(
-    coeffs: npt.NDArray[np.float64], a: float, b: float, exact: bool = True
+    coeffs: npt.NDArray[np.float64],
+    a: float,
+    b: float,
+    exact: bool = True,
+    budget: float = ...,
+    method: str = "bernstein",
 ) -> tuple[npt.NDArray[np.int8], npt.NDArray[np.float64], npt.NDArray[np.bool_]]:
-    """:func:`certify_below` on every row of ``coeffs`` (n, C): ``(codes, t, decided_fast)``."""
+    """:func:`certify_below` on every row of ``coeffs`` (n, C): ``(codes, t, decided_fast)``.
+
+    ``budget`` (seconds, default ``inf``) applies to each row's exact fallback; ``method`` is
+    ``"bernstein"`` (exact Bernstein subdivision) or ``"sturm"`` (the previous exact Sturm chain,
+    unbudgeted, kept for comparisons)."""
 
 def certify_spline(
     coeffs: npt.NDArray[np.float64],
@@ -74,8 +118,12 @@ def certify_spline(
     limits: npt.NDArray[np.float64],
     g: float = 9.81,
     exact: bool = True,
+    budget: float = ...,
 ) -> tuple[npt.NDArray[np.int8], npt.NDArray[np.float64]]:
     """Bound certificates of a (S, 4, C) spline: ``(codes (5, S), t (5, S))``.
+
+    ``budget`` (seconds, default ``inf``) bounds the exact fallbacks of the whole call; cells
+    left undecided when it runs out are 2 (unknown).
 
     ``limits`` = ``[thrust_max, thrust_min, thrust_rate_max, tilt_rate_max, body_rate_max]``
     (mass-normalised, ``inf`` = not checked); codes 0 within, 1 violated, 2 unknown (with

@@ -21,7 +21,16 @@ import numpy.typing as npt
 from . import _avp_rust
 from .errors import ConfigError
 
-__all__ = ["Bound", "BoundReport", "Certificate", "Violation", "certify_spline"]
+__all__ = ["EXACT_BUDGET", "Bound", "BoundReport", "Certificate", "Violation", "certify_spline"]
+
+EXACT_BUDGET = 0.01
+"""Default time budget (s, wall clock) of the exact fallback per :func:`certify_spline` call.
+Measured with ``benchmarks/bench_bounds.py``: the planner's own polynomials never needed the
+exact path on the standard scenarios; on adversarial near-tangent, mixed-magnitude polynomials
+(degree 10-40) the exact path (Bernstein subdivision) takes a median of ~0.3 ms and at most
+~0.8 ms of CPU time (the previous Sturm path: median ~16 ms, max ~75 ms CPU), so 10 ms leaves
+room for a loaded machine; a cell still undecided then is UNKNOWN, never a wrong verdict. ``inf``
+restores the unbounded, never-UNKNOWN behaviour."""
 
 
 class Certificate(Enum):
@@ -32,7 +41,7 @@ class Certificate(Enum):
     VIOLATED = "violated"
     """``F(t) >= 0`` somewhere on the segment: proven (touching counts)."""
     UNKNOWN = "unknown"
-    """Not decided (only when the exact fallback is disabled)."""
+    """Not decided: the exact fallback was disabled or ran out of its time budget."""
     NOT_CHECKED = "not checked"
     """The limit is ``inf``: the bound was skipped."""
 
@@ -163,6 +172,7 @@ def certify_spline(
     body_rate_max: float = math.inf,
     g: float = 9.81,
     exact: bool = True,
+    budget: float = EXACT_BUDGET,
 ) -> BoundReport:
     """Certifies the actuator bounds of a flat-output spline on every segment (Algorithm 1).
 
@@ -190,6 +200,13 @@ def certify_spline(
         Fall back to exact arithmetic when the floating-point path is unsure (default). With
         ``False`` undecided cells are :attr:`Certificate.UNKNOWN`. The body rate's roll level
         has no exact path: a segment whose roll is not decided is UNKNOWN either way.
+    budget:
+        Seconds the exact fallbacks of this call may take together (default
+        :data:`EXACT_BUDGET`; ``inf``: no limit, never UNKNOWN with ``exact=True``). Cells still
+        undecided when it runs out are :attr:`Certificate.UNKNOWN`: never a wrong WITHIN, never
+        a needless VIOLATED. It is checked between steps of the exact path, so a call can
+        overrun it by one step (a few ms at degree 40). The fast path alone decides realistic
+        trajectories; the budget bounds the rare near-tangent case (``docs/bounds.md``).
 
     Returns
     -------
@@ -214,6 +231,12 @@ def certify_spline(
     g = float(g)
     if not math.isfinite(g):
         raise ConfigError("g", f"must be finite, got {g!r}")
+    try:
+        budget = float(budget)
+    except (TypeError, ValueError):
+        raise ConfigError("budget", f"must be a number of seconds, got {budget!r}") from None
+    if math.isnan(budget) or budget < 0.0:
+        raise ConfigError("budget", f"must be >= 0 s (inf for no limit), got {budget!r}")
     c = np.ascontiguousarray(coeffs, dtype=np.float64)
     k = np.ascontiguousarray(knots, dtype=np.float64)
     if c.ndim != 3 or c.shape[1] != 4:
@@ -223,10 +246,9 @@ def certify_spline(
     # The kernel's limits vector and its output rows share one order: Bound (= BOUND_NAMES).
     row = np.array([limits[b] for b in _BOUNDS], dtype=np.float64)
     try:
-        codes, times = _avp_rust.certify_spline(c, k, row, g, exact)
-    except ValueError as exc:
-        field = str(exc).split(":", 1)[0] or "coeffs"
-        raise ConfigError(field, str(exc).split(":", 1)[-1].strip()) from exc
+        codes, times = _avp_rust.certify_spline(c, k, row, g, exact, budget)
+    except _avp_rust.KernelError as exc:
+        raise ConfigError(exc.arg, exc.detail) from exc
     verdicts = {b: tuple(_CODES[int(x)] for x in codes[i]) for i, b in enumerate(_BOUNDS)}
     tmap = {b: tuple(float(x) for x in times[i]) for i, b in enumerate(_BOUNDS)}
     return BoundReport(verdicts=verdicts, times=tmap, limits=limits)

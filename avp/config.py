@@ -171,6 +171,21 @@ class OverhangFlip:
     an overhang's pre-impact band (14) in PAPER mode is imposed as the tilt cone (CONE): the
     componentwise box pins the thrust upside down and blocked most overhangs. Measured in
     ``docs/decisions.md``.
+
+    Parameters
+    ----------
+    enabled:
+        Add the horizontal-thrust waypoint on overhangs.
+    min_incline:
+        Pads steeper than this (rad) count as overhangs.
+    cone_band:
+        On overhangs, impose a PAPER-mode band (14) as the tilt cone instead.
+    thrust:
+        Least horizontal thrust at the waypoint (m/s^2, mass-normalised); ``None``:
+        ``max(2.5, 2 f_min)`` kept below the middle of the thrust range.
+    turn_rate:
+        Planned turn rate of the thrust from the horizontal to ``s3`` (rad/s); ``None``:
+        0.7 x ``limits.tilt_rate_max`` (7 rad/s without a tilt limit).
     """
 
     enabled: bool = True

@@ -125,20 +125,20 @@ is singular at 90 deg; near it the yaw term of the body rate grows as ``1/cos ph
 
 def contact_yaw(R_WS: npt.ArrayLike) -> tuple[float, float]:
     """Yaw ``psi`` for which the construction (13) with ``b3 = s3`` gives exactly
-    ``R_WB = R_WS``, and the roll ``phi`` (rad) of that attitude.
+    ``R_WB = R_WS`` when that is representable, and the roll ``phi`` (rad) of the attitude it gives.
 
     The construction is ``R_WB = Rz(psi) Ry(theta) Rx(phi)`` with ``cos phi > 0``; it gives
     ``b1 = s1`` iff ``b2_des`` is horizontal, orthogonal to ``s1`` and has ``b2_des . s2 > 0``:
     ``b2_des = sign(s3z) (s3z s2 - s2z s3) / sqrt(s2z^2 + s3z^2)``, with ``cos phi =
     |s3z| / sqrt(s2z^2 + s3z^2)``. When ``s1`` is vertical (``s2z = s3z = 0``, a wall in its
-    natural frame) ``b2_des = s2`` and ``phi = 0``. A pad with ``s3z = 0`` and ``s2z != 0``
-    (horizontal thrust, ``s1`` not vertical, e.g. a vertical ``s2``) has ``|phi| = 90 deg``: the
-    construction cannot represent it.
+    natural frame) ``b2_des = s2`` and ``phi = 0``.
 
-    Raises
-    ------
-    ConfigError
-        ``target.R_WS`` when ``|phi|`` exceeds :data:`MAX_CONTACT_ROLL`.
+    A frame whose roll exceeds :data:`MAX_CONTACT_ROLL` (``s3z`` small against ``s2z``: a wall
+    with a tilted or vertical ``s2``, e.g. an estimate of a wall's frame rotated by noise) is not
+    represented exactly, and near 90 deg the exact yaw is singular. Then ``b2_des`` is the
+    horizontal direction closest to ``s2`` (``e3 x s3`` if ``s2`` is vertical): the plan still
+    ends with ``b3 = s3`` exactly, and the rotation about ``s3`` differs from ``R_WS`` by
+    :func:`contact_frame_error`.
     """
     R = np.asarray(R_WS, dtype=float)
     s2, s3 = R[:, 1], R[:, 2]
@@ -150,15 +150,23 @@ def contact_yaw(R_WS: npt.ArrayLike) -> tuple[float, float]:
     else:
         roll = math.atan2(abs(s2[2]), abs(s3[2]))
         b2d = math.copysign(1.0, s3[2]) * w / wn
-    if roll > MAX_CONTACT_ROLL:
-        raise ConfigError(
-            "target.R_WS",
-            f"the contact attitude R_WS has a roll of {math.degrees(roll):.1f} deg in the attitude "
-            f"construction (13) (yaw-pitch-roll, singular at 90 deg); at most "
-            f"{math.degrees(MAX_CONTACT_ROLL):.1f} deg is supported: choose s1 (up_slope) so that "
-            "s2 = s3 x s1 is closer to horizontal"
-        )
+    if roll > MAX_CONTACT_ROLL:  # not representable: the horizontal direction closest to s2
+        h = np.array([s2[0], s2[1], 0.0])
+        if float(np.linalg.norm(h)) < 1e-9:
+            h = np.cross([0.0, 0.0, 1.0], s3)
+        b2d = h / float(np.linalg.norm(h))
+        return float(math.atan2(-b2d[0], b2d[1])), float(math.asin(max(-1.0, min(1.0, -float(b2d @ s3)))))
     return float(math.atan2(-b2d[0], b2d[1])), math.copysign(roll, -float(b2d @ s3)) if roll else 0.0
+
+
+def contact_frame_error(R_WS: npt.ArrayLike, g: float = GRAVITY) -> float:
+    """Angle (rad) of the rotation about ``s3`` between ``R_WS`` and the contact attitude the
+    planner reaches with :func:`contact_yaw` (0 to rounding when the roll is at most
+    :data:`MAX_CONTACT_ROLL`)."""
+    R = np.asarray(R_WS, dtype=float)
+    psi, _ = contact_yaw(R)
+    a_f = 4.0 * R[:, 2] - g * np.array([0.0, 0.0, 1.0])  # any contact thrust along s3
+    return float(rotation_error_angle(attitude(a_f, psi), R))
 
 
 def rotation_error_angle(R_a: npt.ArrayLike, R_b: npt.ArrayLike) -> Array:

@@ -2,16 +2,18 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
+from . import _avp_rust, frames
 from . import _validate as v
 from .camera import Camera
 from .trajectory import Trajectory
 from .types import PerchTarget
 
-__all__ = ["Visibility", "visibility"]
+__all__ = ["Visibility", "visibility", "visibility_many"]
 
 
 @dataclass(frozen=True)
@@ -62,21 +64,46 @@ def visibility(
     dt:
         Sampling step (s).
     """
+    return visibility_many((trajectory,), target, camera, dt)[0]
+
+
+def visibility_many(
+    trajectories: Sequence[Trajectory],
+    target: PerchTarget,
+    camera: Camera | None = None,
+    dt: float = 1e-3,
+) -> list[Visibility]:
+    """:func:`visibility` of several plans in one pass.
+
+    Plans on the same knots (the candidates of one SQP, say) are evaluated by one kernel call on
+    their stacked coefficients and one vectorised camera test; the result equals calling
+    :func:`visibility` on each. Plans on different knots are evaluated one after the other.
+    """
     cam = Camera() if camera is None else camera
     step = v.positive_float("dt", dt)
-    t = trajectory.sample(step)
-    d = trajectory.derivatives(t, (0, 2))
-    x = d[0, :, :3]
-    R = trajectory.attitude(t)
+    if not trajectories:
+        return []
+    first = trajectories[0]
+    if any(not np.array_equal(tr.knots, first.knots) or tr.g != first.g for tr in trajectories[1:]):
+        return [visibility_many((tr,), target, cam, step)[0] for tr in trajectories]
+    k = len(trajectories)
+    t = first.sample(step)
+    coeffs = first.coefficients if k == 1 else np.concatenate([tr.coefficients for tr in trajectories], axis=1)
+    ev = _avp_rust.eval_spline(coeffs, first.knots, t, [0, 2]).reshape(2, t.size, k, 4)
+    x = ev[0, :, :, :3]  # (n, k, 3)
+    R = frames.attitude(ev[1, :, :, :3], ev[0, :, :, 3], first.g)  # (n, k, 3, 3), (11), (13)
     flags = cam.sees(x, R, target.point).astype(float)
-    flags[~np.all(np.isfinite(R.reshape(t.size, -1)), axis=1)] = 0.0
-    w = 0.5 * (flags[1:] + flags[:-1])
+    flags[~np.all(np.isfinite(R.reshape(t.size, k, -1)), axis=2)] = 0.0
     dtimes = np.diff(t)
-    ds = np.linalg.norm(np.diff(x, axis=0), axis=1)
     total_t = float(dtimes.sum())
-    total_s = float(ds.sum())
-    tf = float(w @ dtimes / total_t) if total_t > 0 else 0.0
-    pf = float(w @ ds / total_s) if total_s > 0 else tf
-    lost = np.flatnonzero(flags[:-1] < 0.5)
-    first_loss = float(t[lost[0]]) if lost.size else None
-    return Visibility(tf, pf, first_loss)
+    out = []
+    for j in range(k):
+        f = flags[:, j]
+        w = 0.5 * (f[1:] + f[:-1])
+        ds = np.linalg.norm(np.diff(x[:, j], axis=0), axis=1)
+        total_s = float(ds.sum())
+        tf = float(w @ dtimes / total_t) if total_t > 0 else 0.0
+        pf = float(w @ ds / total_s) if total_s > 0 else tf
+        lost = np.flatnonzero(f[:-1] < 0.5)
+        out.append(Visibility(tf, pf, float(t[lost[0]]) if lost.size else None))
+    return out

@@ -15,14 +15,14 @@ Policy (:func:`solve_with_fov`), at fixed segment durations:
 Incompatibility (16) is declared when the back-end reports no solution, raises, or returns a point
 whose KKT residuals are out of tolerance: primal violation above
 :data:`avp.solve.FEASIBILITY_TOL` (checked by :func:`~avp.solve.solve_perching_qp`), or dual
-residual / duality gap of the returned ``qpsolvers.Solution`` above :data:`KKT_TOL`. For the FoV
-attempts iterative back-ends (proxqp, osqp) get ``max_iter = fov.fallback_max_iter`` so an
-infeasible problem is declared quickly (docs/perception.md has the measurements).
+residual / duality gap of the returned ``qpsolvers.Solution`` above :data:`KKT_TOL`
+(:func:`avp.solve.incompatibility`, next to the back-end table :data:`avp.solve.BACKENDS`). For
+the FoV attempts iterative back-ends (proxqp, osqp) get ``max_iter = fov.fallback_max_iter`` so
+an infeasible problem is declared quickly (docs/perception.md has the measurements).
 """
 
 from __future__ import annotations
 
-import math
 import time
 import warnings
 from dataclasses import dataclass, replace
@@ -32,22 +32,23 @@ import numpy.typing as npt
 
 from .config import PlannerConfig
 from .errors import InfeasibleError, SolverError
-from .metrics import visibility
+from .metrics import visibility_many
 from .qp.assemble import ConstraintBlock, PerchingQp, build_perching_qp
 from .qp.fov import FovLinearisation, fov_blocks, fov_times
-from .solve import QpOutcome, solve_perching_qp
+from .solve import (
+    ITERATIVE_SOLVERS,
+    KKT_TOL,
+    QpOutcome,
+    backend,
+    incompatibility,
+    solve_perching_qp,
+)
 from .trajectory import Trajectory
 from .types import PerchTarget, State
 
 Array = npt.NDArray[np.float64]
 
-__all__ = ["ITERATIVE_SOLVERS", "KKT_TOL", "FovSolve", "linearise_on", "solve_with_fov"]
-
-KKT_TOL = 1e-5
-"""Largest accepted dual residual and duality gap (of the unit-diagonal scaled reduced QP)."""
-
-ITERATIVE_SOLVERS = ("proxqp", "osqp", "scs", "clarabel")
-"""Back-ends that accept ``max_iter`` and may iterate to their limit on an infeasible QP."""
+__all__ = ["ITERATIVE_SOLVERS", "KKT_TOL", "FovSolve", "incompatibility", "linearise_on", "solve_with_fov"]
 
 _SCORE_GRID = 200
 """Samples of the coarse visibility grid used to accept an SQP step."""
@@ -95,33 +96,15 @@ def linearise_on(
 
 def _fov_config(cfg: PlannerConfig) -> PlannerConfig:
     cap = cfg.fov.fallback_max_iter
-    if cap is None or cfg.solver not in ITERATIVE_SOLVERS:
+    if cap is None or not backend(cfg.solver).iterative:
         return cfg
     return replace(cfg, solver_options=(("max_iter", int(cap)),) + tuple(cfg.solver_options))
 
 
-def incompatibility(outcome: QpOutcome | None) -> str | None:
-    """Why a FoV-constrained solve counts as incompatible (16), or ``None`` if it is accepted."""
-    if outcome is None:
-        return "no outcome"
-    if not outcome.ok:
-        return f"{outcome.status.value} (max violation {outcome.max_violation:.1e})"
-    sol = outcome.solution
-    if sol is None:
-        return None
-    for name in ("dual_residual", "duality_gap"):
-        try:
-            val = float(getattr(sol, name)())
-        except (ValueError, TypeError, AttributeError):  # no multipliers: the primal check stands
-            continue
-        if math.isfinite(val) and val > KKT_TOL:
-            return f"KKT {name.replace('_', ' ')} {val:.1e} > {KKT_TOL:.0e}"
-    return None
-
-
-def _score(traj: Trajectory, target: PerchTarget, cfg: PlannerConfig) -> float:
-    vis = visibility(traj, target, cfg.fov.camera, dt=traj.duration / _SCORE_GRID)
-    return vis.time_fraction + vis.path_fraction
+def _scores(trajs: tuple[Trajectory, ...], target: PerchTarget, cfg: PlannerConfig) -> list[float]:
+    """Visibility time + path fraction of plans on the same knots, in one vectorised pass."""
+    vis = visibility_many(trajs, target, cfg.fov.camera, dt=trajs[0].duration / _SCORE_GRID)
+    return [v.time_fraction + v.path_fraction for v in vis]
 
 
 def solve_with_fov(
@@ -219,7 +202,7 @@ def solve_with_fov(
         log.append("no FoV points: the gate covers the whole plan")
         return FovSolve(out0, traj0, False, build, solve)
     best_out, best_traj = out0, traj0
-    best_score = _score(traj0, target, cfg)
+    best_score: float | None = None  # scored with the first step's plan, in one pass
     best_lin: FovLinearisation | None = None
     steps = 0
     for k in range(cfg.fov.sqp_iterations):
@@ -229,7 +212,10 @@ def solve_with_fov(
                 log.append("FoV rows dropped (16): returning the plan without them")
                 return FovSolve(out0, traj0, True, build, solve, 0, lin)
             break
-        score = _score(traj, target, cfg)
+        if best_score is None:
+            best_score, score = _scores((traj0, traj), target, cfg)
+        else:
+            (score,) = _scores((traj,), target, cfg)
         log.append(f"SQP step {k + 1}: visibility time+path {score / 2:.3f} (was {best_score / 2:.3f})")
         if score <= best_score + 1e-4:
             if k == 0 and score < best_score - 1e-4:

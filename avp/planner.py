@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass, field, replace
 from enum import Enum
@@ -13,6 +14,7 @@ import numpy.typing as npt
 
 from .bounds import BoundReport, certify_spline
 from .config import PlannerConfig, PreImpactMode, Relaxation
+from .frames import MAX_CONTACT_ROLL, contact_frame_error
 from .errors import (
     BoundsNotCertifiedError,
     ConfigError,
@@ -312,6 +314,11 @@ def plan_detailed(
     T0 = check_durations(durations, cfg) if durations is not None else initial_durations(state, target, cfg)
     check_request(state, target, cfg, float(T0.sum()))  # physical sense of the request
     log: list[str] = [f"durations {np.round(T0, 4).tolist()} s ({'given' if durations is not None else 'allocated'})"]
+    frame_error = contact_frame_error(target.R_WS, cfg.g)
+    if frame_error > 1e-6:
+        log.append(f"contact attitude: R_WS is not representable by the attitude construction (13) (roll "
+                   f"beyond {math.degrees(MAX_CONTACT_ROLL):.1f} deg); b3 = s3 exactly, the rotation about s3 "
+                   f"differs from R_WS by {math.degrees(frame_error):.2f} deg")
     build = solve = certify = 0.0
     attempts = 0
     relaxed: list[Relaxation] = []

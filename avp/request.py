@@ -6,8 +6,6 @@ perch-plane clearance region, with the other workspace limits):
 
 * the requested contact velocity does not move into the pad (``v . s3 >= 0``): a contact needs
   ``ContactVelocity.normal < 0``;
-* the contact attitude ``R_WS`` cannot be represented by the attitude construction (13)
-  (:func:`avp.frames.contact_yaw`);
 * the requested contact velocity is out of reach: ``|v(t_f) - v(0)| = |int a dt| <=
   (f_max + g) T`` because ``|a| <= |a + g e3| + g`` and the thrust (15) is at most ``f_max``,
   so a velocity change larger than ``(f_max + g) T_max``, with ``T_max`` the longest total
@@ -20,7 +18,6 @@ import numpy as np
 
 from .config import PlannerConfig
 from .errors import ConfigError
-from .frames import contact_yaw
 from .types import PerchTarget, State
 
 __all__ = ["check_request", "longest_total_time"]
@@ -44,7 +41,6 @@ def check_request(state: State, target: PerchTarget, config: PlannerConfig, tota
             f"is {cv.normal} m/s: v . s3 >= 0 does not move into the pad (s3 points out of it), so "
             "the vehicle never arrives; use a negative value (paper: -0.3 m/s) or None to leave it free",
         )
-    contact_yaw(target.R_WS)  # raises ConfigError("target.R_WS") for a singular contact attitude
     # The fixed components of v(t_f) in S against the start velocity; free ones can match it.
     names = ("slope", "lateral", "normal")
     gaps = [

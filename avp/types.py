@@ -69,13 +69,13 @@ class PerchTarget:
     pad is level). Incline is the angle between ``s3`` and ``e3``: 0 floor, 90 deg wall,
     180 deg ceiling.
 
-    A plan ends with ``attitude(t_f) == R_WS`` exactly (to rounding) for every target the
-    planner accepts: the terminal yaw (13) is :func:`avp.frames.contact_yaw`. That holds for any
-    ``R_WS`` whose roll in the attitude construction (13) (yaw-pitch-roll, ``cos(roll) =
-    |s3z| / sqrt(s2z^2 + s3z^2)``) is at most :data:`avp.frames.MAX_CONTACT_ROLL` (75.5 deg);
-    ``from_incline`` and ``from_normal`` without ``up_slope`` always give roll 0. Others (e.g.
-    a horizontal normal with a vertical ``s2``) are rejected by the planner with a
-    ``ConfigError`` on ``target.R_WS``.
+    A plan ends with ``attitude(t_f)[:, 2] == s3`` (thrust axis along the normal) for every
+    target, and with ``attitude(t_f) == R_WS`` exactly (to rounding) whenever the frame's roll in
+    the attitude construction (13) (yaw-pitch-roll, ``cos(roll) = |s3z| / sqrt(s2z^2 + s3z^2)``) is
+    at most :data:`avp.frames.MAX_CONTACT_ROLL` (75.5 deg); ``from_incline`` and ``from_normal``
+    without ``up_slope`` always give roll 0. Beyond it (a horizontal normal with a tilted or
+    vertical ``s2``) the rotation about ``s3`` is the closest the construction reaches, off by
+    :func:`avp.frames.contact_frame_error` (the plan's log says so).
 
     The target is static; :meth:`at` is the hook a moving target overrides (roadmap: moving
     platforms, as in Gao et al., "Adaptive Tracking and Perching for Quadrotor in Dynamic Scenarios").

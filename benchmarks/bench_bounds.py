@@ -1,16 +1,23 @@
 """Cost of the sound bound certificates (Algorithm 1) against sampling and numpy.roots.
 
-Run: ``python benchmarks/bench_bounds.py``. Prints
+Run: ``python benchmarks/bench_bounds.py [--adversarial 1000] [--plans 3]``. Prints
 
 * microseconds per certificate for degree 10/20/30 polynomials on [0, 1] (median and p95 over
   batches, fast path only and with the exact fallback), with the fast-path unknown rate;
 * the time of a whole-trajectory certificate (3 segments, degree-7 spline, all 5 bounds);
 * in the same run, the same trajectory checked by (a) dense sampling at 1 ms with NumPy and
-  (b) ``numpy.roots`` on the derivative of each checked polynomial (extrema), and the ratios.
+  (b) ``numpy.roots`` on the derivative of each checked polynomial (extrema), and the ratios;
+* the exact fallback on adversarial polynomials (near-tangent and mixed-magnitude, degree
+  10-40): per call, the previous exact path (Sturm chain of primitive pseudo-remainders,
+  ``method="sturm"``) and the current one (Bernstein subdivision) measured interleaved on the
+  same polynomials, median/p95/p99/max, their agreement, and the UNKNOWN rate per budget;
+* how often the planner's own checked polynomials need the exact path (``avp.plan`` on the
+  standard scenarios of ``bench_plan.py``, cells the fast path leaves undecided).
 """
 
 from __future__ import annotations
 
+import argparse
 import time
 
 import numpy as np
@@ -127,6 +134,118 @@ def whole_trajectory() -> None:
         print(f"  {name:<34} {np.median(v):>10.1f} {np.percentile(v, 95):>10.1f} {np.median(v) / base:>9.1f}")
 
 
+def adversarial(n: int, rng: np.random.Generator) -> list[np.ndarray]:
+    """Polynomials on [0, 1] built to defeat the floating-point path: (a) random with mixed
+    magnitudes (e^+-3) and the maximum within +-5 % of zero, (b) planted near-tangencies
+    ``-(x - r)^2 s(x) -+ 2^-k |F_0|`` with ``s > 0`` spanning e^+-6, (c) wide magnitudes (e^+-8)
+    with the maximum 10^-3..10^-12 (relative) from zero. Degrees 10, 20, 30, 40."""
+    out = []
+    for _ in range(n):
+        deg = int(rng.choice([10, 20, 30, 40]))
+        kind = rng.integers(3)
+        if kind == 0:
+            C = rng.standard_normal(deg + 1) * np.exp(rng.uniform(-3, 3, deg + 1))
+            mx = P.polyval(np.linspace(0, 1, 1001), C).max()
+            C[0] -= mx + abs(mx) * rng.uniform(-0.05, 0.05)
+        elif kind == 1:
+            r = rng.uniform(0.05, 0.95)
+            s = np.abs(rng.standard_normal(deg - 1)) * np.exp(rng.uniform(-6, 6, deg - 1))
+            C = -P.polymul(P.polymul([-r, 1.0], [-r, 1.0]), s)
+            C[0] -= 2.0 ** -int(rng.integers(20, 52)) * abs(C[0]) * rng.choice([1.0, -1.0])
+        else:
+            C = rng.standard_normal(deg + 1) * np.exp(rng.uniform(-8, 8, deg + 1))
+            mx = P.polyval(np.linspace(0, 1, 4001), C).max()
+            C[0] -= mx * (1 + rng.choice([1.0, -1.0]) * 10.0 ** -rng.uniform(3, 12))
+        out.append(np.ascontiguousarray(C[None, :]))
+    return out
+
+
+def stats(v: np.ndarray) -> str:
+    return (f"{np.median(v):>9.3f} {np.percentile(v, 95):>9.3f} {np.percentile(v, 99):>9.3f} "
+            f"{v.max():>9.3f}")
+
+
+def exact_worst_case(n: int) -> None:
+    polys = adversarial(n, np.random.default_rng(1))
+    old, new, old_cpu, new_cpu, slow, disagree = [], [], [], [], [], 0
+    for row in polys:
+        _, _, fast = _avp_rust.certify_below_many(row, 0.0, 1.0, False)
+        t0, c0 = time.perf_counter(), time.thread_time()
+        a = _avp_rust.certify_below_many(row, 0.0, 1.0, True, method="sturm")[0][0]
+        t1, c1 = time.perf_counter(), time.thread_time()
+        b = _avp_rust.certify_below_many(row, 0.0, 1.0, True)[0][0]
+        t2, c2 = time.perf_counter(), time.thread_time()
+        old.append(t1 - t0)
+        new.append(t2 - t1)
+        old_cpu.append(c1 - c0)
+        new_cpu.append(c2 - c1)
+        slow.append(not fast[0])
+        disagree += int(a != b)
+    old, new, slow = np.array(old) * 1e3, np.array(new) * 1e3, np.array(slow)
+    old_cpu, new_cpu = np.array(old_cpu) * 1e3, np.array(new_cpu) * 1e3
+    print(f"\nExact fallback on {n} adversarial polynomials (degree 10-40, near-tangent, mixed "
+          f"magnitudes); {slow.sum()} ({slow.mean():.1%}) need the exact path; verdicts of the two "
+          f"exact paths disagree on {disagree}")
+    print(f"  {'per call, ms (wall unless CPU)':<40} {'median':>9} {'p95':>9} {'p99':>9} {'max':>9}")
+    for name, v in (("all: previous exact path (Sturm)", old), ("all: Bernstein subdivision", new),
+                    ("exact path only: previous (Sturm)", old[slow]),
+                    ("exact path only: Bernstein", new[slow]),
+                    ("exact path only, CPU time: previous", old_cpu[slow]),
+                    ("exact path only, CPU time: Bernstein", new_cpu[slow])):
+        print(f"  {name:<40} {stats(v)}")
+    print(f"  speed-up on the exact path: median {np.median(old[slow]) / np.median(new[slow]):.0f}x, "
+          f"p99 {np.percentile(old[slow], 99) / np.percentile(new[slow], 99):.0f}x, "
+          f"max {old[slow].max() / new[slow].max():.0f}x")
+    hard = [p for p, s in zip(polys, slow, strict=True) if s]
+    # wall time includes the machine's scheduling; thread CPU time is the kernel's own work
+    print(f"  {'budget':>8} {'unknown rate (exact-path cases)':>32} {'max wall ms':>12} {'max CPU ms':>11}")
+    for budget in (1e-3, 5e-3, 1e-2, 2e-2):
+        unk, worst, worst_cpu = 0, 0.0, 0.0
+        for row in hard:
+            t0, c0 = time.perf_counter(), time.thread_time()
+            unk += int(_avp_rust.certify_below_many(row, 0.0, 1.0, True, budget)[0][0] == 2)
+            worst = max(worst, time.perf_counter() - t0)
+            worst_cpu = max(worst_cpu, time.thread_time() - c0)
+        print(f"  {budget * 1e3:>6.0f}ms {unk / max(len(hard), 1):>32.3%} {worst * 1e3:>12.2f} {worst_cpu * 1e3:>11.2f}")
+
+
+def planner_exact_path_rate(repeats: int) -> None:
+    """Cells of the planner's own certificates that the fast path leaves to the exact path."""
+    from bench_plan import scenarios
+
+    import avp
+    import avp.planner as planner
+
+    counts = {"calls": 0, "cells": 0, "exact": 0}
+    original = planner.certify_spline
+
+    def counting(coeffs, knots, **kw):
+        rep = original(coeffs, knots, **kw)
+        fast = original(coeffs, knots, **{**kw, "exact": False})
+        counts["calls"] += 1
+        counts["cells"] += sum(v.value != "not checked" for vs in fast.verdicts.values() for v in vs)
+        counts["exact"] += len(fast.unknown)
+        return rep
+
+    planner.certify_spline = counting
+    try:
+        for cfg in (avp.PlannerConfig(), avp.PlannerConfig(fov=avp.FovConfig(enabled=False))):
+            for state, target in scenarios():
+                for _ in range(repeats):
+                    avp.plan_detailed(state, target, cfg)
+    finally:
+        planner.certify_spline = original
+    print(f"\nPlanner's own polynomials (bench_plan scenarios, FoV on and off, {repeats} repeats): "
+          f"{counts['calls']} certificates, {counts['cells']} checked cells, "
+          f"{counts['exact']} need the exact path ({counts['exact'] / max(counts['cells'], 1):.2%})")
+
+
 if __name__ == "__main__":
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--adversarial", type=int, default=1000)
+    ap.add_argument("--plans", type=int, default=3)
+    args = ap.parse_args()
     per_certificate()
     whole_trajectory()
+    exact_worst_case(args.adversarial)
+    planner_exact_path_rate(args.plans)

@@ -111,7 +111,7 @@ def main() -> None:
     print(f"the previous release's behaviour (alpha = 4, no rows): {solved_legacy} plans returned, "
           f"{through_legacy} of them cross the pad's plane or the ground")
     print(f"with the rows: {violations_after} returned plans cross either (must be 0)")
-    ms = lambda x: np.percentile(np.asarray(x) * 1e3, [50, 95, 99])  # noqa: E731
+    ms = lambda x: np.percentile(np.asarray(x) * 1e3, [50, 95, 99])
     a, b = ms(t_unsafe), ms(t_safe)
     print(f"plan_detailed latency (ms)    median    p95     p99   ({args.repeats} repeats per case, interleaved)")
     print(f"  without workspace rows      {a[0]:7.2f} {a[1]:7.2f} {a[2]:7.2f}")

@@ -1,4 +1,4 @@
-"""Soundness sweep of the body-rate certificate (issue 8, item 7): random perches with moving
+"""Soundness sweep of the body-rate certificate: random perches with moving
 starts (up to 5 m/s), any yaw, yaw rates up to 5 rad/s, inclines 0-180 deg and pads with a
 custom up-slope, planned with ``VehicleLimits(body_rate_max=14)``. For every plan returned as
 certified, the true body rate is recomputed independently (Euler-angle attitude from scipy,

@@ -1,4 +1,4 @@
-"""Overhangs and ceilings (issue 8, item 5): 54 perches at inclines 100-180 deg, stand-offs 2/3/5 m,
+"""Overhangs and ceilings: 54 perches at inclines 100-180 deg, stand-offs 2/3/5 m,
 starts at rest 1.5/3/4 m below the pad, default limits; how many plan SOLVED (every certificate,
 nothing relaxed) with the overhang rows (`avp.OverhangFlip`), without them, and with them but the
 componentwise band (14), and plan_detailed median / p95 per variant in the same run.

@@ -236,6 +236,76 @@ def test_fast_path_unknown_rate_is_recorded():
     assert all(r < 0.5 for r in rates.values())
 
 
+@st.composite
+def near_tangent_poly(draw):
+    """Mixed-magnitude near-tangencies: ``scale * (-(x - r)^2 s(x) + eps)`` with ``s > 0`` a sum
+    of squares with coefficients spanning ~2^-20..2^20 and ``eps = +-2^-k`` (k 10-60), rounded
+    to floats (the oracle is exact on the rounded floats). The fast path is often unsure on
+    these; the exact path decides them."""
+    r = Fraction(draw(st.integers(1, 127)), 128)
+    s = [Fraction(0)]
+    for _ in range(draw(st.integers(1, 3))):
+        f = [Fraction(draw(st.integers(-(2**8), 2**8))) * Fraction(2) ** draw(st.integers(-20, 20))
+             for _ in range(draw(st.integers(1, 3)))]
+        sq = _mul(f, f)
+        s = [a + b for a, b in zip(s + [Fraction(0)] * (len(sq) - len(s)), sq + [Fraction(0)] * (len(s) - len(sq)), strict=True)]
+    s[0] += Fraction(1, 2**20)  # strictly positive
+    p = [-x for x in _mul(_mul([-r, Fraction(1)], [-r, Fraction(1)]), s)]
+    eps = Fraction(draw(st.sampled_from([-1, 1])), 2 ** draw(st.integers(10, 60)))
+    p[0] += eps * (abs(p[2]) + 1)
+    scale = Fraction(2) ** draw(st.integers(-30, 30))
+    return [float(x * scale) for x in p]
+
+
+@settings(max_examples=60, deadline=None)
+@given(c=near_tangent_poly(), ab=st.sampled_from([(0.0, 1.0), (0.25, 0.875), (-0.5, 0.75)]))
+def test_exact_paths_and_budgets_match_sympy_on_near_tangent_polynomials(c, ab):
+    """The Bernstein exact path, the previous Sturm path and every budget agree with the exact
+    verdict: a budget may end in UNKNOWN, never in a wrong verdict."""
+    a, b = ab
+    truth = WITHIN if below_oracle(c, a, b) else VIOLATED
+    row = np.array([c])
+    assert _avp_rust.certify_below(np.array(c), a, b)[0] == truth
+    assert _avp_rust.certify_below_many(row, a, b, True, method="sturm")[0][0] == truth
+    codes, _, fast = _avp_rust.certify_below_many(row, a, b, True)
+    assert codes[0] == truth
+    for budget in (0.0, 1e-5, 1e-3):
+        code, t = _avp_rust.certify_below(np.array(c), a, b, budget=budget)
+        assert code in (truth, UNKNOWN)
+        if fast[0]:
+            assert code == truth  # the fast path never needs the budget
+        if code == VIOLATED:
+            assert a <= t <= b
+
+
+def test_zero_budget_is_unknown_exactly_when_the_exact_path_is_needed():
+    touch = np.array([-0.25, 1.0, -1.0])  # -(t - 1/2)^2: only the exact path decides it
+    assert _avp_rust.certify_below(touch, 0.0, 1.0, budget=0.0)[0] == UNKNOWN
+    assert _avp_rust.certify_below(touch, 0.0, 1.0, budget=math.inf)[0] == VIOLATED
+    assert _avp_rust.certify_below(touch - [0.01, 0, 0], 0.0, 1.0, budget=0.0)[0] == WITHIN
+    with pytest.raises(_avp_rust.KernelError) as exc:
+        _avp_rust.certify_below(touch, 0.0, 1.0, budget=-1.0)
+    assert exc.value.arg == "budget"
+    with pytest.raises(_avp_rust.KernelError) as exc:
+        _avp_rust.certify_below_many(touch[None, :], 0.0, 1.0, method="newton")
+    assert exc.value.arg == "method"
+
+
+def test_kernel_errors_carry_the_argument_name():
+    with pytest.raises(_avp_rust.KernelError) as exc:
+        _avp_rust.certify_below(np.array([np.nan, 1.0]), 0.0, 1.0)
+    assert (exc.value.arg, exc.value.detail) == ("coeffs", "contains NaN or inf; pass finite values")
+    assert str(exc.value) == "coeffs: contains NaN or inf; pass finite values"
+    assert isinstance(exc.value, ValueError)
+    with pytest.raises(_avp_rust.KernelError) as exc:
+        _avp_rust.certify_below(np.array([1.0, 1.0]), 1.0, 0.0)
+    assert exc.value.arg == "b"
+    c, k = _hover()
+    with pytest.raises(_avp_rust.KernelError) as exc:
+        _avp_rust.certify_spline(c, k[::-1].copy(), np.full(5, 10.0))
+    assert exc.value.arg == "knots"
+
+
 # ---------------------------------------------------------------- certify_spline
 
 
@@ -376,14 +446,29 @@ def test_config_errors_name_the_field(kwargs, field):
     assert exc.value.field == field
 
 
+def test_budgeted_spline_certificate_is_unknown_never_wrong():
+    c, k = _hover()
+    # hovering: ||f|| = g exactly, so thrust_max = g touches: a violation only exact arithmetic sees
+    exact = certify_spline(c, k, thrust_min=1.0, thrust_max=9.81, budget=math.inf)
+    assert exact.verdicts[Bound.THRUST_MAX] == (Certificate.VIOLATED,) * 2
+    spent = certify_spline(c, k, thrust_min=1.0, thrust_max=9.81, budget=0.0)
+    assert spent.verdicts[Bound.THRUST_MAX] == (Certificate.UNKNOWN,) * 2
+    assert spent.verdicts[Bound.THRUST_MIN] == (Certificate.WITHIN,) * 2
+    assert not spent.certified and spent.unknown == [(Bound.THRUST_MAX, 0), (Bound.THRUST_MAX, 1)]
+    with pytest.raises(ConfigError) as exc:
+        certify_spline(c, k, thrust_min=1.0, thrust_max=9.81, budget=-1.0)
+    assert exc.value.field == "budget"
+
+
 def test_config_errors_on_shapes_and_degree():
     c, k = _hover()
     with pytest.raises(ConfigError):
         certify_spline(c[:, :3], k, thrust_min=1.0, thrust_max=20.0)
     with pytest.raises(ConfigError):
         certify_spline(c, k[:2], thrust_min=1.0, thrust_max=20.0)
-    with pytest.raises(ConfigError):
+    with pytest.raises(ConfigError) as exc:
         certify_spline(c, k[::-1].copy(), thrust_min=1.0, thrust_max=20.0)
+    assert exc.value.field == "knots"
     big = np.zeros((1, 4, 13))
     with pytest.raises(ConfigError):
         certify_spline(big, k[:2], thrust_min=1.0, thrust_max=20.0, body_rate_max=3.0)

@@ -7,6 +7,7 @@ import dataclasses
 import math
 
 import numpy as np
+import numpy.typing as npt
 import pytest
 import qpsolvers
 from hypothesis import given, settings
@@ -24,10 +25,20 @@ from avp import (
     visibility,
 )
 from avp.errors import ConfigError
-from avp.frames import attitude
+from avp.frames import GRAVITY, attitude
 from avp.qp.assemble import build_perching_qp
-from avp.qp.fov import fov_blocks, fov_gradient, fov_h, fov_times
+from avp.qp.fov import (
+    FOV_PREFIX,
+    FovGradient,
+    fov_blocks,
+    fov_gradient,
+    fov_h,
+    fov_times,
+)
+from avp.qp.layout import YAW, DecisionLayout
+from avp.qp.rows import point_rows
 
+Array = npt.NDArray[np.float64]
 CAM = Camera()
 floats = st.floats(allow_nan=False, allow_infinity=False)
 
@@ -221,3 +232,158 @@ def test_disabled_fov_is_plain_qp() -> None:
     result = plan_detailed(state, target, PlannerConfig(fov=FovConfig(enabled=False)))
     assert result.ok and not result.fov_dropped
     assert not any("FoV" in line for line in result.log)
+
+
+# ---------------------------------------------------------------- previous NumPy implementation
+# Kept as the reference the Rust kernel and the shared-basis rows must reproduce (to 1e-12).
+
+E3 = np.array([0.0, 0.0, 1.0])
+
+
+def _ref_skew(w: Array) -> Array:
+    """``hat(w)`` for ``w`` of shape ``(..., 3)`` -> ``(..., 3, 3)`` with ``hat(w) u = w x u``."""
+    z = np.zeros(w.shape[:-1])
+    return np.stack([
+        np.stack([z, -w[..., 2], w[..., 1]], -1),
+        np.stack([w[..., 2], z, -w[..., 0]], -1),
+        np.stack([-w[..., 1], w[..., 0], z], -1),
+    ], -2)
+
+
+def _ref_axis_and_jacobians(psi: Array, a: Array, axis_B: Array, g: float) -> tuple[Array, Array, Array]:
+    """``e_c``, ``d e_c / d psi`` (m, 3) and ``d e_c / d a`` (m, 3, 3) for the construction (13)."""
+    f = a + g * E3
+    fn = np.linalg.norm(f, axis=-1, keepdims=True)
+    b3 = f / fn
+    eye = np.eye(3)
+    J_b3 = (eye - b3[..., :, None] * b3[..., None, :]) / fn[..., None]  # d b3 / d a
+    b2d = np.stack([-np.sin(psi), np.cos(psi), np.zeros_like(psi)], -1)
+    b2d_psi = np.stack([-np.cos(psi), -np.sin(psi), np.zeros_like(psi)], -1)
+    v = np.cross(b2d, b3)
+    vn = np.linalg.norm(v, axis=-1, keepdims=True)
+    b1 = v / vn
+    b2 = np.cross(b3, b1)
+    P1 = (eye - b1[..., :, None] * b1[..., None, :]) / vn[..., None]  # d b1 / d v
+    dv_a = _ref_skew(b2d) @ J_b3
+    dv_psi = np.cross(b2d_psi, b3)
+    J_b1_a = P1 @ dv_a
+    J_b1_psi = np.einsum("mij,mj->mi", P1, dv_psi)
+    # b2 = b3 x b1: d b2 = hat(b3) d b1 - hat(b1) d b3
+    J_b2_a = _ref_skew(b3) @ J_b1_a - _ref_skew(b1) @ J_b3
+    J_b2_psi = np.cross(b3, J_b1_psi)
+    d1, d2, d3 = axis_B
+    e_c = d1 * b1 + d2 * b2 + d3 * b3
+    de_psi = d1 * J_b1_psi + d2 * J_b2_psi
+    de_a = d1 * J_b1_a + d2 * J_b2_a + d3 * J_b3
+    return e_c, de_psi, de_a
+
+
+def _ref_fov_gradient(
+    x: npt.ArrayLike, psi: npt.ArrayLike, a: npt.ArrayLike, s: npt.ArrayLike,
+    camera: Camera, g: float = GRAVITY,
+) -> FovGradient:
+    """The previous NumPy implementation of ``fov_gradient``."""
+    xx = np.atleast_2d(np.asarray(x, dtype=float))
+    aa = np.atleast_2d(np.asarray(a, dtype=float))
+    pp = np.atleast_1d(np.asarray(psi, dtype=float))
+    n_d = np.asarray(s, dtype=float) - xx
+    dist = np.linalg.norm(n_d, axis=-1)
+    e_c, de_psi, de_a = _ref_axis_and_jacobians(pp, aa, camera.axis_B, g)
+    c = math.cos(camera.half_fov)
+    h = c * dist - np.sum(n_d * e_c, axis=-1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        unit = n_d / dist[:, None]
+    d_x = e_c - c * unit
+    d_psi = -np.sum(n_d * de_psi, axis=-1)
+    d_a = -np.einsum("mi,mij->mj", n_d, de_a)
+    return FovGradient(h=h, d_x=d_x, d_psi=d_psi, d_a=d_a, distance=dist)
+
+
+def _ref_rows(layout: DecisionLayout, knots: Array, times: Array, gx: Array, ga: Array, gp: Array):
+    """The previous construction of the rows: three ``point_rows`` calls and einsum products."""
+    Rx = point_rows(layout, knots, 0, times, (0, 1, 2))  # (m, 3, n)
+    Ra = point_rows(layout, knots, 2, times, (0, 1, 2))
+    Rpsi = point_rows(layout, knots, 0, times, (YAW,))[:, 0, :]  # (m, n)
+    G = np.einsum("mi,min->mn", gx, Rx) + np.einsum("mi,min->mn", ga, Ra) + gp[:, None] * Rpsi
+    return G, Rx, Ra, Rpsi
+
+
+def _random_fov_case(rng: np.random.Generator, m: int):
+    x = rng.normal(0.0, 2.0, (m, 3))
+    a = rng.normal(0.0, 3.0, (m, 3))
+    psi = rng.uniform(-math.pi, math.pi, m)
+    s = rng.normal(0.0, 2.0, 3)
+    x[0] = s  # a degenerate point (|n_d| = 0): both implementations give the same non-finite
+    return x, psi, a, s
+
+
+@pytest.mark.parametrize("mount", range(3))
+def test_rust_gradient_equals_previous_numpy_implementation(mount: int) -> None:
+    R_BC = [avp.camera.FRONT_CAMERA_R_BC, np.eye(3),
+            np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]]) @ avp.camera.FRONT_CAMERA_R_BC][mount]
+    cam = Camera(R_BC=R_BC, half_fov=math.radians(30 + 10 * mount))
+    rng = np.random.default_rng(mount)
+    for _ in range(20):
+        x, psi, a, s = _random_fov_case(rng, 9)
+        new, old = fov_gradient(x, psi, a, s, cam), _ref_fov_gradient(x, psi, a, s, cam)
+        for name in ("h", "d_x", "d_psi", "d_a", "distance"):
+            u, v = getattr(new, name), getattr(old, name)
+            assert np.array_equal(np.isfinite(u), np.isfinite(v)), name
+            fin = np.isfinite(v)
+            np.testing.assert_allclose(u[fin], v[fin], rtol=1e-12, atol=1e-12, err_msg=name)
+    # broadcasting: one position against many accelerations, as before
+    x, psi, a, s = _random_fov_case(rng, 4)
+    np.testing.assert_allclose(fov_gradient(x[1], psi, a, s, cam).d_a, _ref_fov_gradient(x[1], psi, a, s, cam).d_a,
+                               rtol=1e-12, atol=1e-12)
+
+
+@pytest.mark.parametrize("policy", list(FovPointPolicy))
+def test_fov_blocks_equal_previous_implementation(policy: FovPointPolicy) -> None:
+    """Rows (8) and trust-region rows (9) from one shared basis evaluation equal the previous
+    construction (point_rows + einsum on the NumPy gradient) to 1e-12."""
+    rng = np.random.default_rng(len(policy.name))
+    for trial in range(10):
+        n_seg, degree = int(rng.integers(1, 5)), int(rng.choice([5, 7, 9]))
+        layout = avp.qp.layout.layout_for(n_seg, degree)
+        knots = np.concatenate([[0.0], np.cumsum(rng.uniform(0.2, 2.0, n_seg))])
+        times = np.sort(rng.uniform(0.0, knots[-1], 8))
+        x, psi, a, s = _random_fov_case(rng, 8)
+        x[0] += 0.5  # keep every point regular here (the degenerate one is tested above)
+        fov = FovConfig(point_policy=policy, trust_yaw=math.inf if trial % 3 == 0 else 0.1,
+                        margin=0.01 * (trial % 2))
+        new = fov_blocks(layout, knots, times, x, psi, a, s, fov)
+        grad = _ref_fov_gradient(x, psi, a, s, fov.camera)
+        dist = grad.distance
+        gx, ga, gp = grad.d_x / dist[:, None], grad.d_a / dist[:, None], grad.d_psi / dist
+        G, Rx, Ra, Rpsi = _ref_rows(layout, knots, times, gx, ga, gp)
+        h0 = grad.h / dist
+        np.testing.assert_allclose(new.h0, h0, rtol=1e-12, atol=1e-12)
+        sel = new.placed
+        blocks = {b.name: b for b in new.blocks}
+        assert (FOV_PREFIX + " rows (8)" in blocks) == bool(sel.any())
+        if not sel.any():
+            continue
+        rows = blocks[FOV_PREFIX + " rows (8)"]
+        np.testing.assert_allclose(rows.matrix, G[sel], rtol=1e-12, atol=1e-12)
+        lin0 = np.sum(gx * x, 1) + np.sum(ga * a, 1) + gp * psi
+        keep = sel & ~new.progress
+        np.testing.assert_allclose(rows.upper[keep[sel]], (lin0 - h0 - fov.margin)[keep], rtol=1e-12, atol=1e-12)
+        for label, R in (("x", Rx[sel].reshape(-1, layout.n_variables)),
+                         ("a", Ra[sel].reshape(-1, layout.n_variables)), ("yaw", Rpsi[sel])):
+            name = f"{FOV_PREFIX} trust region (9) {label}"
+            if name in blocks:
+                np.testing.assert_array_equal(blocks[name].matrix, R)
+
+
+def test_backend_table_drives_warm_starts_and_the_fov_iteration_cap() -> None:
+    from avp import perception, solve
+
+    for name, b in solve.BACKENDS.items():
+        cfg = dataclasses.replace(PlannerConfig(), solver=name)
+        capped = dict(perception._fov_config(cfg).solver_options)
+        assert ("max_iter" in capped) == b.iterative, name
+        assert (name in solve.WARM_START_SOLVERS) == b.warm_start
+        assert solve.SOLVER_DEFAULTS.get(name, {}) == dict(b.defaults)
+    assert solve.backend("no-such-backend") == solve.Backend("no-such-backend")
+    assert not solve.backend("daqp").warm_start and not solve.backend("daqp").iterative
+    assert solve.backend("osqp").max_iter == 200_000

@@ -62,3 +62,27 @@ def test_finer_grid_converges() -> None:
 def test_bad_dt() -> None:
     with pytest.raises(ConfigError, match="dt"):
         visibility(_hover_then_cruise(), _target([2.0, 0.0, 1.0]), dt=0.0)
+
+
+def test_visibility_many_equals_one_at_a_time() -> None:
+    """One vectorised pass over several plans gives exactly the per-plan answers (same knots in
+    one kernel call; different knots fall back to one call each)."""
+    from avp.metrics import visibility_many
+
+    rng = np.random.default_rng(5)
+    knots = [0.0, 0.7, 1.6, 2.4]
+    trajs = []
+    for _ in range(3):
+        c = rng.normal(0.0, 0.4, (3, 4, 8))
+        c[:, 0, 0] += -2.0
+        trajs.append(Trajectory(c, knots))
+    other = Trajectory(rng.normal(0.0, 0.4, (2, 4, 8)), [0.0, 1.0, 2.2])
+    target = _target([2.0, 0.0, TARGET_HEIGHT])
+    cam = Camera(half_fov=math.radians(50.0))
+    for dt in (1e-2, 2.4 / 200):
+        many = visibility_many(trajs + [other], target, cam, dt)
+        one = [visibility(t, target, cam, dt) for t in trajs + [other]]
+        assert many == one
+        assert visibility_many(trajs, target, cam, dt) == one[:3]
+    assert any(v.time_fraction not in (0.0, 1.0) for v in one)  # the case is not trivial
+    assert visibility_many([], target) == []

@@ -1,4 +1,4 @@
-"""Overhangs and ceilings, 95-180 deg (issue 8, item 5): approached from below, the thrust turns
+"""Overhangs and ceilings, 95-180 deg: approached from below, the thrust turns
 through the horizontal while it stays above thrust_min, every bound certified."""
 
 from __future__ import annotations

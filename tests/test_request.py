@@ -1,4 +1,4 @@
-"""Requests that make no physical sense are ConfigErrors naming the field (issue 8, item 6)."""
+"""Requests that make no physical sense are ConfigErrors naming the field."""
 
 from __future__ import annotations
 
@@ -82,8 +82,3 @@ def test_the_speed_rule_is_a_necessary_condition(slope, lateral, speed, incline)
     assert traj.duration <= longest_total_time(cfg, float(initial_durations(state, target, cfg).sum())) + 1e-9
     if result.ok:  # certified thrust: the rule's bound holds on the returned plan
         assert dv <= (cfg.limits.accel_max + cfg.g) * traj.duration
-
-
-def test_a_contact_attitude_the_flatness_map_cannot_represent() -> None:
-    target = avp.PerchTarget.from_normal([0.0, 3.5, 1.5], [0.0, -1.0, 0.0], up_slope=[1.0, 0.0, 0.0])
-    assert field_of(START, target) == "target.R_WS"

@@ -5,16 +5,29 @@
 ``c = c_p + Z z``. The reduced QP in ``z`` has only inequalities and a positive-definite Hessian
 (the initial position..jerk and yaw, yaw-rate rows pin the cost-free polynomials), and the
 equalities then hold to rounding whatever the solver's tolerance.
+
+The factorisation depends on the equality *matrix* ``A`` (durations and constraint pattern) and
+the cost ``P``, not on the right-hand side ``b`` (the state and target values): it is cached per
+``(A, P)`` (:data:`ELIMINATION_CACHE_SIZE` entries, found by a cheap fingerprint), and only
+``c_p`` and the linear cost term are recomputed for a new ``b``. Because rows and cost are
+normalised by the mean duration, scaling every duration by one factor (the time search, a
+replan with the same split) changes ``A`` and ``P`` only by rounding: a cached factorisation
+whose ``A`` and ``P`` are within :data:`REUSE_TOL` (relative, entrywise) of the new ones is
+reused. Its null space then satisfies the new equalities to the same rounding level, and the
+particular solution ``c_p`` is checked against the new ``A`` as always.
 """
 
 from __future__ import annotations
 
+import threading
+from collections import OrderedDict
 from dataclasses import dataclass, field, replace
 from functools import cached_property
 
 import numpy as np
 import numpy.typing as npt
 import scipy.linalg
+import scipy.linalg.lapack
 
 from ..config import PlannerConfig
 from ..errors import InfeasibleError
@@ -29,6 +42,93 @@ Array = npt.NDArray[np.float64]
 
 RANK_TOL = 1e-10
 """Relative tolerance on the QR diagonal below which equality rows count as dependent."""
+
+ELIMINATION_CACHE_SIZE = 256
+"""Factorisations kept (least recently used first out); each holds a few ``n x n`` arrays."""
+
+REUSE_TOL = 1e-13
+"""Largest entrywise difference, relative to the largest entry, between a cached ``(A, P)`` and
+a new one for the cached factorisation to be reused (rounding of the duration normalisation is
+~1e-16 relative)."""
+
+
+@dataclass(frozen=True)
+class _Factor:
+    """What the elimination needs from ``A`` and ``P`` alone (independent of ``b``)."""
+
+    A: Array  # the equality matrix and cost this factor belongs to (exact-hit check)
+    P: Array
+    Q1: Array  # (n, rank): orthonormal basis of the row space of A
+    R1: Array  # (rank, rank): triangular factor
+    piv: npt.NDArray[np.intp]  # (rank,) pivoted row indices of A
+    Z: Array  # (n, n - rank): null-space basis
+    PZ: Array  # P @ Z
+    H: Array  # scaled, symmetrised Z^T P Z
+    scale: float
+
+
+_FACTORS: OrderedDict[tuple[object, ...], list[_Factor]] = OrderedDict()
+"""Buckets of factorisations by ``(shapes, fingerprints to 9 digits)``; a bucket can hold
+several matrices that the fingerprint does not tell apart."""
+_FACTORS_LOCK = threading.Lock()
+_WEIGHTS = np.random.default_rng(0).uniform(0.5, 1.5, 1 << 16)
+
+
+def _read_only(M: Array) -> Array:
+    M.setflags(write=False)
+    return M
+
+
+def _fingerprint(M: Array) -> float:
+    """A cheap, position-sensitive checksum of ``M`` (hits are confirmed by comparison)."""
+    flat = M.reshape(-1)
+    n = min(flat.size, _WEIGHTS.size)
+    return float(flat[:n] @ _WEIGHTS[:n]) + float(flat[n:].sum())
+
+
+def _cached_factors() -> int:
+    """Number of factorisations held."""
+    return sum(len(b) for b in _FACTORS.values())
+
+
+def _close(M: Array, N: Array) -> bool:
+    """``M`` equals ``N``, or differs by at most :data:`REUSE_TOL` relative (entrywise)."""
+    if np.array_equal(M, N):
+        return True
+    scale = max(1.0, float(np.max(np.abs(M)))) if M.size else 1.0
+    return bool(np.max(np.abs(M - N)) <= REUSE_TOL * scale)
+
+
+def _factor(A: Array, P: Array) -> _Factor:
+    """Pivoted QR of ``A^T`` and the reduced Hessian, cached per ``(A, P)`` up to rounding."""
+    key = (A.shape, P.shape, f"{_fingerprint(A):.9e}", f"{_fingerprint(P):.9e}")
+    with _FACTORS_LOCK:
+        for hit in _FACTORS.get(key, ()):
+            if _close(hit.A, A) and _close(hit.P, P):
+                _FACTORS.move_to_end(key)
+                return hit
+    Q, R, piv = scipy.linalg.qr(A.T, pivoting=True, check_finite=False)
+    diag = np.abs(np.diag(R))
+    rank = int(np.sum(diag > RANK_TOL * max(diag[0] if diag.size else 0.0, 1.0)))
+    Z = Q[:, rank:]
+    PZ = P @ Z
+    H = Z.T @ PZ
+    # Scale the objective to unit Hessian diagonal: the minimiser is unchanged and the
+    # back-ends' absolute dual tolerances become meaningful (raw entries reach 1e7).
+    scale = 1.0 / max(float(np.max(np.abs(np.diag(H)))) if H.size else 1.0, 1e-300)
+    H = (0.5 * scale) * (H + H.T)
+    f = _Factor(A.copy(), P.copy(), Q[:, :rank], R[:rank, :rank], piv[:rank], Z, PZ, H, scale)
+    for arr in (f.A, f.P, f.Q1, f.R1, f.piv, f.Z, f.PZ, f.H):
+        arr.setflags(write=False)
+    with _FACTORS_LOCK:
+        _FACTORS.setdefault(key, []).append(f)
+        _FACTORS.move_to_end(key)
+        while _cached_factors() > ELIMINATION_CACHE_SIZE:
+            oldest = next(iter(_FACTORS))
+            _FACTORS[oldest].pop(0)
+            if not _FACTORS[oldest]:
+                del _FACTORS[oldest]
+    return f
 
 
 @dataclass(frozen=True)
@@ -77,17 +177,28 @@ class PerchingQp:
         return np.concatenate([[0.0], np.cumsum(self.durations)])
 
     def stacked_equalities(self) -> tuple[Array, Array]:
-        A = np.vstack([b.matrix for b in self.equalities])
-        return A, np.concatenate([b.lower for b in self.equalities])
+        """``(A, b)`` of all equality blocks (stacked once per QP, read-only)."""
+        return self._stacked_equalities
 
     def stacked_inequalities(self) -> tuple[Array, Array, Array]:
+        """``(G, lower, upper)`` of all inequality blocks (stacked once per QP, read-only)."""
+        return self._stacked_inequalities
+
+    @cached_property
+    def _stacked_equalities(self) -> tuple[Array, Array]:
+        A = np.vstack([b.matrix for b in self.equalities])
+        b = np.concatenate([b.lower for b in self.equalities])
+        return _read_only(A), _read_only(b)
+
+    @cached_property
+    def _stacked_inequalities(self) -> tuple[Array, Array, Array]:
         n = self.layout.n_variables
         if not self.inequalities:
-            return np.zeros((0, n)), np.zeros(0), np.zeros(0)
+            return _read_only(np.zeros((0, n))), _read_only(np.zeros(0)), _read_only(np.zeros(0))
         return (
-            np.vstack([b.matrix for b in self.inequalities]),
-            np.concatenate([b.lower for b in self.inequalities]),
-            np.concatenate([b.upper for b in self.inequalities]),
+            _read_only(np.vstack([b.matrix for b in self.inequalities])),
+            _read_only(np.concatenate([b.lower for b in self.inequalities])),
+            _read_only(np.concatenate([b.upper for b in self.inequalities])),
         )
 
     def trajectory(self, c_hat: Array, g: float) -> Trajectory:
@@ -107,8 +218,9 @@ class PerchingQp:
 
     def _same_equalities(self, other: PerchingQp) -> PerchingQp:
         """``other`` has this QP's cost and equalities: hand over the elimination if computed."""
-        if "elimination" in self.__dict__:
-            other.__dict__["elimination"] = self.__dict__["elimination"]
+        for name in ("elimination", "_stacked_equalities"):
+            if name in self.__dict__:
+                other.__dict__[name] = self.__dict__[name]
         return other
 
     @cached_property
@@ -122,27 +234,21 @@ class PerchingQp:
         """
         A, b = self.stacked_equalities()
         m = A.shape[0]
-        Q, R, piv = scipy.linalg.qr(A.T, pivoting=True, check_finite=False)
-        diag = np.abs(np.diag(R))
-        rank = int(np.sum(diag > RANK_TOL * max(diag[0] if diag.size else 0.0, 1.0)))
+        f = _factor(A, self.P)
         # Particular solution on the rank-revealing basis; dependent rows must then agree.
-        y = scipy.linalg.solve_triangular(R[:rank, :rank], b[piv[:rank]], trans="T", check_finite=False)
-        c_p = Q[:, :rank] @ y
+        # R1^T y = b[piv] (LAPACK trtrs directly: what solve_triangular calls, minus its overhead)
+        y, info = scipy.linalg.lapack.dtrtrs(f.R1, b[f.piv], lower=0, trans=1)
+        if info != 0:
+            raise InfeasibleError(f"the equality elimination failed (LAPACK trtrs info {info})")
+        c_p = f.Q1 @ y
         residual = float(np.max(np.abs(A @ c_p - b))) if m else 0.0
         if residual > 1e-8 * max(1.0, float(np.max(np.abs(b)))):
             raise InfeasibleError(
                 f"the equality constraints are inconsistent (residual {residual:.2e}): the spline has "
                 f"too few degrees of freedom; raise config.n_segments or config.degree"
             )
-        Z = Q[:, rank:]
-        PZ = self.P @ Z
-        H = Z.T @ PZ
-        # Scale the objective to unit Hessian diagonal: the minimiser is unchanged and the
-        # back-ends' absolute dual tolerances become meaningful (raw entries reach 1e7).
-        scale = 1.0 / max(float(np.max(np.abs(np.diag(H)))) if H.size else 1.0, 1e-300)
-        H = (0.5 * scale) * (H + H.T)
-        g = scale * (PZ.T @ c_p)
-        return Z, c_p, H, g
+        g = f.scale * (f.PZ.T @ c_p)
+        return f.Z, c_p, f.H, g
 
     def reduce(self) -> ReducedQp:
         """The QP in ``z`` (see :attr:`elimination`): only inequalities, positive-definite Hessian."""

@@ -11,7 +11,7 @@ from functools import lru_cache
 import numpy as np
 import numpy.typing as npt
 
-from .layout import N_AXES, YAW, DecisionLayout
+from .layout import N_AXES, YAW, DecisionLayout, layout_for
 
 Array = npt.NDArray[np.float64]
 
@@ -35,10 +35,17 @@ def cost_matrix(layout: DecisionLayout, durations: Array, position_order: int, y
 
     Each axis block is scaled by ``T_total^(2j - 1)`` and the whole matrix to a unit largest
     diagonal entry, so entries stay O(1) whatever the durations; the minimiser is unchanged (the
-    axes are separate sums).
+    axes are separate sums). Cached per (layout, durations, orders): read-only.
     """
+    T = np.ascontiguousarray(durations, dtype=float)
+    return _cost_matrix(layout.n_segments, layout.degree, T.tobytes(), position_order, yaw_order)
+
+
+@lru_cache(maxsize=256)
+def _cost_matrix(n_segments: int, degree: int, durations: bytes, position_order: int, yaw_order: int) -> Array:
+    layout = layout_for(n_segments, degree)
     S, n = layout.n_segments, layout.n_coeffs
-    T = np.asarray(durations, dtype=float)
+    T = np.frombuffer(durations, dtype=float)
     total = float(T.sum())
     P = np.zeros((layout.n_variables, layout.n_variables))
     for axis in range(N_AXES):
@@ -48,4 +55,6 @@ def cost_matrix(layout: DecisionLayout, durations: Array, position_order: int, y
         for seg in range(S):
             s = layout.start(axis, seg)
             P[s : s + n, s : s + n] = w[seg] * G
-    return P / float(np.max(np.diag(P)))
+    P /= float(np.max(np.diag(P)))
+    P.setflags(write=False)
+    return P

@@ -22,11 +22,11 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
+from .. import _avp_rust
 from ..camera import Camera, FovConfig, FovPointPolicy
 from ..frames import GRAVITY
 from .assemble import ConstraintBlock
 from .layout import YAW, DecisionLayout
-from .rows import point_rows
 
 Array = npt.NDArray[np.float64]
 
@@ -43,18 +43,6 @@ __all__ = [
 FOV_PREFIX = "fov"
 """Name prefix of every FoV block (``qp.without(FOV_PREFIX)``)."""
 
-E3 = np.array([0.0, 0.0, 1.0])
-
-
-def _skew(w: Array) -> Array:
-    """``hat(w)`` for ``w`` of shape ``(..., 3)`` -> ``(..., 3, 3)`` with ``hat(w) u = w x u``."""
-    z = np.zeros(w.shape[:-1])
-    return np.stack([
-        np.stack([z, -w[..., 2], w[..., 1]], -1),
-        np.stack([w[..., 2], z, -w[..., 0]], -1),
-        np.stack([-w[..., 1], w[..., 0], z], -1),
-    ], -2)
-
 
 @dataclass(frozen=True)
 class FovGradient:
@@ -65,34 +53,6 @@ class FovGradient:
     d_psi: Array  # (m,)
     d_a: Array  # (m, 3)
     distance: Array  # (m,) |n_d|
-
-
-def _axis_and_jacobians(psi: Array, a: Array, axis_B: Array, g: float) -> tuple[Array, Array, Array]:
-    """``e_c``, ``d e_c / d psi`` (m, 3) and ``d e_c / d a`` (m, 3, 3) for the construction (13)."""
-    f = a + g * E3
-    fn = np.linalg.norm(f, axis=-1, keepdims=True)
-    b3 = f / fn
-    eye = np.eye(3)
-    J_b3 = (eye - b3[..., :, None] * b3[..., None, :]) / fn[..., None]  # d b3 / d a
-    b2d = np.stack([-np.sin(psi), np.cos(psi), np.zeros_like(psi)], -1)
-    b2d_psi = np.stack([-np.cos(psi), -np.sin(psi), np.zeros_like(psi)], -1)
-    v = np.cross(b2d, b3)
-    vn = np.linalg.norm(v, axis=-1, keepdims=True)
-    b1 = v / vn
-    b2 = np.cross(b3, b1)
-    P1 = (eye - b1[..., :, None] * b1[..., None, :]) / vn[..., None]  # d b1 / d v
-    dv_a = _skew(b2d) @ J_b3
-    dv_psi = np.cross(b2d_psi, b3)
-    J_b1_a = P1 @ dv_a
-    J_b1_psi = np.einsum("mij,mj->mi", P1, dv_psi)
-    # b2 = b3 x b1: d b2 = hat(b3) d b1 - hat(b1) d b3
-    J_b2_a = _skew(b3) @ J_b1_a - _skew(b1) @ J_b3
-    J_b2_psi = np.cross(b3, J_b1_psi)
-    d1, d2, d3 = axis_B
-    e_c = d1 * b1 + d2 * b2 + d3 * b3
-    de_psi = d1 * J_b1_psi + d2 * J_b2_psi
-    de_a = d1 * J_b1_a + d2 * J_b2_a + d3 * J_b3
-    return e_c, de_psi, de_a
 
 
 def fov_h(
@@ -115,20 +75,22 @@ def fov_gradient(
     ``d h / d x = e_c - cos(half_fov) n_d / |n_d|``; ``d h / d (psi, a) = -n_d^T d e_c / d (psi, a)``
     with ``e_c`` differentiated through ``b3 = (a + g e3)/|.|``, ``b1 = (b2_des x b3)/|.|`` and
     ``b2 = b3 x b1`` (11), (13). Singular where the thrust vanishes or ``b3 || b2_des``.
+    Computed in Rust (``avp._avp_rust.fov_gradient``) for all points in one call; the inputs
+    broadcast over the points.
     """
     xx = np.atleast_2d(np.asarray(x, dtype=float))
     aa = np.atleast_2d(np.asarray(a, dtype=float))
     pp = np.atleast_1d(np.asarray(psi, dtype=float))
-    n_d = np.asarray(s, dtype=float) - xx
-    dist = np.linalg.norm(n_d, axis=-1)
-    e_c, de_psi, de_a = _axis_and_jacobians(pp, aa, camera.axis_B, g)
-    c = math.cos(camera.half_fov)
-    h = c * dist - np.sum(n_d * e_c, axis=-1)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        unit = n_d / dist[:, None]
-    d_x = e_c - c * unit
-    d_psi = -np.sum(n_d * de_psi, axis=-1)
-    d_a = -np.einsum("mi,mij->mj", n_d, de_a)
+    m = max(xx.shape[0], aa.shape[0], pp.shape[0])
+    h, d_x, d_psi, d_a, dist = _avp_rust.fov_gradient(
+        np.ascontiguousarray(np.broadcast_to(xx, (m, 3))),
+        np.ascontiguousarray(np.broadcast_to(pp, (m,))),
+        np.ascontiguousarray(np.broadcast_to(aa, (m, 3))),
+        np.ascontiguousarray(s, dtype=float),
+        np.ascontiguousarray(camera.axis_B),
+        math.cos(camera.half_fov),
+        float(g),
+    )
     return FovGradient(h=h, d_x=d_x, d_psi=d_psi, d_a=d_a, distance=dist)
 
 
@@ -199,9 +161,20 @@ def fov_blocks(
     if m == 0:
         return FovLinearisation((), t, empty, empty, np.zeros(0, bool), np.zeros(0, bool))
     grad = fov_gradient(x0, psi0, a0, target_point, fov.camera, g)
-    Rx = point_rows(layout, knots_rel, 0, t, (0, 1, 2))  # (m, 3, n)
-    Ra = point_rows(layout, knots_rel, 2, t, (0, 1, 2))
-    Rpsi = point_rows(layout, knots_rel, 0, t, (YAW,))[:, 0, :]  # (m, n)
+    # One location, one column table and two basis evaluations serve the rows of x, a and yaw.
+    seg, u = layout.locate(knots_rel, t)
+    T = knots_rel[seg + 1] - knots_rel[seg]
+    b0 = layout.basis(0, u)  # (m, C)
+    b2 = layout.basis(2, u) / (T**2)[:, None]
+    cols = layout.columns(np.arange(4)[None, :], seg[:, None])  # (m, 4 axes, C)
+    mi = np.arange(m)[:, None, None]
+    ai = np.arange(3)[None, :, None]
+    Rx = np.zeros((m, 3, layout.n_variables))
+    Rx[mi, ai, cols[:, :3]] = b0[:, None, :]
+    Ra = np.zeros((m, 3, layout.n_variables))
+    Ra[mi, ai, cols[:, :3]] = b2[:, None, :]
+    Rpsi = np.zeros((m, layout.n_variables))
+    Rpsi[mi[:, 0], cols[:, YAW]] = b0
     ok = np.isfinite(grad.h) & np.all(np.isfinite(grad.d_a), axis=1) & np.isfinite(grad.d_psi) & (grad.distance > 1e-6)
     dist = np.where(ok, grad.distance, 1.0)
     gx = np.where(ok[:, None], grad.d_x, 0.0) / dist[:, None]
@@ -212,8 +185,11 @@ def fov_blocks(
     decrease = (np.abs(gx).sum(1) * fov.trust_position + np.abs(ga).sum(1) * fov.trust_acceleration
                 + np.abs(gp) * fov.trust_yaw)
     reachable = h0 - decrease
-    # Row: grad.z <= grad.z0 - h0 - margin, i.e. h0 + grad.(z - z0) <= -margin.
-    G = np.einsum("mi,min->mn", gx, Rx) + np.einsum("mi,min->mn", ga, Ra) + gp[:, None] * Rpsi
+    # Row: grad.z <= grad.z0 - h0 - margin, i.e. h0 + grad.(z - z0) <= -margin. Each point's
+    # row touches only its segment's columns: x/a columns get gx_i b0 + ga_i b2, yaw gp b0.
+    G = np.zeros((m, layout.n_variables))
+    G[mi, cols[:, :3]] = gx[:, :, None] * b0[:, None, :] + ga[:, :, None] * b2[:, None, :]
+    G[mi[:, 0], cols[:, YAW]] = gp[:, None] * b0
     lin0 = np.sum(gx * x0, 1) + np.sum(ga * a0, 1) + gp * psi0
     rhs = lin0 - h0 - fov.margin
     placed = ok.copy()

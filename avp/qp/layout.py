@@ -57,12 +57,18 @@ class DecisionLayout:
         B1.setflags(write=False)
         return B0, B1
 
+    @cached_property
+    def _exponents(self) -> tuple[npt.NDArray[np.intp], npt.NDArray[np.bool_]]:
+        """``(powers, alive)``: ``powers[r, k] = max(k - r, 0)``, ``alive[r, k] = k >= r``."""
+        k = np.arange(self.n_coeffs)
+        r = k[:, None]
+        return np.where(k >= r, k - r, 0), k >= r
+
     def basis(self, order: int, u: Array | float) -> Array:
         """Rows ``d^r/du^r u^k`` at ``u`` (shape ``(*shape(u), N + 1)``)."""
         uu = np.asarray(u, dtype=float)[..., None]
-        k = np.arange(self.n_coeffs)
-        powers = np.where(k >= order, k - order, 0)
-        return self.falling[order] * np.where(k >= order, uu**powers, 0.0)
+        powers, alive = self._exponents
+        return self.falling[order] * np.where(alive[order], uu ** powers[order], 0.0)
 
     @cached_property
     def fit_nodes(self) -> Array:
@@ -83,7 +89,7 @@ class DecisionLayout:
     def locate(self, knots_rel: Array, t: Array) -> tuple[npt.NDArray[np.intp], Array]:
         """Segment index and normalised time ``u`` of times ``t`` relative to the plan start."""
         tt = np.asarray(t, dtype=float)
-        seg = np.clip(np.searchsorted(knots_rel, tt, side="right") - 1, 0, self.n_segments - 1)
+        seg = np.minimum(np.maximum(np.searchsorted(knots_rel, tt, side="right") - 1, 0), self.n_segments - 1)
         u = (tt - knots_rel[seg]) / (knots_rel[seg + 1] - knots_rel[seg])
         return seg, u
 

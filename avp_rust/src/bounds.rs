@@ -29,6 +29,7 @@ use num_rational::BigRational;
 use num_traits::Zero;
 
 use crate::certify::{certify_enclosure, certify_unit_exact, to_time, Certificate, UnitVerdict};
+use crate::descartes::Budget;
 use crate::error::{Error, Result};
 use crate::exact;
 use crate::poly::falling_factorial;
@@ -379,6 +380,18 @@ pub fn certify_spline(
     g: f64,
     exact: bool,
 ) -> Result<Vec<BoundVerdict>> {
+    certify_spline_budgeted(view, limits, g, exact, &Budget::UNLIMITED)
+}
+
+/// [`certify_spline`] whose exact fallbacks share one `budget` (for the whole call): cells the
+/// fast path leaves undecided when the budget has run out are Unknown, never guessed.
+pub fn certify_spline_budgeted(
+    view: &SplineView<'_>,
+    limits: &Limits,
+    g: f64,
+    exact: bool,
+    budget: &Budget,
+) -> Result<Vec<BoundVerdict>> {
     validate(view, limits, g)?;
     let n_seg = view.n_segments();
     let mut verdicts: Vec<BoundVerdict> = Vec::with_capacity(ALL_BOUNDS.len() * n_seg);
@@ -418,11 +431,11 @@ pub fn certify_spline(
             let lo: Vec<f64> = f.iter().map(|x| x.lo).collect();
             let hi: Vec<f64> = f.iter().map(|x| x.hi).collect();
             let mut v = certify_enclosure(&lo, &hi);
-            if v == UnitVerdict::Unsure && exact {
+            if v == UnitVerdict::Unsure && exact && !budget.spent() {
                 let ep =
                     exact_polys.get_or_insert_with(|| segment_polys::<BigRational>(view, seg, g));
                 let fe = bound_poly(kind, ep, limit, roll_s2);
-                v = certify_unit_exact(&exact::int_poly_from_rational(&fe));
+                v = certify_unit_exact(&exact::int_poly_from_rational(&fe), budget);
             }
             verdicts[row * n_seg + seg].certificate = Some(to_time(v, t0, t1));
         }

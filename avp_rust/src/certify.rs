@@ -14,6 +14,7 @@
 //! ends (Algorithm 1, line 2), a Bernstein-coefficient upper bound, then the interval Sturm
 //! count of [`crate::sturm`] (line 5). When undecided the exact fallback builds `G` with big
 //! integers and runs Algorithm 1 exactly ([`crate::exact::certify_unit`]).
+use crate::descartes::Budget;
 use crate::error::Result;
 use crate::exact::{self, IntPoly, UnitExact};
 use crate::sturm::{self, next_up, Iv, MAX_DEGREE};
@@ -26,7 +27,7 @@ pub enum Certificate {
     /// `F(t) >= 0` somewhere (proven); `t` estimates where (the largest sampled value, or the
     /// violating end).
     Violated { t: f64 },
-    /// Not decided (fast path unsure and exact fallback disabled).
+    /// Not decided (fast path unsure and exact fallback disabled or out of budget).
     Unknown,
 }
 
@@ -203,13 +204,33 @@ pub fn certify_enclosure(lo: &[f64], hi: &[f64]) -> UnitVerdict {
     }
 }
 
-/// Exact Algorithm 1 on `[0, 1]` for an integer polynomial (a positive multiple of `G`).
-pub fn certify_unit_exact(p: &IntPoly) -> UnitVerdict {
-    match exact::certify_unit(p) {
-        UnitExact::Within => UnitVerdict::Within,
-        UnitExact::ViolatedAt0 => UnitVerdict::Violated(0.0),
-        UnitExact::ViolatedAt1 => UnitVerdict::Violated(1.0),
-        UnitExact::ViolatedInside => {
+/// Which exact algorithm decides what the fast path cannot (the Sturm chain is the previous
+/// path, kept for comparisons in `benchmarks/bench_bounds.py`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ExactMethod {
+    /// Bernstein subdivision with Descartes' rule ([`crate::descartes`]), budgeted.
+    Bernstein,
+    /// Sturm chain of primitive pseudo-remainders ([`exact::certify_unit_sturm`]), unbudgeted.
+    Sturm,
+}
+
+/// Exact Algorithm 1 on `[0, 1]` for an integer polynomial (a positive multiple of `G`);
+/// `Unsure` only when `budget` runs out.
+pub fn certify_unit_exact(p: &IntPoly, budget: &Budget) -> UnitVerdict {
+    certify_unit_exact_with(p, budget, ExactMethod::Bernstein)
+}
+
+fn certify_unit_exact_with(p: &IntPoly, budget: &Budget, method: ExactMethod) -> UnitVerdict {
+    let verdict = match method {
+        ExactMethod::Bernstein => exact::certify_unit_budgeted(p, budget),
+        ExactMethod::Sturm => Some(exact::certify_unit_sturm(p)),
+    };
+    match verdict {
+        None => UnitVerdict::Unsure,
+        Some(UnitExact::Within) => UnitVerdict::Within,
+        Some(UnitExact::ViolatedAt0) => UnitVerdict::Violated(0.0),
+        Some(UnitExact::ViolatedAt1) => UnitVerdict::Violated(1.0),
+        Some(UnitExact::ViolatedInside) => {
             UnitVerdict::Violated(argmax_sample(&exact::to_f64_scaled(p), SAMPLES))
         }
     }
@@ -253,6 +274,27 @@ pub fn to_time(v: UnitVerdict, a: f64, b: f64) -> Certificate {
 /// touching root counted as a violation). With `exact = true` the answer is never Unknown.
 /// Errors on non-finite input, `a > b` and degree > 40.
 pub fn certify_below(coeffs: &[f64], a: f64, b: f64, exact: bool) -> Result<Certificate> {
+    Ok(certify_below_traced(
+        coeffs,
+        a,
+        b,
+        exact,
+        &Budget::UNLIMITED,
+        ExactMethod::Bernstein,
+    )?
+    .0)
+}
+
+/// Like [`certify_below`], with a `budget` for the exact fallback (Unknown when it runs out),
+/// a choice of exact `method`, and whether the fast path decided (for statistics).
+pub fn certify_below_traced(
+    coeffs: &[f64],
+    a: f64,
+    b: f64,
+    exact: bool,
+    budget: &Budget,
+    method: ExactMethod,
+) -> Result<(Certificate, bool)> {
     sturm::validate_poly(coeffs)?;
     sturm::validate_interval(a, b)?;
     let coeffs = sturm::trim(coeffs);
@@ -260,44 +302,21 @@ pub fn certify_below(coeffs: &[f64], a: f64, b: f64, exact: bool) -> Result<Cert
         let p = exact::int_poly_from_f64(coeffs);
         let r = exact::rational(a);
         let v = exact::eval_hom(&p, r.numer(), r.denom());
-        return Ok(if num_traits::Signed::is_negative(&v) {
+        let cert = if num_traits::Signed::is_negative(&v) {
             Certificate::Within
         } else {
             Certificate::Violated { t: a }
-        });
+        };
+        return Ok((cert, true));
     }
-    let (lo, hi) = unit_enclosure(coeffs, a, b);
-    let fast = certify_enclosure(&lo, &hi);
-    if fast != UnitVerdict::Unsure || !exact {
-        return Ok(to_time(fast, a, b));
-    }
-    Ok(to_time(
-        certify_unit_exact(&exact::unit_shift(coeffs, a, b)),
-        a,
-        b,
-    ))
-}
-
-/// Like [`certify_below`] but also reports whether the fast path decided (for statistics).
-pub fn certify_below_traced(
-    coeffs: &[f64],
-    a: f64,
-    b: f64,
-    exact: bool,
-) -> Result<(Certificate, bool)> {
-    sturm::validate_poly(coeffs)?;
-    sturm::validate_interval(a, b)?;
-    if a == b {
-        return Ok((certify_below(coeffs, a, b, exact)?, true));
-    }
-    let coeffs = sturm::trim(coeffs);
     let (lo, hi) = unit_enclosure(coeffs, a, b);
     let fast = certify_enclosure(&lo, &hi);
     if fast != UnitVerdict::Unsure || !exact {
         return Ok((to_time(fast, a, b), fast != UnitVerdict::Unsure));
     }
+    let p = exact::unit_shift(coeffs, a, b);
     Ok((
-        to_time(certify_unit_exact(&exact::unit_shift(coeffs, a, b)), a, b),
+        to_time(certify_unit_exact_with(&p, budget, method), a, b),
         false,
     ))
 }

@@ -1,5 +1,6 @@
 //! The crate's one error type. Kernels return `Result` and never panic on input paths; the
-//! Python wrappers map every variant to `ValueError` with the message below.
+//! Python wrappers map every variant to `avp._avp_rust.KernelError` (a `ValueError`) carrying
+//! the offending argument as `.arg` and the reason as `.detail` (message: `"{arg}: {detail}"`).
 use std::fmt;
 
 #[derive(Debug, Clone, PartialEq)]
@@ -14,13 +15,27 @@ pub enum Error {
 
 pub type Result<T> = std::result::Result<T, Error>;
 
+impl Error {
+    /// Name of the offending argument.
+    pub fn arg(&self) -> &'static str {
+        match self {
+            Error::Shape { arg, .. } | Error::NonFinite { arg } | Error::Invalid { arg, .. } => arg,
+        }
+    }
+
+    /// What is wrong and what to do, without the argument name.
+    pub fn detail(&self) -> String {
+        match self {
+            Error::Shape { detail, .. } => format!("wrong shape: {detail}"),
+            Error::NonFinite { .. } => "contains NaN or inf; pass finite values".into(),
+            Error::Invalid { detail, .. } => detail.clone(),
+        }
+    }
+}
+
 impl fmt::Display for Error {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        match self {
-            Error::Shape { arg, detail } => write!(f, "{arg}: wrong shape: {detail}"),
-            Error::NonFinite { arg } => write!(f, "{arg}: contains NaN or inf; pass finite values"),
-            Error::Invalid { arg, detail } => write!(f, "{arg}: {detail}"),
-        }
+        write!(f, "{}: {}", self.arg(), self.detail())
     }
 }
 

@@ -6,10 +6,16 @@
 //! multipliers (`|lc|^k`, positive contents), which keeps the sign pattern of the true
 //! `S_{i+1} = -rem(S_{i-1}, S_i)` sequence (paper eq. (17)) while the integers stay small.
 //! Signs at rational points come from homogenised Horner evaluation, so nothing rounds.
+//!
+//! The certificate ([`certify_unit_budgeted`]) no longer builds a Sturm chain: it decides the
+//! inside of `[0, 1]` by exact Bernstein subdivision ([`crate::descartes`]), under a budget.
+//! The chain stays for root counting ([`count_roots`]) and as [`certify_unit_sturm`].
 use num_bigint::BigInt;
 use num_integer::Integer;
 use num_rational::BigRational;
 use num_traits::{One, Signed, ToPrimitive, Zero};
+
+use crate::descartes::{self, Budget, Isolation};
 
 /// Integer polynomial, ascending powers, no trailing zeros (the zero polynomial is empty).
 pub type IntPoly = Vec<BigInt>;
@@ -37,7 +43,7 @@ pub fn rational(x: f64) -> BigRational {
     }
 }
 
-fn trim_int(mut p: IntPoly) -> IntPoly {
+pub(crate) fn trim_int(mut p: IntPoly) -> IntPoly {
     while p.last().is_some_and(|c| c.is_zero()) {
         p.pop();
     }
@@ -45,7 +51,7 @@ fn trim_int(mut p: IntPoly) -> IntPoly {
 }
 
 /// Divides by the (positive) gcd of the coefficients.
-fn primitive(p: IntPoly) -> IntPoly {
+pub(crate) fn primitive(p: IntPoly) -> IntPoly {
     let p = trim_int(p);
     let g = p.iter().fold(BigInt::zero(), |g, c| g.gcd(c));
     if g.is_zero() || g.is_one() {
@@ -156,26 +162,34 @@ pub fn sturm_chain(p: &[BigInt]) -> Vec<IntPoly> {
     chain
 }
 
-fn variations(chain: &[IntPoly], num: &BigInt, den: &BigInt) -> usize {
+/// Sign of a big integer as `-1`, `0` or `1`.
+pub(crate) fn sign(c: &BigInt) -> i8 {
+    if c.is_positive() {
+        1
+    } else if c.is_negative() {
+        -1
+    } else {
+        0
+    }
+}
+
+/// Sign variations of a sequence of signs, zeros skipped (Sturm's and Descartes' rules).
+pub(crate) fn sign_variations(signs: impl IntoIterator<Item = i8>) -> usize {
     let mut count = 0;
     let mut last = 0i8;
-    for s in chain {
-        let v = eval_hom(s, num, den);
-        let sg: i8 = if v.is_positive() {
-            1
-        } else if v.is_negative() {
-            -1
-        } else {
-            0
-        };
-        if sg != 0 {
-            if last != 0 && sg != last {
+    for s in signs {
+        if s != 0 {
+            if last != 0 && s != last {
                 count += 1;
             }
-            last = sg;
+            last = s;
         }
     }
     count
+}
+
+fn variations(chain: &[IntPoly], num: &BigInt, den: &BigInt) -> usize {
+    sign_variations(chain.iter().map(|s| sign(&eval_hom(s, num, den))))
 }
 
 /// Number of distinct real roots of `p` in the closed interval `[a, b]`, exactly. Roots at the
@@ -253,22 +267,53 @@ pub enum UnitExact {
     ViolatedInside,
 }
 
-/// Decides `p(u) < 0 for all u in [0, 1]` exactly (Algorithm 1 with `F = p`).
-pub fn certify_unit(p: &[BigInt]) -> UnitExact {
+/// The ends of Algorithm 1 (line 2) exactly: `Err(verdict)` when an end decides, `Ok(p)` (the
+/// trimmed polynomial, degree >= 1, negative at both ends) when the inside must be checked.
+fn unit_ends(p: &[BigInt]) -> std::result::Result<IntPoly, UnitExact> {
     let p = trim_int(p.to_vec());
     let Some(p0) = p.first() else {
-        return UnitExact::ViolatedAt0;
-    }; // F == 0
+        return Err(UnitExact::ViolatedAt0); // F == 0
+    };
     if !p0.is_negative() {
-        return UnitExact::ViolatedAt0;
+        return Err(UnitExact::ViolatedAt0);
     }
     let p1: BigInt = p.iter().sum();
     if !p1.is_negative() {
-        return UnitExact::ViolatedAt1;
+        return Err(UnitExact::ViolatedAt1);
     }
     if p.len() == 1 {
-        return UnitExact::Within;
+        return Err(UnitExact::Within);
     }
+    Ok(p)
+}
+
+/// Decides `p(u) < 0 for all u in [0, 1]` exactly (Algorithm 1 with `F = p`), by Bernstein
+/// subdivision ([`crate::descartes`]); `None` when `budget` runs out first.
+pub fn certify_unit_budgeted(p: &[BigInt], budget: &Budget) -> Option<UnitExact> {
+    let p = match unit_ends(p) {
+        Ok(p) => p,
+        Err(v) => return Some(v),
+    };
+    match descartes::root_in_unit(&p, budget) {
+        Isolation::NoRoot => Some(UnitExact::Within),
+        Isolation::Root { .. } => Some(UnitExact::ViolatedInside),
+        Isolation::Unsure if *budget == Budget::UNLIMITED => Some(certify_unit_sturm(&p)),
+        Isolation::Unsure => None,
+    }
+}
+
+/// Decides `p(u) < 0 for all u in [0, 1]` exactly, without a budget (never undecided).
+pub fn certify_unit(p: &[BigInt]) -> UnitExact {
+    certify_unit_budgeted(p, &Budget::UNLIMITED).unwrap_or_else(|| certify_unit_sturm(p))
+}
+
+/// The previous exact path, kept for comparisons: Algorithm 1 with a Sturm chain of primitive
+/// pseudo-remainders (a coefficient gcd per element).
+pub fn certify_unit_sturm(p: &[BigInt]) -> UnitExact {
+    let p = match unit_ends(p) {
+        Ok(p) => p,
+        Err(v) => return v,
+    };
     let chain = sturm_chain(&p);
     let (zero, one) = (BigInt::zero(), BigInt::one());
     let v0 = variations(&chain, &zero, &one);

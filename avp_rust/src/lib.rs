@@ -15,8 +15,10 @@
 pub mod anticipation;
 pub mod bounds;
 pub mod certify;
+pub mod descartes;
 pub mod error;
 pub mod exact;
+pub mod fov;
 pub mod poly;
 pub mod regions;
 pub mod roll;

@@ -1,19 +1,20 @@
 //! PyO3 wrappers of the Sturm counts and bound certificates (`sturm`, `certify`, `bounds`).
-//! Kernel errors become `ValueError`; batch kernels release the GIL.
+//! Kernel errors become `KernelError` (a `ValueError` naming the argument); batch kernels
+//! release the GIL. The optional `budget` (seconds, `inf` = none) bounds the exact fallback.
 #![allow(clippy::useless_conversion)]
 use numpy::ndarray::Array2;
 use numpy::{
     IntoPyArray, PyArray1, PyArray2, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3,
     PyUntypedArrayMethods,
 };
-use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 
 use crate::error::guarded;
 
 use crate::bounds::{self, BoundKind, Limits, ALL_BOUNDS};
-use crate::certify;
-use crate::python::{contiguous, spline_view, to_py_err};
+use crate::certify::{self, ExactMethod};
+use crate::descartes::Budget;
+use crate::python::{contiguous, kernel_err, spline_view, to_py_err};
 use crate::sturm;
 
 /// Exact number of distinct real roots of `sum coeffs[k] x^k` in the closed interval `[a, b]`.
@@ -29,29 +30,59 @@ fn sturm_count_py(
         .map_err(to_py_err)
 }
 
+fn budget_arg(budget: f64) -> PyResult<f64> {
+    if budget.is_nan() || budget < 0.0 {
+        return Err(kernel_err(
+            "budget",
+            format!("must be >= 0 seconds (inf for no budget), got {budget}"),
+        ));
+    }
+    Ok(budget)
+}
+
+fn method_arg(method: &str) -> PyResult<ExactMethod> {
+    match method {
+        "bernstein" => Ok(ExactMethod::Bernstein),
+        "sturm" => Ok(ExactMethod::Sturm),
+        _ => Err(kernel_err(
+            "method",
+            format!("unknown exact method {method:?}; use \"bernstein\" or \"sturm\""),
+        )),
+    }
+}
+
 /// Algorithm 1: `(code, t)` with code 0 within (`F < 0` on `[a, b]`), 1 violated at about `t`,
-/// 2 unknown (only with `exact=False`).
+/// 2 unknown (with `exact=False`, or when the exact fallback exceeds `budget` seconds).
 #[pyfunction(name = "certify_below")]
-#[pyo3(signature = (coeffs, a, b, exact = true))]
+#[pyo3(signature = (coeffs, a, b, exact = true, budget = f64::INFINITY))]
 fn certify_below_py(
     py: Python<'_>,
     coeffs: PyReadonlyArray1<'_, f64>,
     a: f64,
     b: f64,
     exact: bool,
+    budget: f64,
 ) -> PyResult<(i8, f64)> {
     let c = contiguous("coeffs", coeffs.as_slice())?;
-    let cert = py
-        .detach(|| guarded(|| certify::certify_below(c, a, b, exact)))
+    let budget = budget_arg(budget)?;
+    let (cert, _) = py
+        .detach(|| {
+            guarded(|| {
+                let budget = Budget::seconds(budget);
+                certify::certify_below_traced(c, a, b, exact, &budget, ExactMethod::Bernstein)
+            })
+        })
         .map_err(to_py_err)?;
     Ok((cert.code(), cert.time()))
 }
 
 /// Algorithm 1 on every row of `coeffs` (shape `(n, C)`) over the same `[a, b]`. Returns
 /// `(codes int8 (n,), t float64 (n,), fast bool (n,))`; `fast` tells whether the floating-point
-/// path decided the row (for unknown-rate statistics).
+/// path decided the row (for unknown-rate statistics). `budget` (seconds) applies to each row's
+/// exact fallback separately; `method` picks the exact algorithm (`"bernstein"`, the default, or
+/// the previous `"sturm"` chain, unbudgeted, kept for comparisons).
 #[pyfunction(name = "certify_below_many")]
-#[pyo3(signature = (coeffs, a, b, exact = true))]
+#[pyo3(signature = (coeffs, a, b, exact = true, budget = f64::INFINITY, method = "bernstein"))]
 #[allow(clippy::type_complexity)]
 fn certify_below_many_py<'py>(
     py: Python<'py>,
@@ -59,6 +90,8 @@ fn certify_below_many_py<'py>(
     a: f64,
     b: f64,
     exact: bool,
+    budget: f64,
+    method: &str,
 ) -> PyResult<(
     Bound<'py, PyArray1<i8>>,
     Bound<'py, PyArray1<f64>>,
@@ -67,9 +100,12 @@ fn certify_below_many_py<'py>(
     let shape = coeffs.shape();
     let (n, m) = (shape[0], shape[1]);
     let c = contiguous("coeffs", coeffs.as_slice())?;
+    let budget = budget_arg(budget)?;
+    let method = method_arg(method)?;
     if m == 0 && n > 0 {
-        return Err(PyValueError::new_err(
-            "coeffs: needs at least one coefficient per row",
+        return Err(kernel_err(
+            "coeffs",
+            "needs at least one coefficient per row",
         ));
     }
     let out = py
@@ -79,7 +115,10 @@ fn certify_below_many_py<'py>(
                     return Ok(Vec::new());
                 }
                 c.chunks_exact(m)
-                    .map(|row| certify::certify_below_traced(row, a, b, exact))
+                    .map(|row| {
+                        let budget = Budget::seconds(budget);
+                        certify::certify_below_traced(row, a, b, exact, &budget, method)
+                    })
                     .collect()
             })
         })
@@ -100,9 +139,11 @@ fn certify_below_many_py<'py>(
 /// shape `(S + 1,)`, `limits` = `[thrust_max, thrust_min, thrust_rate_max, tilt_rate_max,
 /// body_rate_max]` (the row order) mass-normalised (`+inf` = not checked). Returns `(codes int8 (5, S),
 /// t float64 (5, S))` with codes 0 within, 1 violated (at about `t`), 2 unknown (with `exact`,
-/// only a body rate whose roll level is undecided), 3 not checked.
+/// only a body rate whose roll level is undecided, or a cell left when the exact fallbacks ran
+/// out of `budget`), 3 not checked. `budget` (seconds, `inf` = none) bounds the exact fallbacks
+/// of the whole call.
 #[pyfunction(name = "certify_spline")]
-#[pyo3(signature = (coeffs, knots, limits, g = 9.81, exact = true))]
+#[pyo3(signature = (coeffs, knots, limits, g = 9.81, exact = true, budget = f64::INFINITY))]
 #[allow(clippy::type_complexity)]
 fn certify_spline_py<'py>(
     py: Python<'py>,
@@ -111,12 +152,19 @@ fn certify_spline_py<'py>(
     limits: PyReadonlyArray1<'py, f64>,
     g: f64,
     exact: bool,
+    budget: f64,
 ) -> PyResult<(Bound<'py, PyArray2<i8>>, Bound<'py, PyArray2<f64>>)> {
     let view = spline_view(&coeffs, &knots)?;
     let l = contiguous("limits", limits.as_slice())?;
     let limits = Limits::from_slice(l).map_err(to_py_err)?;
+    let budget = budget_arg(budget)?;
     let verdicts = py
-        .detach(|| guarded(|| bounds::certify_spline(&view, &limits, g, exact)))
+        .detach(|| {
+            guarded(|| {
+                let budget = Budget::seconds(budget);
+                bounds::certify_spline_budgeted(&view, &limits, g, exact, &budget)
+            })
+        })
         .map_err(to_py_err)?;
     let n_seg = view.n_segments();
     let mut codes = Array2::<i8>::from_elem((ALL_BOUNDS.len(), n_seg), 3);
@@ -148,22 +196,23 @@ fn bound_polynomial_py<'py>(
     let view = spline_view(&coeffs, &knots)?;
     let shape = (view.n_segments(), view.n_axes(), view.n_coeffs());
     if shape.1 != 4 {
-        return Err(PyValueError::new_err(format!(
-            "coeffs: expected 4 axes (x, y, z, yaw), got {}",
-            shape.1
-        )));
+        return Err(kernel_err(
+            "coeffs",
+            format!("expected 4 axes (x, y, z, yaw), got {}", shape.1),
+        ));
     }
     if segment >= shape.0 {
-        return Err(PyValueError::new_err(format!(
-            "segment: {segment} out of range for {} segments",
-            shape.0
-        )));
+        return Err(kernel_err(
+            "segment",
+            format!("{segment} out of range for {} segments", shape.0),
+        ));
     }
     let kind: BoundKind = *ALL_BOUNDS
         .get(bound)
-        .ok_or_else(|| PyValueError::new_err(format!("bound: index {bound} out of range 0..5")))?;
+        .ok_or_else(|| kernel_err("bound", format!("index {bound} out of range 0..5")))?;
     if !(limit.is_finite() && g.is_finite()) {
-        return Err(PyValueError::new_err("limit, g: must be finite"));
+        let arg = if limit.is_finite() { "g" } else { "limit" };
+        return Err(kernel_err(arg, "must be finite"));
     }
     let (lo, hi) = guarded(|| Ok(bounds::bound_enclosure(&view, segment, kind, limit, g)))
         .map_err(to_py_err)?;

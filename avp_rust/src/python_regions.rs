@@ -1,13 +1,12 @@
 //! PyO3 wrappers of the workspace certificates (`regions`): one function per region kind, so
-//! the boundary is typed by name, not by a row order. Kernel errors become `ValueError`
-//! (`"<argument>: <what to do>"`); the kernels release the GIL.
+//! the boundary is typed by name, not by a row order. Kernel errors become `KernelError` (a
+//! `ValueError` with `.arg` and `.detail`); the kernels release the GIL.
 #![allow(clippy::useless_conversion)]
 use numpy::{IntoPyArray, PyArray1, PyReadonlyArray1, PyReadonlyArray3};
-use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 
 use crate::error::guarded;
-use crate::python::{contiguous, spline_view, to_py_err};
+use crate::python::{contiguous, kernel_err, spline_view, to_py_err};
 use crate::regions::{self, Region, RegionVerdict};
 
 type Verdicts<'py> = (Bound<'py, PyArray1<i8>>, Bound<'py, PyArray1<f64>>, f64);
@@ -15,10 +14,10 @@ type Verdicts<'py> = (Bound<'py, PyArray1<i8>>, Bound<'py, PyArray1<f64>>, f64);
 fn vec3(arg: &'static str, v: &PyReadonlyArray1<'_, f64>) -> PyResult<[f64; 3]> {
     let s = contiguous(arg, v.as_slice())?;
     <[f64; 3]>::try_from(s).map_err(|_| {
-        PyValueError::new_err(format!(
-            "{arg}: wrong shape: expected 3 values, got {}",
-            s.len()
-        ))
+        kernel_err(
+            arg,
+            format!("wrong shape: expected 3 values, got {}", s.len()),
+        )
     })
 }
 

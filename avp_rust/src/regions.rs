@@ -24,6 +24,7 @@ use num_rational::BigRational;
 
 use crate::bounds::{const_minus, minus_const, padd, pscale, scaled_derivative, sq_norm, Scalar};
 use crate::certify::{certify_enclosure, certify_unit_exact, Certificate, UnitVerdict};
+use crate::descartes::Budget;
 use crate::error::{check_finite, Error, Result};
 use crate::exact;
 use crate::spline::SplineView;
@@ -201,7 +202,7 @@ pub fn certify_region(
             } else {
                 fe
             };
-            certify_unit_exact(&exact::int_poly_from_rational(&q))
+            certify_unit_exact(&exact::int_poly_from_rational(&q), &Budget::UNLIMITED)
         } else {
             verdict
         };

@@ -1,0 +1,92 @@
+"""The elimination cache: a factorisation depends on the equality matrix and the cost only, so
+QPs that differ in their right-hand side (state, target values) share it, and a cached answer is
+exactly the uncached one."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+import avp
+import avp.qp.assemble as assemble
+import avp.solve
+from avp.qp.assemble import build_perching_qp
+from avp.qp.cost import cost_matrix, gram
+from avp.qp.layout import layout_for
+
+
+def _qp(start, T, incline=30.0):
+    target = avp.PerchTarget.from_incline(np.array([0.0, 0.0, 1.5]), math.radians(incline))
+    return build_perching_qp(avp.State.hover(np.asarray(start, float)), target, avp.PlannerConfig(), np.asarray(T))
+
+
+def test_right_hand_side_changes_reuse_the_factorisation_exactly() -> None:
+    T = [0.9, 0.8, 0.7]
+    a, b = _qp([-3.0, 0.0, 2.5], T), _qp([-2.0, 0.4, 2.0], T)
+    Aa, ba = a.stacked_equalities()
+    Ab, bb = b.stacked_equalities()
+    assert np.array_equal(Aa, Ab) and not np.array_equal(ba, bb)  # same pattern, new values
+    assemble._FACTORS.clear()
+    Za, cpa, Ha, _ = a.elimination
+    Zb, cpb, Hb, gb = b.elimination
+    assert Za is Zb and Ha is Hb and assemble._cached_factors() == 1  # one factorisation, shared
+    for A, rhs, cp in ((Aa, ba, cpa), (Ab, bb, cpb)):
+        assert np.max(np.abs(A @ cp - rhs)) < 1e-9 * max(1.0, np.max(np.abs(rhs)))
+    # the cached answer is bit for bit the one computed from scratch
+    assemble._FACTORS.clear()
+    Z2, cp2, H2, g2 = _qp([-2.0, 0.4, 2.0], T).elimination
+    assert np.array_equal(Z2, Zb) and np.array_equal(cp2, cpb) and np.array_equal(H2, Hb) and np.array_equal(g2, gb)
+    # other durations: another factorisation
+    assert _qp([-2.0, 0.4, 2.0], [0.9, 0.8, 0.75]).elimination[0] is not Zb
+    assert assemble._cached_factors() == 2
+
+
+def test_time_scaled_durations_reuse_the_factorisation_to_rounding() -> None:
+    """Scaling every duration (the time search) changes the normalised A and P by rounding only:
+    the factorisation is reused, the equalities of the new QP still hold, and the plan equals the
+    one computed from scratch to rounding."""
+    config = avp.PlannerConfig(fov=avp.FovConfig(enabled=False))
+    state = avp.State.hover(np.array([-2.5, 0.3, 2.2]))
+    target = avp.PerchTarget.from_incline(np.array([0.0, 0.0, 1.5]), math.radians(60.0))
+    T = np.array([0.7, 0.55, 0.4])
+    assemble._FACTORS.clear()
+    base = build_perching_qp(state, target, config, T)
+    scaled = build_perching_qp(state, target, config, 1.15 * T)
+    A0, A1 = base.stacked_equalities()[0], scaled.stacked_equalities()[0]
+    assert not np.array_equal(A0, A1) and np.max(np.abs(A0 - A1)) <= assemble.REUSE_TOL * np.max(np.abs(A0))
+    assert base.elimination[0] is scaled.elimination[0] and assemble._cached_factors() == 1
+    Z, c_p, _, _ = scaled.elimination
+    A1, b1 = scaled.stacked_equalities()
+    assert np.max(np.abs(A1 @ Z)) < 1e-12 * np.max(np.abs(A1))
+    assert np.max(np.abs(A1 @ c_p - b1)) < 1e-12 * max(1.0, np.max(np.abs(b1)))
+    reused = avp.solve.solve_perching_qp(scaled, config)
+    assemble._FACTORS.clear()
+    fresh = avp.solve.solve_perching_qp(build_perching_qp(state, target, config, 1.15 * T), config)
+    assert reused.ok and fresh.ok
+    np.testing.assert_allclose(reused.c_hat, fresh.c_hat, rtol=0, atol=1e-9 * np.max(np.abs(fresh.c_hat)))
+
+
+def test_cache_is_bounded(monkeypatch) -> None:
+    monkeypatch.setattr(assemble, "ELIMINATION_CACHE_SIZE", 4)
+    assemble._FACTORS.clear()
+    for k in range(assemble.ELIMINATION_CACHE_SIZE + 5):
+        assert _qp([-3.0, 0.0, 2.5], [0.9, 0.8, 0.7 + 1e-3 * k]).elimination[0].shape[0] > 0
+    assert assemble._cached_factors() == assemble.ELIMINATION_CACHE_SIZE
+
+
+def test_cost_matrix_matches_its_definition_and_is_read_only() -> None:
+    layout = layout_for(3, 7)
+    T = np.array([0.6, 1.1, 0.8])
+    P = cost_matrix(layout, T, 4, 2)
+    assert not P.flags.writeable
+    assert P is cost_matrix(layout, T.copy(), 4, 2)  # cached per value
+    # block (axis, segment) = (T_total / T_i)^(2j - 1) G_j, normalised to a unit largest diagonal
+    ref = np.zeros_like(P)
+    n = layout.n_coeffs
+    for axis in range(4):
+        j = 2 if axis == 3 else 4
+        for seg in range(3):
+            s = layout.start(axis, seg)
+            ref[s:s + n, s:s + n] = (T.sum() / T[seg]) ** (2 * j - 1) * gram(7, j)
+    np.testing.assert_allclose(P, ref / np.max(np.diag(ref)), rtol=1e-14, atol=0)
