@@ -101,7 +101,7 @@ class MovingConfig:
     contact_thrust_margin: float | None = 0.05
     time_weight: float = 1000.0
     growth: float = 1.25
-    max_solves: int = 5
+    max_solves: int = 6
     max_duration: float = 12.0
     certify_clearance: bool = True
     contact_tol: float = 1e-9
@@ -239,6 +239,15 @@ class _Eval:
     note: str
     clearance: ClearanceReport | None = None
 
+    @property
+    def failure(self) -> frozenset[str]:
+        """Why the candidate is not certified: the violated bounds (empty when certified)."""
+        if math.isfinite(self.score):
+            return frozenset()
+        if self.report is None:
+            return frozenset({"qp"})
+        return frozenset(x.bound.value for x in self.report.violations) or frozenset({"undecided"})
+
 
 def plan_moving_detailed(
     state: State,
@@ -345,14 +354,24 @@ def _search(run: Any, T1: float, mcfg: MovingConfig, log: list[str]) -> None:
     log.append(f"initial arrival-time guess {T1:.4f} s")
     T, n, grew = T1, 0, False
     best: _Eval | None = None
+    prev: _Eval | None = None
     while n < mcfg.max_solves:  # bracket: grow T until certified
         e = run(T)
         n += 1
         if math.isfinite(e.score):
             best = e
             break
+        if prev is not None and e.failure != prev.failure:
+            # The reason changed between prev.T and T (e.g. tilt rate -> thrust): a certified
+            # window, if any, lies between them; bisect geometrically.
+            best = _bisect(run, prev, e, mcfg.max_solves - n)
+            if best is not None:
+                grew = True
+                n = mcfg.max_solves  # the window is narrow: no pattern search around it
+            break
         if T >= mcfg.max_duration:
             return
+        prev = e
         T, grew = min(T * mcfg.growth, mcfg.max_duration), True
     if best is None:
         return
@@ -373,6 +392,19 @@ def _search(run: Any, T1: float, mcfg: MovingConfig, log: list[str]) -> None:
         if turned:
             return
         factor, turned = 1.0 / factor, True
+
+
+def _bisect(run: Any, lo: _Eval, hi: _Eval, budget: int) -> _Eval | None:
+    """Geometric bisection between two uncertified durations that fail for different reasons."""
+    for _ in range(budget):
+        e = run(math.sqrt(lo.T * hi.T))
+        if math.isfinite(e.score):
+            return e
+        if e.failure == lo.failure:
+            lo = e
+        else:
+            hi = e
+    return None
 
 
 def _pick(evals: list[_Eval], target: MovingTarget, mcfg: MovingConfig, log: list[str]) -> _Eval | None:

@@ -222,11 +222,9 @@ class ClearanceReport:
 
 def clearance(traj: Trajectory, target: MovingTarget, times: Array, body_offset: float = 0.0) -> Array:
     """``h(t) = (p(t) - rho(t)) . s3(t) - l`` at ``times`` (floating point, for checks and plots)."""
-    out = np.empty(np.size(times))
-    for i, t in enumerate(np.atleast_1d(times)):
-        pad = target.at(float(t))
-        out[i] = float((traj(float(t)) - pad.point) @ pad.s3) - body_offset
-    return out
+    t = np.atleast_1d(np.asarray(times, dtype=float))
+    points, _, s3 = target.predict(t)
+    return np.einsum("ij,ij->i", traj(t) - points, s3) - body_offset
 
 
 def certify_moving_clearance(

@@ -50,11 +50,11 @@ def rot_z(angle: float) -> Array:
     return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
 
 
-def _sinc(x: float) -> float:
-    """``sin(x) / x`` with its limit 1 at 0 (series below 1e-4, where it is exact to rounding)."""
-    if abs(x) < 1e-4:
-        return 1.0 - x * x / 6.0
-    return math.sin(x) / x
+def _sinc(x: Array) -> Array:
+    """``sin(x) / x`` with its limit 1 at 0 (series below 1e-4, exact to rounding there)."""
+    small = np.abs(x) < 1e-4
+    safe = np.where(small, 1.0, x)
+    return np.where(small, 1.0 - x * x / 6.0, np.sin(safe) / safe)
 
 
 @dataclass(frozen=True)
@@ -149,20 +149,33 @@ class MovingTarget(PerchTarget):
         """``theta(time)`` (rad), not wrapped."""
         return self.heading + self.omega * (float(time) - self.time)
 
-    def at(self, time: float) -> MovingTarget:
-        """The target at ``time``: predicted pad pose and platform state (closed form, any sign
-        of ``time - self.time``)."""
-        t = v.finite_float("time", time)
-        dt = t - self.time
+    def predict(self, times: Any) -> tuple[Array, Array, Array]:
+        """Vectorised prediction at ``times`` (s): pad points ``(m, 3)``, headings ``(m,)`` and
+        outward normals ``s3`` ``(m, 3)``.
+
+        CTRV in closed form: ``rho(t) = rho_0 + v_h dt sinc(w dt / 2) (cos, sin)(theta_0 + w dt / 2)
+        + v_v dt e3`` (the chord of the arc; ``w -> 0`` is the straight line without cancellation).
+        """
+        dt = np.atleast_1d(np.asarray(times, dtype=float)) - self.time
         w = self.omega
         half = 0.5 * w * dt
-        # CTRV: integral of v_h (cos, sin)(theta_0 + w s) ds over [0, dt], written with sinc so
-        # that w -> 0 gives the straight line without cancellation.
         chord = self.speed * dt * _sinc(half)
         mid = self.heading + half
-        point = self.point + np.array([chord * math.cos(mid), chord * math.sin(mid), self.vertical_speed * dt])
-        R = rot_z(w * dt) @ self.R_WS if w != 0.0 else self.R_WS
-        return replace(self, point=point, R_WS=R, heading=self.heading + w * dt, time=t)
+        points = self.point + np.stack([chord * np.cos(mid), chord * np.sin(mid), self.vertical_speed * dt], axis=-1)
+        heading = self.heading + w * dt
+        c, s = np.cos(w * dt), np.sin(w * dt)
+        n = self.s3
+        s3 = np.stack([c * n[0] - s * n[1], s * n[0] + c * n[1], np.full_like(dt, n[2])], axis=-1)
+        return points, heading, s3
+
+    def at(self, time: float) -> MovingTarget:
+        """The target at ``time``: predicted pad pose and platform state (any sign of
+        ``time - self.time``); the pad frame turns with the heading."""
+        t = v.finite_float("time", time)
+        points, heading, _ = self.predict(t)
+        w_dt = self.omega * (t - self.time)
+        R = rot_z(w_dt) @ self.R_WS if w_dt != 0.0 else self.R_WS
+        return replace(self, point=points[0], R_WS=R, heading=float(heading[0]), time=t)
 
     def velocity_at(self, time: float) -> Array:
         """Pad velocity at ``time`` (m/s, W)."""
