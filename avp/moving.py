@@ -43,7 +43,7 @@ from .errors import BoundsNotCertifiedError, ConfigError, InfeasibleError, Plann
 from .moving_clearance import ClearanceReport, certify_moving_clearance
 from .planner import PlanStatus
 from .platform import MovingTarget
-from .qp.moving import MovingQpBuilder, TerminalYaw, contact_pad, objective
+from .qp.moving import MovingQpBuilder, TerminalYaw, contact_point, objective
 from .solve import solve_perching_qp
 from .trajectory import Trajectory
 from .types import State
@@ -101,7 +101,7 @@ class MovingConfig:
     contact_thrust_margin: float | None = 0.05
     time_weight: float = 1000.0
     growth: float = 1.25
-    max_solves: int = 6
+    max_solves: int = 7
     max_duration: float = 12.0
     certify_clearance: bool = True
     contact_tol: float = 1e-9
@@ -194,7 +194,7 @@ def contact_errors(traj: Trajectory, target: MovingTarget, moving: MovingConfig)
     b3 = f / np.linalg.norm(f)
     rel = vel - pad.velocity
     return ContactErrors(
-        position=float(np.linalg.norm(p - contact_pad(pad, moving.body_offset).point)),
+        position=float(np.linalg.norm(p - contact_point(pad, moving.body_offset))),
         attitude=float(math.atan2(np.linalg.norm(np.cross(b3, pad.s3)), float(b3 @ pad.s3))),
         normal_velocity=float(rel @ pad.s3 + moving.normal_speed),
         slip=(float(rel @ pad.s1), float(rel @ pad.s2)),
@@ -218,13 +218,14 @@ def _planner_config(config: PlannerConfig | None, moving: MovingConfig) -> Plann
 
 
 def _initial_duration(state: State, target: MovingTarget, cfg: PlannerConfig, moving: MovingConfig) -> float:
-    """Fixed point of the allocation rule with the predicted pad (three iterations)."""
+    """Fixed point of the allocation rule (three iterations) with the displacement the vehicle
+    must add to coasting, ``rho(t_0 + T) + l s3 - (p_0 + v_0 T)``, and its speed relative to the
+    predicted pad (a vehicle already tracking the platform only closes the gap)."""
     T = cfg.time_allocation.total(float(np.linalg.norm(target.point - state.position)), 0.0)
     for _ in range(3):
         pad = target.at(state.time + T)
-        contact = contact_pad(pad, moving.body_offset).point
-        T = cfg.time_allocation.total(float(np.linalg.norm(contact - state.position)),
-                                      float(np.linalg.norm(state.velocity - pad.velocity)))
+        gap = contact_point(pad, moving.body_offset) - (state.position + T * state.velocity)
+        T = cfg.time_allocation.total(float(np.linalg.norm(gap)), float(np.linalg.norm(state.velocity - pad.velocity)))
     return min(T, moving.max_duration)
 
 
@@ -364,47 +365,51 @@ def _search(run: Any, T1: float, mcfg: MovingConfig, log: list[str]) -> None:
         if prev is not None and e.failure != prev.failure:
             # The reason changed between prev.T and T (e.g. tilt rate -> thrust): a certified
             # window, if any, lies between them; bisect geometrically.
-            best = _bisect(run, prev, e, mcfg.max_solves - n)
-            if best is not None:
-                grew = True
-                n = mcfg.max_solves  # the window is narrow: no pattern search around it
-            break
+            _bisect(run, prev, e, mcfg.max_solves - n)
+            return  # the window is narrow: no refinement around it
         if T >= mcfg.max_duration:
             return
         prev = e
         T, grew = min(T * mcfg.growth, mcfg.max_duration), True
     if best is None:
         return
-    # Pattern search on the geometric grid T * growth^k: shorter first (unless shorter was just
-    # found uncertified), keep going while the score improves, turn once if the first step fails.
-    factor = mcfg.growth if grew else 1.0 / mcfg.growth
-    turned = grew
-    while n < mcfg.max_solves:
-        T = best.T * factor
-        if T > mcfg.max_duration:
+    # Refine: a second certified point one growth step away (shorter first unless shorter is
+    # known to fail), then one log-log secant step to the minimiser of J + rho T under J ~ T^-k.
+    fail_below = prev.T if prev is not None and prev.T < best.T else 0.0
+    cert = [best]
+    for factor in ((1.0 / mcfg.growth, mcfg.growth) if not grew else (mcfg.growth,)):
+        if n >= mcfg.max_solves or best.T * factor > mcfg.max_duration:
             return
-        e = run(T)
+        e = run(best.T * factor)
         n += 1
-        if e.score < best.score:
-            best = e
-            turned = True  # a direction that improves: no turning back
-            continue
-        if turned:
-            return
-        factor, turned = 1.0 / factor, True
+        if math.isfinite(e.score):
+            cert.append(e)
+            break
+        if factor < 1.0:
+            fail_below = max(fail_below, e.T)
+    if len(cert) < 2 or n >= mcfg.max_solves or mcfg.time_weight == 0.0:
+        return
+    a, b = sorted(cert, key=lambda c: c.T)
+    if not a.objective > b.objective > 0.0:
+        return
+    k = math.log(a.objective / b.objective) / math.log(b.T / a.T)
+    T_star = (k * b.objective * b.T**k / mcfg.time_weight) ** (1.0 / (k + 1.0))
+    T_star = min(max(T_star, fail_below * 1.02, a.T / mcfg.growth**2), b.T * mcfg.growth**2, mcfg.max_duration)
+    if all(abs(T_star - c.T) > 0.03 * c.T for c in cert):
+        run(T_star)
 
 
-def _bisect(run: Any, lo: _Eval, hi: _Eval, budget: int) -> _Eval | None:
-    """Geometric bisection between two uncertified durations that fail for different reasons."""
+def _bisect(run: Any, lo: _Eval, hi: _Eval, budget: int) -> None:
+    """Geometric bisection between two uncertified durations that fail for different reasons,
+    until one certifies or the budget is spent."""
     for _ in range(budget):
         e = run(math.sqrt(lo.T * hi.T))
         if math.isfinite(e.score):
-            return e
+            return
         if e.failure == lo.failure:
             lo = e
         else:
             hi = e
-    return None
 
 
 def _pick(evals: list[_Eval], target: MovingTarget, mcfg: MovingConfig, log: list[str]) -> _Eval | None:

@@ -42,6 +42,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 import numpy.typing as npt
@@ -96,6 +97,12 @@ class _IPoly:
         rad = np.convolve(a1, r2) + np.convolve(r1, a2) + np.convolve(r1, r2) + gamma * np.convolve(a1, a2)
         return _IPoly(np.convolve(m1, m2), rad * (1 + 4 * (n + 3) * EPS) + TINY)
 
+    def scaled(self, c: float, c_rad: float = 0.0) -> _IPoly:
+        """``self`` times the scalar ``c +- c_rad``."""
+        m = c * self.mid
+        rad = abs(c) * self.rad + c_rad * (np.abs(self.mid) + self.rad) + EPS * np.abs(m)
+        return _IPoly(m, rad * (1 + 4 * EPS) + TINY)
+
     def lower(self) -> Array:
         """Coefficients of a polynomial ``<= self`` for every ``sigma >= 0``."""
         return np.nextafter(self.mid - self.rad * (1 + 4 * EPS), -np.inf)
@@ -143,31 +150,47 @@ def _integrate(p: _IPoly) -> _IPoly:
     return _IPoly(m, r + TINY)
 
 
-def _pad_enclosures(pad_f: MovingTarget, sigma_max: float) -> tuple[list[_IPoly], list[_IPoly], int]:
-    """``rho(t_f - sigma)`` and ``s3(t_f - sigma)`` per axis, and the Taylor order used."""
+def _pad_enclosures(pad_f: MovingTarget, sigma_max: float) -> tuple[list[_IPoly], _IPoly | None, _IPoly | None, int]:
+    """``rho(t_f - sigma)`` per axis, the rotation ``cos``/``sin`` of ``omega sigma`` that turns
+    ``s3_f`` back to ``s3(t_f - sigma)`` (``None`` for a non-turning platform: ``s3`` is constant),
+    and the Taylor order used."""
     omega = pad_f.omega
     K = _taylor_order(omega, sigma_max)
     theta = pad_f.heading
     phase_rad = 4 * EPS * (abs(theta) + abs(omega) * abs(pad_f.time)) + 2 * EPS
     cos_h, sin_h = _trig_series(theta, phase_rad, omega, K)
-    scale_rho = 16 * EPS * (float(np.max(np.abs(pad_f.point))) + abs(pad_f.speed) * (abs(pad_f.time) + sigma_max)
-                            + abs(pad_f.vertical_speed) * (abs(pad_f.time) + sigma_max)) + TINY
-    v_h = _IPoly.const(pad_f.speed)
-    drift = [_integrate(cos_h) * v_h, _integrate(sin_h) * v_h,
+    reach = abs(pad_f.time) + sigma_max
+    scale_rho = 16 * EPS * (float(np.max(np.abs(pad_f.point))) + (abs(pad_f.speed) + abs(pad_f.vertical_speed)) * reach) + TINY
+    drift = [_integrate(cos_h).scaled(pad_f.speed), _integrate(sin_h).scaled(pad_f.speed),
              _IPoly(np.array([0.0, pad_f.vertical_speed]), np.array([0.0, EPS * abs(pad_f.vertical_speed)]))]
     rho = [_IPoly.const(float(pad_f.point[a]), scale_rho) - drift[a] for a in range(3)]
+    if omega == 0.0:
+        return rho, None, None, K
     # s3(t_f - sigma) = R_z(-omega sigma) s3_f: cos/sin of (0 - omega sigma), exact phase 0.
     cos_w, sin_w = _trig_series(0.0, 0.0, omega, K)
-    a, b, c = (float(x) for x in pad_f.s3)
-    s3_rad = 8 * EPS
-    A, B = _IPoly.const(a, s3_rad), _IPoly.const(b, s3_rad)
-    s3 = [cos_w * A - sin_w * B, sin_w * A + cos_w * B, _IPoly.const(c, s3_rad)]
-    return rho, s3, K
+    return rho, cos_w, sin_w, K
 
 
+def _normal_component(v: list[_IPoly], s3_f: Array, cos_w: _IPoly | None, sin_w: _IPoly | None) -> _IPoly:
+    """``v . s3(t_f - sigma)`` with ``s3 = (cos a - sin b, sin a + cos b, c)`` (``cos``, ``sin``
+    of ``-omega sigma``, ``(a, b, c) = s3_f`` with a radius of 8 ulps):
+    ``cos (a v_x + b v_y) + sin (a v_y - b v_x) + c v_z``."""
+    a, b, c = (float(x) for x in s3_f)
+    r = 8 * EPS
+    u = v[0].scaled(a, r) + v[1].scaled(b, r)
+    out = v[2].scaled(c, r)
+    if cos_w is None or sin_w is None:
+        return u + out
+    w = v[1].scaled(a, r) - v[0].scaled(b, r)
+    return cos_w * u + sin_w * w + out
+
+
+@lru_cache(maxsize=8)
 def _binomials(n: int) -> Array:
-    """``B[j, k] = C(k, j)`` for ``j, k < n`` (exact integers in float64)."""
-    return np.array([[math.comb(k, j) for k in range(n)] for j in range(n)], dtype=float)
+    """``B[j, k] = C(k, j)`` for ``j, k < n`` (exact integers in float64, read-only)."""
+    B = np.array([[math.comb(k, j) for k in range(n)] for j in range(n)], dtype=float)
+    B.setflags(write=False)
+    return B
 
 
 def _segments_in_sigma(coeffs: Array, D: float) -> list[_IPoly]:
@@ -234,16 +257,15 @@ def certify_moving_clearance(
     knots = np.asarray(traj.knots, dtype=float)
     tf = float(knots[-1])
     pad_f = target.at(tf)
-    rho, s3, K = _pad_enclosures(pad_f, tf - float(knots[0]))
+    rho, cos_w, sin_w, K = _pad_enclosures(pad_f, tf - float(knots[0]))
     coeffs = traj.coefficients
-    rho_s3 = rho[0] * s3[0] + rho[1] * s3[1] + rho[2] * s3[2] + _IPoly.const(body_offset)
+    rho_s3 = _normal_component(rho, pad_f.s3, cos_w, sin_w) + _IPoly.const(body_offset)
     verdicts: list[bool] = []
     t_bad = math.nan
     r_lo = r_hi = math.nan
     for i in range(coeffs.shape[0]):
         D = tf - float(knots[i])
-        p = _segments_in_sigma(coeffs[i], D)
-        h = p[0] * s3[0] + p[1] * s3[1] + p[2] * s3[2] - rho_s3
+        h = _normal_component(_segments_in_sigma(coeffs[i], D), pad_f.s3, cos_w, sin_w) - rho_s3
         lo = h.lower()
         sig_lo, sig_hi = tf - float(knots[i + 1]), D
         if i == coeffs.shape[0] - 1:

@@ -21,7 +21,7 @@ its current pose.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from enum import Enum
 from typing import Any
 
@@ -175,7 +175,17 @@ class MovingTarget(PerchTarget):
         points, heading, _ = self.predict(t)
         w_dt = self.omega * (t - self.time)
         R = rot_z(w_dt) @ self.R_WS if w_dt != 0.0 else self.R_WS
-        return replace(self, point=points[0], R_WS=R, heading=float(heading[0]), time=t)
+        # Derived from validated fields: skip re-validation (it dominates the cost of at()).
+        out = object.__new__(type(self))
+        out.__dict__.update(self.__dict__)
+        point = points[0]
+        for arr in (point, R):
+            arr.setflags(write=False)
+        object.__setattr__(out, "point", point)
+        object.__setattr__(out, "R_WS", R)
+        object.__setattr__(out, "heading", float(heading[0]))
+        object.__setattr__(out, "time", t)
+        return out
 
     def velocity_at(self, time: float) -> Array:
         """Pad velocity at ``time`` (m/s, W)."""

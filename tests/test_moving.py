@@ -270,3 +270,17 @@ def test_a_platform_outrunning_the_limits_is_an_honest_failure():
     assert all(c.duration <= 3.0 for c in res.candidates)
     with pytest.raises(avp.BoundsNotCertifiedError):
         plan_moving(state, tgt, CONFIG, mcfg)
+
+
+@pytest.mark.parametrize("slip_weight,slip_max", [(1000.0, 1.0), (0.0, 1.0), (0.0, 0.0)])
+def test_two_stage_elimination_matches_the_generic_one(slip_weight, slip_max):
+    """The builder's cached null space gives the same optimum as PerchingQp's own elimination."""
+    from dataclasses import replace
+    tgt = platform(1.0, 2.0, 0.2)
+    builder = MovingQpBuilder(behind(tgt), QP_CONFIG, 0.3, slip_max, slip_weight, True, TerminalYaw.HEADING, 0.0)
+    qp = builder.build(tgt.at(3.0), 3.0)
+    generic = replace(qp)
+    assert "elimination" in qp.__dict__ and "elimination" not in generic.__dict__
+    a, b = solve_perching_qp(qp, QP_CONFIG), solve_perching_qp(generic, QP_CONFIG)
+    assert a.ok and b.ok
+    assert np.allclose(a.c_hat, b.c_hat, atol=1e-7 * np.abs(b.c_hat).max())

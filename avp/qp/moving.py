@@ -26,22 +26,24 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from enum import Enum
+from functools import lru_cache
 
 import numpy as np
 import numpy.typing as npt
+import scipy.linalg
 
 from ..config import PlannerConfig
-from ..errors import ConfigError
+from ..errors import ConfigError, InfeasibleError
 from ..platform import MovingTarget
 from ..types import PerchTarget, State
-from .assemble import ConstraintBlock, PerchingQp
+from .assemble import RANK_TOL, ConstraintBlock, PerchingQp
 from .boundary import continuity_rows, initial_state_rows
 from .cost import cost_matrix, gram
 from .layout import YAW, layout_for
 from .perching import pre_impact_rows, terminal_yaw
 from .rows import derivative_rows, vector_rows
 
-__all__ = ["MovingQpBuilder", "TerminalYaw", "contact_pad", "moving_perching_qp", "objective"]
+__all__ = ["MovingQpBuilder", "TerminalYaw", "contact_point", "moving_perching_qp", "objective"]
 
 Array = npt.NDArray[np.float64]
 
@@ -53,9 +55,9 @@ class TerminalYaw(Enum):
     PAD = "pad: b2 parallel to s2 of the predicted pad, the static rule (13)"
 
 
-def contact_pad(pad: MovingTarget, body_offset: float) -> PerchTarget:
-    """The static pad whose point is the CoM at contact: ``rho + l s3`` (Gao et al. (43))."""
-    return PerchTarget(point=pad.point + body_offset * pad.s3, R_WS=pad.R_WS)
+def contact_point(pad: PerchTarget, body_offset: float) -> Array:
+    """The CoM at contact: ``rho + l s3`` (Gao et al. (43))."""
+    return np.asarray(pad.point + body_offset * pad.s3, dtype=np.float64)
 
 
 def _physical_scale(durations: Array, degree: int, config: PlannerConfig) -> float:
@@ -76,6 +78,43 @@ def objective(qp: PerchingQp, c_hat: Array, config: PlannerConfig) -> float:
     return float(c_hat @ qp.P @ c_hat) * _physical_scale(qp.durations, qp.layout.degree, config)
 
 
+@lru_cache(maxsize=16)
+def _fixed_parts(
+    S: int, degree: int, position_order: int, yaw_order: int, continuity_order: int
+) -> tuple[Array, ConstraintBlock, list[Array], Array, Array, Array, Array]:
+    """The T-invariant parts of a moving-pad QP with ``S`` equal segments (read-only): cost
+    matrix, continuity rows, endpoint rows (position..jerk, yaw) at ``t_f`` for unit segments,
+    the null space ``Z0`` of the initial-state and continuity rows, the map ``L0`` from the
+    initial right-hand side to a particular solution, and ``Z0^T P Z0``. With equal segments the
+    initial-state and continuity matrices do not depend on ``T`` (only the right-hand side)."""
+    layout = layout_for(S, degree)
+    ones = np.ones(S)
+    P = cost_matrix(layout, ones, position_order, yaw_order)
+    Ac = continuity_rows(layout, ones, continuity_order, 1.0)
+    continuity = ConstraintBlock("continuity", Ac, np.zeros(Ac.shape[0]), np.zeros(Ac.shape[0]))
+    knots = np.arange(S + 1, dtype=float)
+    end = [vector_rows(layout, knots, r, float(S))[0] for r in range(4)]  # / T_S^r: physical
+    end_yaw = derivative_rows(layout, knots, YAW, 0, float(S))[0]
+    A0, _ = initial_state_rows(layout, ones, State.hover(np.zeros(3)), 1.0)
+    A_fix = np.vstack([A0, Ac])
+    Q, R, piv = scipy.linalg.qr(A_fix.T, pivoting=True, check_finite=False)
+    diag = np.abs(np.diag(R))
+    rank = int(np.sum(diag > RANK_TOL * max(float(diag[0]), 1.0)))
+    if rank < A_fix.shape[0]:  # pragma: no cover - the initial/continuity rows are independent
+        raise ConfigError("config", "initial-state and continuity rows are dependent; raise config.degree")
+    Z0 = Q[:, rank:]
+    # c0 = L b_fix solves A_fix c = b_fix = [b0; 0]; only the b0 columns are needed.
+    L = Q[:, :rank] @ scipy.linalg.solve_triangular(R[:rank, :rank], np.eye(rank), trans="T", check_finite=False)
+    L0 = np.zeros((Q.shape[0], A0.shape[0]))
+    for col, row in enumerate(piv[:rank]):
+        if row < A0.shape[0]:
+            L0[:, row] = L[:, col]
+    G0 = Z0.T @ P @ Z0
+    for arr in (P, Z0, L0, G0, end_yaw, *end):
+        arr.setflags(write=False)
+    return P, continuity, end, end_yaw, Z0, L0, G0
+
+
 @dataclass
 class MovingQpBuilder:
     """Builds :func:`moving_perching_qp` for many durations of one start state: with equal
@@ -94,18 +133,12 @@ class MovingQpBuilder:
 
     def __post_init__(self) -> None:
         cfg = self.config
-        S = cfg.n_segments
-        self.layout = layout_for(S, cfg.degree)
-        ones = np.ones(S)
-        self.P = cost_matrix(self.layout, ones, cfg.position_cost_order, cfg.yaw_cost_order)
-        Ac = continuity_rows(self.layout, ones, cfg.continuity_order, 1.0)
-        self.continuity = ConstraintBlock("continuity", Ac, np.zeros(Ac.shape[0]), np.zeros(Ac.shape[0]))
-        knots = np.arange(S + 1, dtype=float)
-        # Endpoint rows at t_f for unit segments: row / T_S^r is the physical derivative r.
-        self.end = [vector_rows(self.layout, knots, r, float(S))[0] for r in range(4)]
-        self.end_yaw = derivative_rows(self.layout, knots, YAW, 0, float(S))[0]
-        j = cfg.position_cost_order
-        self.peak = _physical_scale(ones, cfg.degree, cfg) * float(S) ** (2 * j - 1)  # largest raw diagonal
+        self.layout = layout_for(cfg.n_segments, cfg.degree)
+        fixed = _fixed_parts(cfg.n_segments, cfg.degree, cfg.position_cost_order, cfg.yaw_cost_order,
+                             cfg.continuity_order)
+        self.P, self.continuity, self.end, self.end_yaw, self.Z0, self.L0, self.G0 = fixed
+        self.peak = _physical_scale(np.ones(cfg.n_segments), cfg.degree, cfg) * float(cfg.n_segments) ** (
+            2 * cfg.position_cost_order - 1)  # largest raw diagonal of the cost matrix
 
     def build(self, pad: MovingTarget, total: float) -> PerchingQp:
         """The QP for duration ``total`` toward ``pad`` predicted at ``state.time + total``."""
@@ -118,7 +151,7 @@ class MovingQpBuilder:
         s1, s2, s3 = pad.s1, pad.s2, pad.s3
         v_pad = pad.velocity
         R: list[Array] = list(P_)
-        b: list[float] = list(pad.point + self.body_offset * s3)  # (43)
+        b: list[float] = list(contact_point(pad, self.body_offset))  # (43)
         if cfg.alpha_range is None:
             R.extend(A_)
             b.extend((cfg.alpha * s3 - np.array([0.0, 0.0, cfg.g])) * Ti**2)
@@ -154,6 +187,7 @@ class MovingQpBuilder:
             ineq += (ConstraintBlock("contact thrust range (12)", (s3 @ A_)[None, :] / Ti**2,
                                      np.array([a_lo - gs3]), np.array([a_hi - gs3])),)
         P = self.P
+        M: Array | None = None  # slip cost P = P0 + M^T M
         if self.slip_max > 0.0:
             slip = S_t @ V_ / Ti  # physical m/s
             d = S_t @ v_pad
@@ -162,9 +196,41 @@ class MovingQpBuilder:
                 A_all = np.vstack([blk.matrix for blk in eq])
                 b_all = np.concatenate([blk.lower for blk in eq])
                 ell = A_all.T @ b_all / float(b_all @ b_all)  # ell . c = 1 wherever A c = b
-                M = slip - np.outer(d, ell)
-                P = P + (self.slip_weight * total ** (2 * cfg.position_cost_order - 1) / self.peak) * (M.T @ M)
-        return PerchingQp(layout=self.layout, durations=T, t0=st.time, P=P, equalities=eq, inequalities=ineq)
+                weight = self.slip_weight * total ** (2 * cfg.position_cost_order - 1) / self.peak
+                M = math.sqrt(weight) * (slip - np.outer(d, ell))
+                P = P + M.T @ M
+        qp = PerchingQp(layout=self.layout, durations=T, t0=st.time, P=P, equalities=eq, inequalities=ineq)
+        qp.__dict__["elimination"] = self._eliminate(b0, A_t, b_t, M)  # as _same_equalities does
+        return qp
+
+    def _eliminate(self, b0: Array, A_t: Array, b_t: Array, M: Array | None) -> tuple[Array, Array, Array, Array]:
+        """:attr:`PerchingQp.elimination` (same contract: ``c = c_p + Z z`` spans the solutions of
+        every equality, and the cost in ``z`` scaled to a unit largest Hessian diagonal) in two
+        stages: the precomputed null space ``Z0`` of the T-invariant rows, then the terminal rows
+        inside it (a QR of a matrix of about 13 x 42 instead of 64 x 96). ``P = P0 + M^T M``."""
+        c0 = self.L0 @ b0
+        B = A_t @ self.Z0
+        Q, R, piv = scipy.linalg.qr(B.T, pivoting=True, check_finite=False)
+        diag = np.abs(np.diag(R))
+        rank = int(np.sum(diag > RANK_TOL * max(float(diag[0]) if diag.size else 0.0, 1.0)))
+        rhs = b_t - A_t @ c0
+        y = scipy.linalg.solve_triangular(R[:rank, :rank], rhs[piv[:rank]], trans="T", check_finite=False)
+        w_p = Q[:, :rank] @ y
+        residual = float(np.max(np.abs(B @ w_p - rhs)))
+        if residual > 1e-8 * max(1.0, float(np.max(np.abs(b_t)))):
+            raise InfeasibleError(f"the terminal equalities are inconsistent (residual {residual:.2e}); "
+                                  "raise config.n_segments or config.degree")
+        Z1 = Q[:, rank:]
+        Z = self.Z0 @ Z1
+        c_p = c0 + self.Z0 @ w_p
+        H = Z1.T @ self.G0 @ Z1
+        Pc = self.P @ c_p
+        if M is not None:
+            MZ = M @ Z
+            H = H + MZ.T @ MZ
+            Pc = Pc + M.T @ (M @ c_p)
+        scale = 1.0 / max(float(np.max(np.abs(np.diag(H)))) if H.size else 1.0, 1e-300)
+        return Z, c_p, (0.5 * scale) * (H + H.T), scale * (Z.T @ Pc)
 
 
 def moving_perching_qp(
