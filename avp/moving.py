@@ -39,16 +39,20 @@ from . import _validate as v
 from .bounds import BoundReport, certify_spline
 from .camera import FovConfig
 from .config import PlannerConfig
-from .errors import BoundsNotCertifiedError, ConfigError, InfeasibleError, PlanningError, SolverError
+from .errors import AvpError, BoundsNotCertifiedError, ConfigError, InfeasibleError, PlanningError, SolverError
 from .moving_clearance import ClearanceReport, certify_moving_clearance
 from .planner import PlanStatus
 from .platform import MovingTarget
 from .qp.moving import MovingQpBuilder, TerminalYaw, contact_point, objective
+from .replan import ReplanConfig, Replanner, ReplanStep
 from .solve import solve_perching_qp
 from .trajectory import Trajectory
-from .types import State
+from .types import PerchTarget, State
 
-__all__ = ["ContactErrors", "MovingConfig", "MovingPlanResult", "contact_errors", "plan_moving", "plan_moving_detailed"]
+__all__ = [
+    "ContactErrors", "MovingConfig", "MovingPlanResult", "MovingReplanner", "contact_errors", "plan_moving",
+    "plan_moving_detailed",
+]
 
 Array = npt.NDArray[np.float64]
 
@@ -444,3 +448,48 @@ def plan_moving(
     if result.status is PlanStatus.BOUNDS_NOT_CERTIFIED:
         raise BoundsNotCertifiedError(message, result)
     raise PlanningError(message, result)
+
+
+class MovingReplanner(Replanner):
+    """:class:`~avp.replan.Replanner` for a pad on a moving platform.
+
+    ``step(t, odometry, target_estimate)`` takes the latest platform-state estimate as a
+    :class:`~avp.platform.MovingTarget` (pad pose and platform state at its own ``time``), which
+    the motion model predicts to the contact time. The first plan searches the arrival time; a
+    replan anticipates the start state (6) exactly as for a static pad and keeps the committed
+    contact time (``duration = t_f - t_ex``), so only the predicted pad changes.
+    """
+
+    def __init__(
+        self,
+        target: MovingTarget,
+        config: PlannerConfig | None = None,
+        replan: ReplanConfig | None = None,
+        moving: MovingConfig | None = None,
+        trajectory: Trajectory | None = None,
+    ) -> None:
+        if not isinstance(target, MovingTarget):
+            raise ConfigError("target", f"expected avp.platform.MovingTarget, got {type(target).__name__}")
+        super().__init__(target, config, replan, trajectory)
+        self.moving = moving if moving is not None else MovingConfig()
+
+    def step(self, t: float, odometry: State, target_estimate: PerchTarget | None = None) -> ReplanStep:
+        if target_estimate is not None and not isinstance(target_estimate, MovingTarget):
+            raise ConfigError("target_estimate", f"expected avp.platform.MovingTarget, got {type(target_estimate).__name__}")
+        return super().step(t, odometry, target_estimate)
+
+    def _plan(  # type: ignore[override]  # returns the duck-compatible MovingPlanResult
+        self, state: State, durations: Array | None, previous: Trajectory | None, config: PlannerConfig
+    ) -> tuple[MovingPlanResult | None, float, str | None]:
+        t0 = time.perf_counter()
+        assert isinstance(self.target, MovingTarget)
+        try:
+            duration = float(np.sum(durations)) if durations is not None else None
+            result = plan_moving_detailed(state, self.target, self.config, self.moving, duration=duration)
+        except AvpError as exc:  # never raise for a planning or solver failure
+            elapsed = time.perf_counter() - t0
+            self._solve_times.append(elapsed)
+            return None, elapsed, f"{type(exc).__name__}: {exc}"
+        elapsed = time.perf_counter() - t0
+        self._solve_times.append(elapsed)
+        return result, elapsed, None

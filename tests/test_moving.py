@@ -284,3 +284,37 @@ def test_two_stage_elimination_matches_the_generic_one(slip_weight, slip_max):
     a, b = solve_perching_qp(qp, QP_CONFIG), solve_perching_qp(generic, QP_CONFIG)
     assert a.ok and b.ok
     assert np.allclose(a.c_hat, b.c_hat, atol=1e-7 * np.abs(b.c_hat).max())
+
+
+# -- replanning ----------------------------------------------------------------------------
+
+def test_replanner_follows_platform_estimates():
+    """Replanning at 30 Hz from the committed plan with platform-state estimates: when the
+    platform speeds up mid-flight (new estimate), the last committed plan meets the pad where the
+    new motion puts it at contact (exact odometry, so anticipation (6) is exact)."""
+    from avp.moving import MovingReplanner
+    first = platform(0.5, 2.0, model=MotionModel.CONSTANT_VELOCITY)
+    rp = MovingReplanner(first, CONFIG, avp.ReplanConfig(latency=0.02, freeze_horizon=0.25))
+    s0 = behind(first)
+    step = rp.step(0.0, s0, first)
+    assert step.action is avp.ReplanAction.INITIAL_PLAN
+    tf0 = step.trajectory.tf
+    faster = None
+    t = 1.0 / 30.0
+    while t < tf0:
+        traj = rp.trajectory
+        odo = avp.State(position=traj(t), velocity=traj(t, 1), acceleration=traj(t, 2), jerk=traj(t, 3),
+                        yaw=float(traj.yaw(t)), yaw_rate=float(traj.yaw(t, 1)), time=t)
+        if faster is None and t > 0.4 * tf0:  # the platform accelerates to 2.5 m/s: new estimate
+            now = first.at(t)
+            faster = MovingTarget(point=now.point, R_WS=now.R_WS, heading=now.heading, speed=2.5, time=t,
+                                  model=MotionModel.CONSTANT_VELOCITY)
+        rp.step(t, odo, faster.at(t) if faster is not None else first.at(t))
+        t += 1.0 / 30.0
+    actions = {s.action for s in rp.history}
+    assert avp.ReplanAction.REPLANNED in actions and avp.ReplanAction.FROZEN_NEAR_CONTACT in actions
+    final = rp.trajectory
+    assert final.tf == pytest.approx(tf0)  # replans keep the committed contact time
+    err = contact_errors(final, faster, MovingConfig())
+    assert err.position < 1e-3 and err.attitude < math.radians(0.5) and abs(err.normal_velocity) < 1e-3
+    assert np.linalg.norm(final(final.tf) - first.at(final.tf).point) > 0.1  # it did follow the change
