@@ -171,12 +171,14 @@ def _pad_enclosures(pad_f: MovingTarget, sigma_max: float) -> tuple[list[_IPoly]
     return rho, cos_w, sin_w, K
 
 
-def _normal_component(v: list[_IPoly], s3_f: Array, cos_w: _IPoly | None, sin_w: _IPoly | None) -> _IPoly:
+def _normal_component(
+    v: list[_IPoly], s3_f: Array, s3_rad: float, cos_w: _IPoly | None, sin_w: _IPoly | None
+) -> _IPoly:
     """``v . s3(t_f - sigma)`` with ``s3 = (cos a - sin b, sin a + cos b, c)`` (``cos``, ``sin``
-    of ``-omega sigma``, ``(a, b, c) = s3_f`` with a radius of 8 ulps):
+    of ``-omega sigma``, ``(a, b, c) = s3_f +- s3_rad``):
     ``cos (a v_x + b v_y) + sin (a v_y - b v_x) + c v_z``."""
     a, b, c = (float(x) for x in s3_f)
-    r = 8 * EPS
+    r = s3_rad
     u = v[0].scaled(a, r) + v[1].scaled(b, r)
     out = v[2].scaled(c, r)
     if cos_w is None or sin_w is None:
@@ -259,13 +261,15 @@ def certify_moving_clearance(
     pad_f = target.at(tf)
     rho, cos_w, sin_w, K = _pad_enclosures(pad_f, tf - float(knots[0]))
     coeffs = traj.coefficients
-    rho_s3 = _normal_component(rho, pad_f.s3, cos_w, sin_w) + _IPoly.const(body_offset)
+    # s3_f = R_z(omega dt) s3(t_ref) in floating point: a few ulps plus the rounding of the angle.
+    s3_rad = 8 * EPS * (1.0 + abs(pad_f.omega * (tf - target.time)))
+    rho_s3 = _normal_component(rho, pad_f.s3, s3_rad, cos_w, sin_w) + _IPoly.const(body_offset)
     verdicts: list[bool] = []
     t_bad = math.nan
     r_lo = r_hi = math.nan
     for i in range(coeffs.shape[0]):
         D = tf - float(knots[i])
-        h = _normal_component(_segments_in_sigma(coeffs[i], D), pad_f.s3, cos_w, sin_w) - rho_s3
+        h = _normal_component(_segments_in_sigma(coeffs[i], D), pad_f.s3, s3_rad, cos_w, sin_w) - rho_s3
         lo = h.lower()
         sig_lo, sig_hi = tf - float(knots[i + 1]), D
         if i == coeffs.shape[0] - 1:

@@ -78,6 +78,16 @@ def objective(qp: PerchingQp, c_hat: Array, config: PlannerConfig) -> float:
     return float(c_hat @ qp.P @ c_hat) * _physical_scale(qp.durations, qp.layout.degree, config)
 
 
+def _tangents(pad: PerchTarget) -> tuple[Array, Array, Array]:
+    """``(t1, t2, s3)``: an orthonormal frame with ``t1`` along ``s1``. The thrust rows ask
+    ``f . t1 = f . t2 = 0``, which makes ``f`` parallel to ``s3`` exactly even when ``R_WS`` is
+    orthonormal only to its validation tolerance (1e-6)."""
+    s3 = pad.s3 / np.linalg.norm(pad.s3)
+    t1 = pad.s1 - (pad.s1 @ s3) * s3
+    t1 = t1 / np.linalg.norm(t1)
+    return t1, np.cross(s3, t1), s3
+
+
 @lru_cache(maxsize=16)
 def _fixed_parts(
     S: int, degree: int, position_order: int, yaw_order: int, continuity_order: int
@@ -148,7 +158,7 @@ class MovingQpBuilder:
         T = np.full(S, Ti)
         A0, b0 = initial_state_rows(self.layout, T, st, Ti)
         P_, V_, A_, J_ = self.end  # scaled by Ti^r: rows in normalised units
-        s1, s2, s3 = pad.s1, pad.s2, pad.s3
+        s1, s2, s3 = _tangents(pad)
         v_pad = pad.velocity
         R: list[Array] = list(P_)
         b: list[float] = list(contact_point(pad, self.body_offset))  # (43)
