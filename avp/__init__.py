@@ -21,7 +21,9 @@ from .errors import (
     ConfigError,
     InfeasibleError,
     PlanningError,
+    RelaxedPlanError,
     SolverError,
+    WorkspaceNotCertifiedError,
 )
 
 __version__: str = _avp_rust.__version__
@@ -32,7 +34,9 @@ __all__ = [
     "ConfigError",
     "InfeasibleError",
     "PlanningError",
+    "RelaxedPlanError",
     "SolverError",
+    "WorkspaceNotCertifiedError",
     "__version__",
 ]
 
@@ -41,18 +45,22 @@ from .camera import Camera, FovConfig, FovPointPolicy
 from .config import (
     BoundsPolicy,
     ContactVelocity,
+    HalfSpace,
     PlannerConfig,
     PreImpactMode,
     QpForm,
     Relaxation,
     TimeAllocation,
+    Sphere,
     TimeSearch,
     VehicleLimits,
+    Workspace,
 )
 from .metrics import Visibility, visibility
 from .planner import PlanResult, PlanStatus, PlanTimings, plan, plan_detailed
+from .safety import SafetyReport
 from .replan import ReplanAction, ReplanConfig, Replanner, ReplanStep
-from .trajectory import Derivative, FlatOutput, Trajectory
+from .trajectory import Derivative, FlatOutput, Provenance, Trajectory
 from .types import PerchTarget, State
 
 __all__ += [
@@ -66,24 +74,29 @@ __all__ += [
     "FlatOutput",
     "FovConfig",
     "FovPointPolicy",
+    "HalfSpace",
     "PerchTarget",
     "PlanResult",
     "PlanStatus",
     "PlanTimings",
     "PlannerConfig",
     "PreImpactMode",
+    "Provenance",
     "QpForm",
     "Relaxation",
     "ReplanAction",
     "ReplanConfig",
     "ReplanStep",
     "Replanner",
+    "SafetyReport",
+    "Sphere",
     "State",
     "TimeAllocation",
     "TimeSearch",
     "Trajectory",
     "VehicleLimits",
     "Visibility",
+    "Workspace",
     "plan",
     "plan_detailed",
     "visibility",

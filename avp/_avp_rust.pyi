@@ -10,6 +10,9 @@ __all__ = [
     "bound_polynomial",
     "certify_below",
     "certify_below_many",
+    "certify_halfspace",
+    "certify_speed",
+    "certify_sphere_outside",
     "certify_spline",
     "eval_spline",
     "sturm_count",
@@ -89,3 +92,35 @@ def bound_polynomial(
 ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
     """Rigorous enclosure ``(lo, hi)`` of the checked polynomial of row ``bound`` on ``segment``
     in ``u = (t - knots[i]) / (knots[i+1] - knots[i])``."""
+
+# --- workspace certificates (regions.rs) ------------------------------------------------------
+
+def certify_halfspace(
+    coeffs: npt.NDArray[np.float64],
+    knots: npt.NDArray[np.float64],
+    normal: npt.NDArray[np.float64],
+    offset: float,
+    touch_order: int = 0,
+    exact: bool = True,
+) -> tuple[npt.NDArray[np.int8], npt.NDArray[np.float64], float]:
+    """``normal . p(t) > offset`` per segment of a (S, 4, C) spline: ``(codes (S,), t (S,),
+    residual)``. With ``touch_order = k >= 1`` the last segment touches the plane at its end: a
+    ``k``-fold root at ``t_f`` is divided out, the quotient certified, and ``residual`` bounds how
+    far beyond the plane the position can be (m). Codes 0 within, 1 violated, 2 unknown."""
+
+def certify_sphere_outside(
+    coeffs: npt.NDArray[np.float64],
+    knots: npt.NDArray[np.float64],
+    center: npt.NDArray[np.float64],
+    radius: float,
+    exact: bool = True,
+) -> tuple[npt.NDArray[np.int8], npt.NDArray[np.float64], float]:
+    """``|p(t) - center| > radius`` per segment; as :func:`certify_halfspace`."""
+
+def certify_speed(
+    coeffs: npt.NDArray[np.float64],
+    knots: npt.NDArray[np.float64],
+    v_max: float,
+    exact: bool = True,
+) -> tuple[npt.NDArray[np.int8], npt.NDArray[np.float64], float]:
+    """``|v(t)| < v_max`` per segment; as :func:`certify_halfspace`."""

@@ -22,13 +22,16 @@ from .frames import GRAVITY
 __all__ = [
     "BoundsPolicy",
     "ContactVelocity",
+    "HalfSpace",
     "PlannerConfig",
     "PreImpactMode",
     "QpForm",
     "Relaxation",
     "TimeAllocation",
     "TimeSearch",
+    "Sphere",
     "VehicleLimits",
+    "Workspace",
 ]
 
 
@@ -45,6 +48,10 @@ class QpForm(Enum):
 
     REDUCED = "reduced: equalities eliminated by a null-space basis (exact to rounding)"
     FULL = "full: coefficients with A c = b passed to the solver as is"
+
+
+ALPHA_NOMINAL = 4.0
+"""Nominal mass-normalised contact thrust (m/s^2) on steep pads, as in the paper's experiments."""
 
 
 @dataclass(frozen=True)
@@ -205,6 +212,112 @@ class BoundsPolicy:
 
 
 @dataclass(frozen=True)
+class HalfSpace:
+    """The allowed side of a plane: positions ``p`` with ``(p - point) . normal > 0`` (W, m).
+
+    A ceiling at 3 m: ``HalfSpace(point=(0, 0, 3), normal=(0, 0, -1))``.
+    """
+
+    point: Any
+    normal: Any
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "point", v.frozen_array("workspace.half_spaces.point", self.point, (3,)))
+        object.__setattr__(self, "normal", v.unit_vector("workspace.half_spaces.normal", self.normal))
+
+    @property
+    def offset(self) -> float:
+        """``d`` of ``normal . p > d``."""
+        return float(self.normal @ self.point)
+
+
+@dataclass(frozen=True)
+class Sphere:
+    """A keep-out ball: positions with ``|p - center| > radius`` (W, m)."""
+
+    center: Any
+    radius: float
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "center", v.frozen_array("workspace.spheres.center", self.center, (3,)))
+        v.positive_float("workspace.spheres.radius", self.radius)
+
+
+@dataclass(frozen=True)
+class Workspace:
+    """Where the vehicle's centre of mass may go: certified over the whole plan, never relaxed.
+
+    Every active limit becomes linear QP rows on samples (refined where the certificate finds a
+    violation) and a certificate of the exact polynomial over every segment, proven in Rust
+    (:mod:`avp.safety`, ``docs/bounds.md``). The time search and the relaxations may change the
+    soft choices (slide, band, alpha), never these.
+
+    Parameters
+    ----------
+    perch_clearance:
+        Stay strictly on the outward side of the perch pad's plane until contact:
+        ``(p(t) - point) . s3 > body_offset`` for ``t < t_f`` (on by default).
+    body_offset:
+        Distance (m) from the centre of mass to the contact point along ``-b3`` (landing gear
+        or body radius). The centre of mass reaches ``point + body_offset * s3`` at contact and
+        keeps at least this distance from the pad's plane before, which keeps every point of the
+        body within ``body_offset`` of the centre of mass out of the plane at any attitude.
+    ground_z:
+        Minimum height of the centre of mass (m), or ``None`` for no ground (``avp demo``
+        passes 0).
+    max_speed:
+        Limit on ``|v|`` (m/s); ``inf`` to skip.
+    half_spaces, spheres:
+        Extra :class:`HalfSpace` limits (ceilings, neighbouring walls) and :class:`Sphere`
+        keep-out zones.
+    samples_per_segment:
+        Initial number of QP sample rows per segment and limit.
+    refinement_rounds:
+        Re-solves with denser, tightened rows around a certified violation before the attempt
+        counts as failed.
+    refinement_margin:
+        Tightening (m; m/s for the speed) added per refinement round on the refined rows.
+    """
+
+    perch_clearance: bool = True
+    body_offset: float = 0.0
+    ground_z: float | None = None
+    max_speed: float = math.inf
+    half_spaces: tuple[HalfSpace, ...] = ()
+    spheres: tuple[Sphere, ...] = ()
+    samples_per_segment: int = 8
+    refinement_rounds: int = 4
+    refinement_margin: float = 0.005
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.body_offset) and self.body_offset >= 0.0):
+            raise ConfigError("workspace.body_offset", f"must be finite and >= 0 m, got {self.body_offset}")
+        if self.ground_z is not None:
+            object.__setattr__(self, "ground_z", v.finite_float("workspace.ground_z", self.ground_z))
+        v.positive_float("workspace.max_speed", self.max_speed, allow_inf=True)
+        object.__setattr__(self, "half_spaces", tuple(self.half_spaces))
+        object.__setattr__(self, "spheres", tuple(self.spheres))
+        for h in self.half_spaces:
+            if not isinstance(h, HalfSpace):
+                raise ConfigError("workspace.half_spaces", f"expected avp.HalfSpace items, got {type(h).__name__}")
+        for sph in self.spheres:
+            if not isinstance(sph, Sphere):
+                raise ConfigError("workspace.spheres", f"expected avp.Sphere items, got {type(sph).__name__}")
+        for name, lo in (("samples_per_segment", 2), ("refinement_rounds", 0)):
+            val = getattr(self, name)
+            if isinstance(val, bool) or not isinstance(val, (int, np.integer)) or val < lo:
+                raise ConfigError(f"workspace.{name}", f"must be an integer >= {lo}, got {val!r}")
+        if not (math.isfinite(self.refinement_margin) and self.refinement_margin >= 0.0):
+            raise ConfigError("workspace.refinement_margin", "must be finite and >= 0")
+
+    @property
+    def active(self) -> bool:
+        """Any limit to keep."""
+        return (self.perch_clearance or self.ground_z is not None or math.isfinite(self.max_speed)
+                or bool(self.half_spaces) or bool(self.spheres))
+
+
+@dataclass(frozen=True)
 class PlannerConfig:
     """Everything one plan needs besides the start state and the target.
 
@@ -218,6 +331,12 @@ class PlannerConfig:
         Highest derivative continuous at interior knots (4 = snap).
     alpha:
         Mass-normalised thrust at contact (m/s^2) in (12): ``a(t_f) = alpha s3 - g e3``.
+        ``None`` (default): :data:`ALPHA_NOMINAL` on steep pads, raised to ``g cos(incline)`` on
+        flatter ones (:meth:`contact_alpha`), so the acceleration along the normal at contact,
+        ``alpha - g cos(incline)``, is never negative. With a smaller thrust a vehicle that
+        arrives slowly (0.3 m/s) must have come from behind the pad: on a floor, alpha = 4 puts
+        the path 2 cm below the floor 0.15 s before contact, and no trajectory meets the band
+        (14) with the perch-plane clearance.
     alpha_range:
         If given, ``(lo, hi)``: the contact thrust is a decision variable in that range (the
         terminal acceleration is only required to be along ``s3``), as seed 004 does.
@@ -237,6 +356,9 @@ class PlannerConfig:
         :class:`~avp.camera.FovConfig`: FoV rows (7)-(9), SQP steps and the fallback (16).
     bounds:
         :class:`BoundsPolicy`: certification of the limits, time search, relaxations.
+    workspace:
+        :class:`Workspace`: perch-plane clearance, ground, speed, half-spaces and spheres,
+        certified and never relaxed.
     """
 
     n_segments: int = 3
@@ -244,7 +366,7 @@ class PlannerConfig:
     position_cost_order: int = 4
     yaw_cost_order: int = 3
     continuity_order: int = 4
-    alpha: float = 4.0
+    alpha: float | None = None
     alpha_range: tuple[float, float] | None = None
     q: float = 0.1
     t_k: float = 0.15
@@ -263,6 +385,7 @@ class PlannerConfig:
     solver_options: tuple[tuple[str, Any], ...] = ()
     fov: FovConfig = field(default_factory=FovConfig)
     bounds: BoundsPolicy = field(default_factory=BoundsPolicy)
+    workspace: Workspace = field(default_factory=Workspace)
 
     def __post_init__(self) -> None:
         for name, lo in (("n_segments", 1), ("degree", 1), ("position_cost_order", 1),
@@ -278,7 +401,8 @@ class PlannerConfig:
             raise ConfigError("config.degree", "must be at least the cost orders")
         if self.degree < 2 * self.position_cost_order - 1:
             raise ConfigError("config.degree", f"must be >= {2 * self.position_cost_order - 1} for a cost of order {self.position_cost_order}")
-        v.positive_float("config.alpha", self.alpha)
+        if self.alpha is not None:
+            object.__setattr__(self, "alpha", v.positive_float("config.alpha", self.alpha))
         if not (math.isfinite(self.q) and self.q >= 0):
             raise ConfigError("config.q", f"must be finite and >= 0, got {self.q}")
         v.positive_float("config.t_k", self.t_k)
@@ -300,15 +424,36 @@ class PlannerConfig:
             if not (math.isfinite(a_lo) and math.isfinite(a_hi) and 0.0 < a_lo <= a_hi):
                 raise ConfigError("config.alpha_range", f"must be (lo, hi) with 0 < lo <= hi, got {self.alpha_range}")
             object.__setattr__(self, "alpha_range", (a_lo, a_hi))
+        if not isinstance(self.workspace, Workspace):
+            raise ConfigError("config.workspace", f"must be an avp.Workspace, got {self.workspace!r}")
         if not isinstance(self.bounds, BoundsPolicy):
             raise ConfigError("config.bounds", f"must be a BoundsPolicy, got {self.bounds!r}")
-        if not self.limits.accel_min < self.alpha < self.limits.accel_max:
+        if self.alpha is not None and not self.limits.accel_min < self.alpha < self.limits.accel_max:
             raise ConfigError(
                 "config.alpha",
                 f"contact thrust {self.alpha} m/s^2 must lie strictly inside the thrust limits "
                 f"({self.limits.accel_min:.2f}, {self.limits.accel_max:.2f}) m/s^2 (limits / mass): "
                 "the bound certificate would fail at contact; change alpha or the limits",
             )
+
+    def contact_alpha(self, incline: float) -> float:
+        """The contact thrust ``alpha`` (m/s^2) used for a pad of this ``incline`` (rad): the
+        configured value, or with ``alpha=None`` ``max(ALPHA_NOMINAL, g cos(incline))`` kept
+        strictly inside the thrust limits (``ConfigError`` when the limits leave no room)."""
+        if self.alpha is not None:
+            return float(self.alpha)
+        lo, hi = self.limits.accel_min, self.limits.accel_max
+        want = max(ALPHA_NOMINAL, self.g * math.cos(incline))
+        margin = 0.02 * (hi - lo)
+        alpha = min(max(want, lo + margin), hi - margin)
+        if alpha < want - 1e-9:
+            raise ConfigError(
+                "limits.thrust_max",
+                f"{hi:.2f} m/s^2 (thrust_max / mass) leaves no contact thrust of at least "
+                f"g cos(incline) = {want:.2f} m/s^2 for a {math.degrees(incline):.1f} deg pad; raise "
+                "the thrust limit or set config.alpha explicitly",
+            )
+        return alpha
 
     @property
     def band_samples(self) -> int:

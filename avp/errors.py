@@ -18,7 +18,9 @@ __all__ = [
     "ConfigError",
     "InfeasibleError",
     "PlanningError",
+    "RelaxedPlanError",
     "SolverError",
+    "WorkspaceNotCertifiedError",
 ]
 
 
@@ -58,3 +60,13 @@ class SolverError(PlanningError):
 
 class BoundsNotCertifiedError(PlanningError):
     """Actuator bounds could not be certified within the allowed duration changes."""
+
+
+class WorkspaceNotCertifiedError(PlanningError):
+    """No trajectory keeps the workspace limits (perch-plane clearance, ground, speed,
+    half-spaces, spheres) certified; ``result.safety`` and ``result.log`` say which."""
+
+
+class RelaxedPlanError(PlanningError):
+    """A certified trajectory exists only with soft constraints relaxed (``result.relaxations``);
+    :func:`avp.plan` returns it only with ``allow_relaxed=True``."""

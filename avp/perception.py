@@ -33,7 +33,7 @@ import numpy.typing as npt
 from .config import PlannerConfig
 from .errors import InfeasibleError, SolverError
 from .metrics import visibility
-from .qp.assemble import PerchingQp, build_perching_qp
+from .qp.assemble import ConstraintBlock, PerchingQp, build_perching_qp
 from .qp.fov import FovLinearisation, fov_blocks, fov_times
 from .solve import QpOutcome, solve_perching_qp
 from .trajectory import Trajectory
@@ -132,12 +132,14 @@ def solve_with_fov(
     log: list[str],
     previous: Trajectory | None = None,
     initvals: Array | None = None,
+    extra: tuple[ConstraintBlock, ...] = (),
 ) -> FovSolve:
     """Solve the perching QP at durations ``T`` with FoV rows (8)-(9) and the fallback (16).
 
     Appends one line per QP to ``log``. ``fov_dropped`` is ``True`` when the returned plan was
     solved without FoV rows because the rows were incompatible (16). ``initvals`` (normalised
-    coefficients) warm-start every solve of back-ends that take a guess.
+    coefficients) warm-start every solve of back-ends that take a guess. ``extra`` inequality
+    blocks (the workspace rows of :mod:`avp.safety`) are part of every QP, with or without FoV.
 
     Raises
     ------
@@ -146,6 +148,8 @@ def solve_with_fov(
     """
     t0 = time.perf_counter()
     base = build_perching_qp(state, target, cfg, T)
+    if extra:
+        base = base.with_inequalities(*extra)
     build = time.perf_counter() - t0
     solve = 0.0
     fov_cfg = _fov_config(cfg)

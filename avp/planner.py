@@ -18,13 +18,16 @@ from .errors import (
     ConfigError,
     InfeasibleError,
     PlanningError,
+    RelaxedPlanError,
     SolverError,
+    WorkspaceNotCertifiedError,
 )
-from .qp.assemble import build_perching_qp
+from .qp.assemble import ConstraintBlock, build_perching_qp
 from .qp.layout import DecisionLayout, layout_for
+from .safety import SafetyReport, certify_workspace, check_endpoints, refinement_blocks, workspace_blocks
 from .solve import WARM_START_SOLVERS, QpOutcome, solve_perching_qp
 from .timing import check_durations, initial_durations
-from .trajectory import Trajectory
+from .trajectory import Provenance, Trajectory
 from .types import PerchTarget, State
 
 __all__ = ["PlanResult", "PlanStatus", "PlanTimings", "plan", "plan_detailed"]
@@ -42,13 +45,16 @@ class PlanStatus(Enum):
 
     SOLVED = "solved: every constraint met"
     SOLVED_WITHOUT_FOV = "solved after dropping the field-of-view rows (16)"
+    SOLVED_RELAXED = "solved with soft constraints relaxed (see relaxations)"
     INFEASIBLE = "infeasible: the perching constraints admit no trajectory"
     SOLVER_FAILED = "solver failed: no usable solution from the QP back-end"
     BOUNDS_NOT_CERTIFIED = "actuator bounds not certified within the allowed time changes"
+    WORKSPACE_NOT_CERTIFIED = "no trajectory keeps the workspace limits certified (see safety)"
 
     @property
     def has_trajectory(self) -> bool:
-        return self in (PlanStatus.SOLVED, PlanStatus.SOLVED_WITHOUT_FOV)
+        """A certified trajectory was returned (possibly relaxed: check ``relaxations``)."""
+        return self in (PlanStatus.SOLVED, PlanStatus.SOLVED_WITHOUT_FOV, PlanStatus.SOLVED_RELAXED)
 
 
 @dataclass(frozen=True)
@@ -86,7 +92,11 @@ class PlanResult:
     bounds:
         The :class:`~avp.bounds.BoundReport` of the returned (or last) trajectory.
     relaxations:
-        What was relaxed to obtain certified bounds (:class:`~avp.config.Relaxation`).
+        What was relaxed to obtain certified bounds (:class:`~avp.config.Relaxation`); non-empty
+        exactly when the status is ``SOLVED_RELAXED``.
+    safety:
+        The :class:`~avp.safety.SafetyReport` (workspace certificates) of the returned (or last)
+        trajectory; ``None`` when no workspace limit is active or nothing was solved.
     """
 
     status: PlanStatus
@@ -99,6 +109,7 @@ class PlanResult:
     duration_scale_steps: int = 0
     bounds: BoundReport | None = None
     relaxations: tuple[Relaxation, ...] = ()
+    safety: SafetyReport | None = None
 
     @property
     def ok(self) -> bool:
@@ -121,18 +132,59 @@ def _check_inputs(state: Any, target: Any, config: Any) -> PlannerConfig:
             f"is {distance:.3f} m from a start state at rest (config.min_distance = "
             f"{config.min_distance} m); a perch needs a target away from the vehicle",
         )
+    config.contact_alpha(target.incline)  # raises ConfigError when the limits leave no room
+    check_endpoints(state, target, config)
     return config
 
 
 @dataclass
 class _Attempt:
-    """One QP solve at fixed durations (internal)."""
+    """One QP solve at fixed durations, with its workspace refinements (internal)."""
 
     outcome: QpOutcome | None
     trajectory: Trajectory | None
     fov_dropped: bool
     build: float
     solve: float
+    certify: float = 0.0
+    safety: SafetyReport | None = None
+
+    @property
+    def safe(self) -> bool:
+        return self.safety is None or self.safety.certified
+
+
+def _solve_once(
+    state: State,
+    target: PerchTarget,
+    cfg: PlannerConfig,
+    T: Array,
+    log: list[str],
+    previous: Trajectory | None,
+    initvals: Array | None,
+    extra: tuple[ConstraintBlock, ...],
+) -> _Attempt:
+    """Build and solve the perching QP for durations ``T`` with the ``extra`` rows.
+
+    Field-of-view rows (8)-(9) and the fallback (16) plug in here: see :mod:`avp.perception`.
+    """
+    if cfg.fov.enabled:  # FoV rows (8)-(9), SQP step, fallback (16): avp.perception
+        from .perception import solve_with_fov
+        r = solve_with_fov(state, target, cfg, T, log, previous, initvals, extra)
+        return _Attempt(r.outcome, r.trajectory, r.fov_dropped, r.build, r.solve)
+    t0 = time.perf_counter()
+    qp = build_perching_qp(state, target, cfg, T)
+    if extra:
+        qp = qp.with_inequalities(*extra)
+    build = time.perf_counter() - t0
+    try:
+        outcome = solve_perching_qp(qp, cfg, initvals)
+    except InfeasibleError as exc:
+        log.append(str(exc))
+        return _Attempt(None, None, False, build, 0.0)
+    log.append(f"QP {cfg.solver}: {outcome.status.value} (max violation {outcome.max_violation:.1e})")
+    traj = qp.trajectory(outcome.c_hat, cfg.g) if outcome.ok and outcome.c_hat is not None else None
+    return _Attempt(outcome, traj, False, build + outcome.build_time, outcome.solve_time)
 
 
 def _solve_at(
@@ -144,25 +196,37 @@ def _solve_at(
     previous: Trajectory | None = None,
     initvals: Array | None = None,
 ) -> _Attempt:
-    """Build and solve the perching QP for durations ``T``.
-
-    Field-of-view rows (8)-(9) and the fallback (16) plug in here: see :mod:`avp.perception`.
-    """
-    if cfg.fov.enabled:  # FoV rows (8)-(9), SQP step, fallback (16): avp.perception
-        from .perception import solve_with_fov
-        r = solve_with_fov(state, target, cfg, T, log, previous, initvals)
-        return _Attempt(r.outcome, r.trajectory, r.fov_dropped, r.build, r.solve)
-    t0 = time.perf_counter()
-    qp = build_perching_qp(state, target, cfg, T)
-    build = time.perf_counter() - t0
-    try:
-        outcome = solve_perching_qp(qp, cfg, initvals)
-    except InfeasibleError as exc:
-        log.append(str(exc))
-        return _Attempt(None, None, False, build, 0.0)
-    log.append(f"QP {cfg.solver}: {outcome.status.value} (max violation {outcome.max_violation:.1e})")
-    traj = qp.trajectory(outcome.c_hat, cfg.g) if outcome.ok and outcome.c_hat is not None else None
-    return _Attempt(outcome, traj, False, build + outcome.build_time, outcome.solve_time)
+    """Solve at durations ``T`` with the workspace rows, certify the workspace limits, and
+    re-solve with refined rows around proven violations (``workspace.refinement_rounds``)."""
+    ws = cfg.workspace
+    if not ws.active:
+        return _solve_once(state, target, cfg, T, log, previous, initvals, ())
+    layout = layout_for(cfg.n_segments, cfg.degree)
+    knots_rel = np.concatenate([[0.0], np.cumsum(T)])
+    extra = workspace_blocks(layout, knots_rel, state, target, cfg)
+    build = solve = certify = 0.0
+    for round_index in range(ws.refinement_rounds + 1):
+        attempt = _solve_once(state, target, cfg, T, log, previous, initvals, extra)
+        build += attempt.build
+        solve += attempt.solve
+        attempt.build, attempt.solve = build, solve
+        if attempt.trajectory is None:
+            attempt.certify = certify
+            return attempt
+        t_cert = time.perf_counter()
+        report = certify_workspace(attempt.trajectory, target, ws)
+        certify += time.perf_counter() - t_cert
+        attempt.certify, attempt.safety = certify, report
+        if report.certified:
+            log.append("workspace certified (" + ", ".join(c.region.name for c in report.checks) + ")")
+            return attempt
+        log.append("workspace: " + "; ".join(str(c) for c in report.checks if not c.certified))
+        if round_index == ws.refinement_rounds:
+            return attempt
+        tb = time.perf_counter()
+        extra = extra + refinement_blocks(layout, knots_rel, attempt.trajectory, report, round_index + 1, cfg)
+        build += time.perf_counter() - tb
+    raise AssertionError("unreachable")  # pragma: no cover
 
 
 def _certify(traj: Trajectory, cfg: PlannerConfig) -> BoundReport:
@@ -176,14 +240,15 @@ def _certify(traj: Trajectory, cfg: PlannerConfig) -> BoundReport:
     )
 
 
-def _relax(cfg: PlannerConfig, relaxation: Relaxation) -> PlannerConfig:
+def _relax(cfg: PlannerConfig, relaxation: Relaxation, target: PerchTarget) -> PlannerConfig:
     """``cfg`` with one more :class:`Relaxation` applied."""
     if relaxation is Relaxation.ALPHA_RANGE:
+        alpha = cfg.contact_alpha(target.incline)
         # Around the nominal alpha (min-snap otherwise drives it to an extreme) and strictly
         # inside the thrust limits (a touching bound counts as violated).
         lo, hi = cfg.limits.accel_min, cfg.limits.accel_max
         margin = 0.05 * (hi - lo)
-        return replace(cfg, alpha_range=(max(lo + margin, 0.5 * cfg.alpha), min(hi - margin, 2.0 * cfg.alpha)))
+        return replace(cfg, alpha_range=(max(lo + margin, 0.5 * alpha), min(hi - margin, 2.0 * alpha)))
     if relaxation is Relaxation.FREE_SLIDE:
         return replace(cfg, contact_velocity=replace(cfg.contact_velocity, slope=None))
     if relaxation is Relaxation.CONE_BAND:
@@ -241,17 +306,31 @@ def plan_detailed(
     attempts = 0
     relaxed: list[Relaxation] = []
     last: _Attempt | None = None
+    unsafe: _Attempt | None = None  # latest attempt whose bounds held but whose workspace did not
     report: BoundReport | None = None
 
-    def timings() -> PlanTimings:
-        return PlanTimings(build, solve, certify, time.perf_counter() - t_start)
-
     def finish(status: PlanStatus, attempt: _Attempt | None, T: Array) -> PlanResult:
+        traj = attempt.trajectory if attempt else None
+        if traj is not None:
+            traj.provenance = Provenance(
+                status=status.value,
+                relaxations=tuple(r.name for r in relaxed) if status.has_trajectory else (),
+                bounds_certified=bool(report is not None and report.certified and status.has_trajectory),
+                workspace_certified=bool(attempt is not None and attempt.safe and attempt.safety is not None),
+                fov_dropped=bool(attempt and attempt.fov_dropped),
+            )
         return PlanResult(
-            status, attempt.trajectory if attempt else None, T, attempt.outcome if attempt else None,
-            tuple(log), timings(), bool(attempt and attempt.fov_dropped), max(attempts - 1, 0),
-            report, tuple(relaxed),
+            status, traj, T, attempt.outcome if attempt else None,
+            tuple(log), PlanTimings(build, solve, certify, time.perf_counter() - t_start),
+            bool(attempt and attempt.fov_dropped), max(attempts - 1, 0),
+            report, tuple(relaxed) if status.has_trajectory else (),
+            attempt.safety if attempt else None,
         )
+
+    def solved(attempt: _Attempt) -> PlanStatus:
+        if relaxed:
+            return PlanStatus.SOLVED_RELAXED
+        return PlanStatus.SOLVED_WITHOUT_FOV if attempt.fov_dropped else PlanStatus.SOLVED
 
     schedule = (1.0,) + (cfg.bounds.schedule() if cfg.bounds.certify else ())
     stages: list[Relaxation | None] = [None]
@@ -260,9 +339,9 @@ def plan_detailed(
     stage_cfg = cfg
     for stage in stages:
         if stage is not None:
-            stage_cfg = _relax(stage_cfg, stage)
+            stage_cfg = _relax(stage_cfg, stage, target)
             relaxed.append(stage)
-            log.append(f"relaxing: {stage.value}")
+            log.append(f"relaxing: {stage.value} (the workspace limits stay)")
         for factor in schedule:
             T = T0 * factor
             if factor != 1.0 or stage is not None:
@@ -275,6 +354,7 @@ def plan_detailed(
             attempts += 1
             build += attempt.build
             solve += attempt.solve
+            certify += attempt.certify
             if attempt.trajectory is None:
                 if last is None or last.trajectory is None:
                     last = attempt
@@ -284,21 +364,31 @@ def plan_detailed(
                 continue
             last = attempt
             if not cfg.bounds.certify:
-                return finish(PlanStatus.SOLVED_WITHOUT_FOV if attempt.fov_dropped else PlanStatus.SOLVED, attempt, T)
+                if not attempt.safe:
+                    return finish(PlanStatus.WORKSPACE_NOT_CERTIFIED, attempt, T)
+                return finish(solved(attempt), attempt, T)
             t_cert = time.perf_counter()
             report = _certify(attempt.trajectory, cfg)
             certify += time.perf_counter() - t_cert
-            if report.certified:
+            if report.certified and attempt.safe:
                 log.append("bounds certified (Algorithm 1, exact)")
-                status = PlanStatus.SOLVED_WITHOUT_FOV if attempt.fov_dropped else PlanStatus.SOLVED
-                return finish(status, attempt, T)
+                return finish(solved(attempt), attempt, T)
+            if report.certified:
+                unsafe = attempt
+                log.append("bounds certified, workspace not: trying other durations")
+                continue
             log.append("bounds: " + "; ".join(str(x) for x in report.violations[:3])
                        + ("; undecided: " + str(report.unknown) if report.unknown else ""))
-    T_last = last.trajectory.durations if last is not None and last.trajectory is not None else T0
     if last is None or last.trajectory is None:
         return finish(PlanStatus.INFEASIBLE if last is None or _infeasible(last) else PlanStatus.SOLVER_FAILED, last, T0)
+    if unsafe is not None and unsafe.trajectory is not None:
+        report = _certify(unsafe.trajectory, cfg)
+        failed = ", ".join(unsafe.safety.failed) if unsafe.safety is not None else "workspace"
+        log.append(f"no duration in the search and no relaxation kept the workspace certified "
+                   f"({attempts} solves): {failed} could not be met")
+        return finish(PlanStatus.WORKSPACE_NOT_CERTIFIED, unsafe, unsafe.trajectory.durations)
     log.append(f"no duration in the search and no relaxation gave certified bounds ({attempts} solves)")
-    return finish(PlanStatus.BOUNDS_NOT_CERTIFIED, last, T_last)
+    return finish(PlanStatus.BOUNDS_NOT_CERTIFIED, last, last.trajectory.durations)
 
 
 def _infeasible(attempt: _Attempt) -> bool:
@@ -312,18 +402,31 @@ def plan(
     config: PlannerConfig | None = None,
     *,
     durations: Any = None,
+    allow_relaxed: bool = False,
 ) -> Trajectory:
     """Plan a perch; return the :class:`Trajectory` or raise a :class:`PlanningError`.
+
+    The trajectory's bounds and workspace limits are certified. A plan that needed relaxed soft
+    constraints (``PlanStatus.SOLVED_RELAXED``) is returned only with ``allow_relaxed=True``;
+    it says so in ``traj.provenance``.
 
     Raises
     ------
     ConfigError
         Bad input (names the field).
-    InfeasibleError, SolverError, BoundsNotCertifiedError
+    InfeasibleError, SolverError, BoundsNotCertifiedError, WorkspaceNotCertifiedError
         No trajectory; ``exc.result`` is the :class:`PlanResult`.
+    RelaxedPlanError
+        Only a relaxed plan exists and ``allow_relaxed`` is false (``exc.result.trajectory``
+        holds it).
     """
     result = plan_detailed(state, target, config, durations=durations)
     if result.ok and result.trajectory is not None:
+        if result.status is PlanStatus.SOLVED_RELAXED and not allow_relaxed:
+            raise RelaxedPlanError(
+                "a certified plan exists only with relaxed soft constraints ("
+                + ", ".join(r.name for r in result.relaxations)
+                + "); pass allow_relaxed=True to accept it, or change the request", result)
         return result.trajectory
     message = f"no perching trajectory: {result.status.value}; " + "; ".join(result.log[-2:])
     if result.status is PlanStatus.INFEASIBLE:
@@ -332,4 +435,6 @@ def plan(
         raise SolverError(message, result)
     if result.status is PlanStatus.BOUNDS_NOT_CERTIFIED:
         raise BoundsNotCertifiedError(message, result)
+    if result.status is PlanStatus.WORKSPACE_NOT_CERTIFIED:
+        raise WorkspaceNotCertifiedError(message, result)
     raise PlanningError(message, result)

@@ -16,7 +16,7 @@ import numpy.typing as npt
 from . import _avp_rust, frames
 from .errors import ConfigError
 
-__all__ = ["Derivative", "FlatOutput", "RotorpyTrajectory", "Trajectory"]
+__all__ = ["Derivative", "FlatOutput", "Provenance", "RotorpyTrajectory", "Trajectory"]
 
 Array = npt.NDArray[np.float64]
 
@@ -49,6 +49,41 @@ class FlatOutput:
     yaw_acceleration: Array
 
 
+@dataclass(frozen=True)
+class Provenance:
+    """Where a planned trajectory came from: it travels with the :class:`Trajectory`.
+
+    Attributes
+    ----------
+    status:
+        The planner's status value (``PlanStatus.value``), e.g. ``"solved: every constraint met"``.
+    relaxations:
+        Names of the soft constraints relaxed to obtain it (empty: none).
+    bounds_certified, workspace_certified:
+        The actuator bounds / workspace limits were proven over the whole trajectory.
+    fov_dropped:
+        The field-of-view rows were dropped (16).
+    """
+
+    status: str
+    relaxations: tuple[str, ...] = ()
+    bounds_certified: bool = False
+    workspace_certified: bool = False
+    fov_dropped: bool = False
+
+    @property
+    def relaxed(self) -> bool:
+        return bool(self.relaxations)
+
+    def __str__(self) -> str:
+        certs = []
+        certs.append("bounds certified" if self.bounds_certified else "bounds NOT certified")
+        certs.append("workspace certified" if self.workspace_certified else "workspace NOT certified")
+        relax = f", RELAXED: {', '.join(self.relaxations)}" if self.relaxations else ""
+        fov = ", FoV rows dropped" if self.fov_dropped else ""
+        return f"{self.status.split(':')[0]} ({'; '.join(certs)}{relax}{fov})"
+
+
 class Trajectory:
     """A spline of ``S`` segments over the knots ``t0 < t1 < ... < tS``.
 
@@ -78,6 +113,8 @@ class Trajectory:
         self._c = c
         self._k = k
         self.g = float(g)
+        self.provenance: Provenance | None = None
+        """Set by the planner: status, relaxations, certificates (``None`` for a bare spline)."""
 
     # -- structure -------------------------------------------------------------------------
     @property
@@ -116,7 +153,8 @@ class Trajectory:
         return int(self._c.shape[2] - 1)
 
     def __repr__(self) -> str:
-        return f"Trajectory(segments={self.n_segments}, degree={self.degree}, t=[{self.t0:.3f}, {self.tf:.3f}] s)"
+        origin = f", {self.provenance}" if self.provenance is not None else ""
+        return f"Trajectory(segments={self.n_segments}, degree={self.degree}, t=[{self.t0:.3f}, {self.tf:.3f}] s{origin})"
 
     # -- evaluation ------------------------------------------------------------------------
     def _times(self, t: Any) -> tuple[Array, tuple[int, ...]]:

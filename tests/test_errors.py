@@ -143,9 +143,19 @@ def test_relaxations_are_applied_in_order_and_reported() -> None:
     """The same problem becomes feasible once the band is widened (alpha range) or dropped;
     the result lists the relaxations, a prefix of the policy's order, and the log says why."""
     sc = standard(90, 3.5)
-    result = avp.plan_detailed(sc.state, sc.target, _pinned_band_config())
-    assert result.status is avp.PlanStatus.SOLVED
+    config = _pinned_band_config()
+    result = avp.plan_detailed(sc.state, sc.target, config)
+    assert result.status is avp.PlanStatus.SOLVED_RELAXED and result.ok
     order = avp.BoundsPolicy().relaxations
     assert 1 <= len(result.relaxations) and result.relaxations == order[: len(result.relaxations)]
     for relaxation in result.relaxations:
-        assert f"relaxing: {relaxation.value}" in result.log
+        assert f"relaxing: {relaxation.value} (the workspace limits stay)" in result.log
+    # the trajectory remembers it, plan() refuses it unless asked
+    prov = result.trajectory.provenance
+    assert prov is not None and prov.relaxations == tuple(r.name for r in result.relaxations)
+    assert "RELAXED" in repr(result.trajectory)
+    with pytest.raises(avp.RelaxedPlanError) as exc:
+        avp.plan(sc.state, sc.target, config)
+    assert exc.value.result.status is avp.PlanStatus.SOLVED_RELAXED
+    traj = avp.plan(sc.state, sc.target, config, allow_relaxed=True)
+    assert traj.provenance is not None and traj.provenance.relaxed

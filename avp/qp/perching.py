@@ -44,12 +44,13 @@ def terminal_rows(
     P = vector_rows(layout, knots_rel, 0, tf)[0]
     V = vector_rows(layout, knots_rel, 1, tf)[0]
     A = vector_rows(layout, knots_rel, 2, tf)[0]
+    p_contact = target.point + config.workspace.body_offset * target.s3  # centre of mass at contact
     for axis in range(3):
         rows.append(P[axis])
-        rhs.append(target.point[axis])
+        rhs.append(p_contact[axis])
         names.append(f"terminal position {'xyz'[axis]}")
     if config.alpha_range is None:
-        c0 = terminal_acceleration(target, config.alpha, config.g)
+        c0 = terminal_acceleration(target, config.contact_alpha(target.incline), config.g)
         for axis in range(3):
             rows.append(A[axis] * t_scale**2)
             rhs.append(c0[axis] * t_scale**2)
@@ -114,7 +115,8 @@ def pre_impact_rows(
     if times.size == 0:
         return np.zeros((0, n)), np.zeros(0), np.zeros(0)
     A = vector_rows(layout, knots_rel, 2, times)  # (m, 3, n)
-    alpha_lo, alpha_hi = config.alpha_range if config.alpha_range is not None else (config.alpha, config.alpha)
+    alpha = config.contact_alpha(target.incline)
+    alpha_lo, alpha_hi = config.alpha_range if config.alpha_range is not None else (alpha, alpha)
     if config.pre_impact is PreImpactMode.PAPER:
         c_lo = terminal_acceleration(target, alpha_lo, config.g)
         c_hi = (1.0 + config.q) * terminal_acceleration(target, alpha_hi, config.g)

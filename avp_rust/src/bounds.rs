@@ -166,7 +166,7 @@ impl Scalar for BigRational {
     }
 }
 
-fn padd<S: Scalar>(a: &[S], b: &[S]) -> Vec<S> {
+pub(crate) fn padd<S: Scalar>(a: &[S], b: &[S]) -> Vec<S> {
     let n = a.len().max(b.len());
     (0..n)
         .map(|k| match (a.get(k), b.get(k)) {
@@ -177,7 +177,7 @@ fn padd<S: Scalar>(a: &[S], b: &[S]) -> Vec<S> {
         .collect()
 }
 
-fn pmul<S: Scalar>(a: &[S], b: &[S]) -> Vec<S> {
+pub(crate) fn pmul<S: Scalar>(a: &[S], b: &[S]) -> Vec<S> {
     if a.is_empty() || b.is_empty() {
         return vec![S::zero()];
     }
@@ -190,33 +190,33 @@ fn pmul<S: Scalar>(a: &[S], b: &[S]) -> Vec<S> {
     out
 }
 
-fn pscale<S: Scalar>(a: &[S], s: &S) -> Vec<S> {
+pub(crate) fn pscale<S: Scalar>(a: &[S], s: &S) -> Vec<S> {
     a.iter().map(|x| x.mul(s)).collect()
 }
 
 /// `c - p` for a constant `c`.
-fn const_minus<S: Scalar>(c: &S, p: &[S]) -> Vec<S> {
+pub(crate) fn const_minus<S: Scalar>(c: &S, p: &[S]) -> Vec<S> {
     let mut out: Vec<S> = p.iter().map(|x| S::zero().sub(x)).collect();
     out[0] = c.add(&out[0]);
     out
 }
 
 /// `p - c` for a constant `c`.
-fn minus_const<S: Scalar>(p: &[S], c: &S) -> Vec<S> {
+pub(crate) fn minus_const<S: Scalar>(p: &[S], c: &S) -> Vec<S> {
     let mut out = p.to_vec();
     out[0] = out[0].sub(c);
     out
 }
 
 /// Squared norm `sum_i v_i²` of a vector of polynomials.
-fn sq_norm<S: Scalar>(v: &[Vec<S>]) -> Vec<S> {
+pub(crate) fn sq_norm<S: Scalar>(v: &[Vec<S>]) -> Vec<S> {
     v.iter()
         .fold(vec![S::zero()], |acc, p| padd(&acc, &pmul(p, p)))
 }
 
 /// Coefficients in `u` of the `order`-th time derivative of `sum c_k tau^k` at `tau = T u`:
 /// `d^r p/dtau^r (T u) = sum_m (m+r)!/m! c_{m+r} T^m u^m` (the physical derivative, no `1/T`).
-fn scaled_derivative<S: Scalar>(c: &[f64], order: usize, h: &S) -> Vec<S> {
+pub(crate) fn scaled_derivative<S: Scalar>(c: &[f64], order: usize, h: &S) -> Vec<S> {
     if order >= c.len() {
         return vec![S::zero()];
     }

@@ -1,7 +1,8 @@
 //! Numeric kernels of `avp` (active visual perching).
 //!
 //! Pure functions on plain slices: spline evaluation ([`spline`]), polynomial algebra ([`poly`]),
-//! Sturm sequences and bound certificates (`sturm`, `certify`, `exact`), and the anticipation
+//! Sturm sequences and bound certificates (`sturm`, `certify`, `exact`), workspace
+//! certificates (`regions`), and the anticipation
 //! step (6) of the replanner (`anticipation`). The PyO3 wrappers live in `python` behind the
 //! `python` feature, so `cargo test` runs without linking libpython.
 //!
@@ -17,6 +18,7 @@ pub mod certify;
 pub mod error;
 pub mod exact;
 pub mod poly;
+pub mod regions;
 pub mod spline;
 pub mod sturm;
 
@@ -24,5 +26,7 @@ pub mod sturm;
 mod python;
 #[cfg(feature = "python")]
 mod python_bounds;
+#[cfg(feature = "python")]
+mod python_regions;
 
 pub use error::{Error, Result};

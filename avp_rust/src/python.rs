@@ -100,5 +100,6 @@ pub fn _avp_rust(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(eval_spline_py, m)?)?;
     m.add_function(wrap_pyfunction!(anticipate_py, m)?)?;
     crate::python_bounds::register(m)?;
+    crate::python_regions::register(m)?;
     Ok(())
 }
