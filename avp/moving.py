@@ -45,6 +45,7 @@ from .planner import PlanStatus
 from .platform import MovingTarget
 from .qp.moving import MovingQpBuilder, TerminalYaw, contact_point, objective
 from .replan import ReplanConfig, Replanner, ReplanStep
+from .safety import RESIDUAL_TOL, SafetyReport, certify_workspace
 from .solve import solve_perching_qp
 from .trajectory import Trajectory
 from .types import PerchTarget, State
@@ -55,8 +56,6 @@ __all__ = [
 ]
 
 Array = npt.NDArray[np.float64]
-
-_CLEARANCE_FAILED = getattr(PlanStatus, "WORKSPACE_NOT_CERTIFIED", PlanStatus.BOUNDS_NOT_CERTIFIED)
 
 
 @dataclass(frozen=True)
@@ -76,8 +75,6 @@ class MovingConfig:
         ``p'''(t_f) = 0`` (their Sec. V-D): no body rate at contact.
     yaw:
         :class:`~avp.qp.moving.TerminalYaw`.
-    body_offset:
-        ``l`` (m): the CoM at contact is ``rho + l s3`` (their (43), landing gear).
     contact_thrust_margin:
         The contact thrust ``alpha`` is free in the thrust limits shrunk by this fraction of their
         span at each end (their ``tau_e``, (50)); ``None`` keeps ``config.alpha_range`` /
@@ -90,10 +87,10 @@ class MovingConfig:
         QP solves per plan at most.
     max_duration:
         Longest duration tried (s).
-    certify_clearance:
-        Certify the moving-plane clearance (:mod:`avp.moving_clearance`) of the returned plan.
-    contact_tol:
-        Largest accepted penetration at contact (m) in the clearance certificate (rounding).
+
+    The landing-gear offset ``l`` (their (43): the CoM at contact is ``rho + l s3``) and the
+    clearance switch come from ``config.workspace`` (``body_offset``, ``perch_clearance``), as for
+    a static pad.
     """
 
     normal_speed: float = 0.3
@@ -101,18 +98,15 @@ class MovingConfig:
     slip_weight: float = 1000.0
     zero_jerk: bool = True
     yaw: TerminalYaw = TerminalYaw.HEADING
-    body_offset: float = 0.0
     contact_thrust_margin: float | None = 0.05
     time_weight: float = 1000.0
     growth: float = 1.25
     max_solves: int = 7
     max_duration: float = 12.0
-    certify_clearance: bool = True
-    contact_tol: float = 1e-9
 
     def __post_init__(self) -> None:
         v.positive_float("moving.normal_speed", self.normal_speed)
-        for name in ("slip_max", "slip_weight", "body_offset", "time_weight"):
+        for name in ("slip_max", "slip_weight", "time_weight"):
             val = v.finite_float(f"moving.{name}", getattr(self, name))
             if val < 0.0:
                 raise ConfigError(f"moving.{name}", f"must be >= 0, got {val}")
@@ -126,7 +120,6 @@ class MovingConfig:
         if isinstance(self.max_solves, bool) or not isinstance(self.max_solves, int) or self.max_solves < 1:
             raise ConfigError("moving.max_solves", f"must be an integer >= 1, got {self.max_solves!r}")
         v.positive_float("moving.max_duration", self.max_duration)
-        v.positive_float("moving.contact_tol", self.contact_tol)
         if not isinstance(self.yaw, TerminalYaw):
             raise ConfigError("moving.yaw", f"must be an avp.qp.moving.TerminalYaw, got {self.yaw!r}")
 
@@ -175,6 +168,7 @@ class MovingPlanResult:
     solve_time: float = 0.0
     total_time: float = 0.0
     contact: ContactErrors | None = field(default=None)
+    safety: SafetyReport | None = None
 
     @property
     def ok(self) -> bool:
@@ -190,15 +184,19 @@ class MovingPlanResult:
         return len(self.candidates)
 
 
-def contact_errors(traj: Trajectory, target: MovingTarget, moving: MovingConfig) -> ContactErrors:
-    """Contact state of ``traj`` against ``target`` predicted at ``traj.tf``."""
+def contact_errors(
+    traj: Trajectory, target: MovingTarget, moving: MovingConfig | None = None, body_offset: float = 0.0
+) -> ContactErrors:
+    """Contact state of ``traj`` against ``target`` predicted at ``traj.tf`` (``body_offset`` as
+    ``config.workspace.body_offset``)."""
+    moving = moving if moving is not None else MovingConfig()
     pad = target.at(traj.tf)
     p, vel, acc = (traj(traj.tf, order) for order in (0, 1, 2))
     f = acc + np.array([0.0, 0.0, traj.g])
     b3 = f / np.linalg.norm(f)
     rel = vel - pad.velocity
     return ContactErrors(
-        position=float(np.linalg.norm(p - contact_point(pad, moving.body_offset))),
+        position=float(np.linalg.norm(p - contact_point(pad, body_offset))),
         attitude=float(math.atan2(np.linalg.norm(np.cross(b3, pad.s3)), float(b3 @ pad.s3))),
         normal_velocity=float(rel @ pad.s3 + moving.normal_speed),
         slip=(float(rel @ pad.s1), float(rel @ pad.s2)),
@@ -228,7 +226,7 @@ def _initial_duration(state: State, target: MovingTarget, cfg: PlannerConfig, mo
     T = cfg.time_allocation.total(float(np.linalg.norm(target.point - state.position)), 0.0)
     for _ in range(3):
         pad = target.at(state.time + T)
-        gap = contact_point(pad, moving.body_offset) - (state.position + T * state.velocity)
+        gap = contact_point(pad, cfg.workspace.body_offset) - (state.position + T * state.velocity)
         T = cfg.time_allocation.total(float(np.linalg.norm(gap)), float(np.linalg.norm(state.velocity - pad.velocity)))
     return min(T, moving.max_duration)
 
@@ -243,6 +241,7 @@ class _Eval:
     score: float
     note: str
     clearance: ClearanceReport | None = None
+    safety: SafetyReport | None = None
 
     @property
     def failure(self) -> frozenset[str]:
@@ -292,7 +291,7 @@ def plan_moving_detailed(
     evals: list[_Eval] = []
     solve_time = 0.0
     builder = MovingQpBuilder(state, cfg, mcfg.normal_speed, mcfg.slip_max, mcfg.slip_weight, mcfg.zero_jerk,
-                              mcfg.yaw, mcfg.body_offset)
+                              mcfg.yaw, cfg.workspace.body_offset)
 
     def evaluate(T: float) -> _Eval:
         nonlocal solve_time
@@ -330,17 +329,18 @@ def plan_moving_detailed(
         run(T)
     else:
         _search(run, _initial_duration(state, target, cfg, mcfg), mcfg, log)
-    best = _pick(evals, target, mcfg, log)
+    best = _pick(evals, target, cfg, log)
     total = time.perf_counter() - t_start
     candidates = tuple(Candidate(e.T, e.score, e.objective, math.isfinite(e.score), e.note) for e in evals)
     if best is not None and best.traj is not None:
         return MovingPlanResult(
             PlanStatus.SOLVED, best.traj, best.pad, best.traj.durations, best.report, best.clearance,
-            best.score, candidates, tuple(log), solve_time, total, contact_errors(best.traj, target, mcfg),
+            best.score, candidates, tuple(log), solve_time, total,
+            contact_errors(best.traj, target, mcfg, cfg.workspace.body_offset), best.safety,
         )
     last = evals[-1]
-    if any(e.clearance is not None for e in evals):
-        status = _CLEARANCE_FAILED
+    if any(e.clearance is not None or e.safety is not None for e in evals):
+        status = PlanStatus.WORKSPACE_NOT_CERTIFIED
     elif all(e.traj is None for e in evals):
         status = PlanStatus.INFEASIBLE if any(e.note.startswith("infeasible") or "no solution" in e.note for e in evals) \
             else PlanStatus.SOLVER_FAILED
@@ -416,16 +416,26 @@ def _bisect(run: Any, lo: _Eval, hi: _Eval, budget: int) -> None:
             hi = e
 
 
-def _pick(evals: list[_Eval], target: MovingTarget, mcfg: MovingConfig, log: list[str]) -> _Eval | None:
-    """Best certified candidate that also passes the moving-plane clearance certificate."""
+def _pick(evals: list[_Eval], target: MovingTarget, cfg: PlannerConfig, log: list[str]) -> _Eval | None:
+    """Best certified candidate that also passes the moving-plane clearance certificate and the
+    static workspace regions (ground, speed, half-spaces, spheres: :func:`avp.safety.
+    certify_workspace` without the perch plane, which moves)."""
+    ws = cfg.workspace
+    static_ws = replace(ws, perch_clearance=False)
+    check_static = ws.ground_z is not None or math.isfinite(ws.max_speed) or bool(ws.half_spaces) or bool(ws.spheres)
     for e in sorted((e for e in evals if math.isfinite(e.score)), key=lambda e: e.score):
-        if not mcfg.certify_clearance:
-            return e
         assert e.traj is not None
-        e.clearance = certify_moving_clearance(e.traj, target, mcfg.body_offset, mcfg.contact_tol)
-        log.append(f"T = {e.T:.4f} s: {e.clearance.summary()}")
-        if e.clearance.certified:
-            return e
+        if ws.perch_clearance:
+            e.clearance = certify_moving_clearance(e.traj, target, ws.body_offset, RESIDUAL_TOL)
+            log.append(f"T = {e.T:.4f} s: {e.clearance.summary()}")
+            if not e.clearance.certified:
+                continue
+        if check_static:
+            e.safety = certify_workspace(e.traj, e.pad.static(), static_ws)
+            log.append(f"T = {e.T:.4f} s: workspace {'certified' if e.safety.certified else 'NOT certified'}")
+            if not e.safety.certified:
+                continue
+        return e
     return None
 
 

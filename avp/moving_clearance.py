@@ -49,6 +49,7 @@ import numpy.typing as npt
 
 from . import _avp_rust
 from .platform import MovingTarget
+from .safety import RESIDUAL_TOL
 from .trajectory import Trajectory
 
 __all__ = ["ClearanceReport", "certify_moving_clearance", "clearance"]
@@ -253,7 +254,7 @@ def clearance(traj: Trajectory, target: MovingTarget, times: Array, body_offset:
 
 
 def certify_moving_clearance(
-    traj: Trajectory, target: MovingTarget, body_offset: float = 0.0, contact_tol: float = 1e-9
+    traj: Trajectory, target: MovingTarget, body_offset: float = 0.0, contact_tol: float = RESIDUAL_TOL
 ) -> ClearanceReport:
     """Prove ``(p(t) - rho(t)) . s3(t) - l > 0`` on ``[t_0, t_f)`` (module docstring)."""
     knots = np.asarray(traj.knots, dtype=float)

@@ -166,8 +166,7 @@ def test_stationary_limit_equals_the_static_planner():
                             bounds=avp.BoundsPolicy(factors=(), relaxations=()))
     state = avp.State.hover([-3.0, 0.0, 1.0])
     static = avp.plan_detailed(state, pad, cfg, durations=[0.9, 0.9, 0.9])
-    mcfg = MovingConfig(slip_max=0.0, zero_jerk=False, yaw=TerminalYaw.PAD, contact_thrust_margin=None,
-                        certify_clearance=False)
+    mcfg = MovingConfig(slip_max=0.0, zero_jerk=False, yaw=TerminalYaw.PAD, contact_thrust_margin=None)
     moving = plan_moving_detailed(state, MovingTarget.from_pad(pad), cfg, mcfg, duration=2.7)
     assert static.ok and moving.ok
     t = np.linspace(0.0, 2.7, 41)

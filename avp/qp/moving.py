@@ -164,7 +164,7 @@ class MovingQpBuilder:
         b: list[float] = list(contact_point(pad, self.body_offset))  # (43)
         if cfg.alpha_range is None:
             R.extend(A_)
-            b.extend((cfg.alpha * s3 - np.array([0.0, 0.0, cfg.g])) * Ti**2)
+            b.extend((cfg.contact_alpha(pad.incline) * s3 - np.array([0.0, 0.0, cfg.g])) * Ti**2)
         else:  # (12) with alpha free: no s1, s2 component of a + g e3
             R.extend([s1 @ A_, s2 @ A_])
             b.extend([-cfg.g * s1[2] * Ti**2, -cfg.g * s2[2] * Ti**2])
