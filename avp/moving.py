@@ -87,6 +87,10 @@ class MovingConfig:
         QP solves per plan at most.
     max_duration:
         Longest duration tried (s).
+    retime:
+        With a fixed ``duration`` (replans): factors tried in order on it when the plan at the
+        given duration does not certify (a plan planned at the edge of the limits would
+        otherwise keep the stale plan); ``()`` keeps the duration strictly.
 
     The landing-gear offset ``l`` (their (43): the CoM at contact is ``rho + l s3``) and the
     clearance switch come from ``config.workspace`` (``body_offset``, ``perch_clearance``), as for
@@ -103,6 +107,7 @@ class MovingConfig:
     growth: float = 1.25
     max_solves: int = 7
     max_duration: float = 12.0
+    retime: tuple[float, ...] = (1.03, 0.97)
 
     def __post_init__(self) -> None:
         v.positive_float("moving.normal_speed", self.normal_speed)
@@ -120,6 +125,8 @@ class MovingConfig:
         if isinstance(self.max_solves, bool) or not isinstance(self.max_solves, int) or self.max_solves < 1:
             raise ConfigError("moving.max_solves", f"must be an integer >= 1, got {self.max_solves!r}")
         v.positive_float("moving.max_duration", self.max_duration)
+        if any(not (math.isfinite(f) and f > 0.0) for f in self.retime):
+            raise ConfigError("moving.retime", f"every factor must be finite and > 0, got {self.retime}")
         if not isinstance(self.yaw, TerminalYaw):
             raise ConfigError("moving.yaw", f"must be an avp.qp.moving.TerminalYaw, got {self.yaw!r}")
 
@@ -326,7 +333,9 @@ def plan_moving_detailed(
 
     if duration is not None:
         T = v.positive_float("duration", duration)
-        run(T)
+        for factor in (1.0, *mcfg.retime):  # a fixed arrival time, nudged only if uncertified
+            if math.isfinite(run(T * factor).score):
+                break
     else:
         _search(run, _initial_duration(state, target, cfg, mcfg), mcfg, log)
     best = _pick(evals, target, cfg, log)

@@ -6,9 +6,10 @@ from noisy odometry and noisy platform-state estimates while the SE(3) controlle
 committed plan at 500 Hz (:func:`~avp.sim.flight.fly`).
 
 Effects modelled: odometry noise (:class:`~avp.sim.odometry.OdometryNoise`, on the controller and
-the planner), white noise on every platform-state estimate (:class:`PlatformNoise`: position,
-velocity, heading, turn rate; a stand-in for the seed's GPS/vision EKF, not a camera model),
-actuator limits of :class:`~avp.sim.vehicle.VehicleParams`. Not modelled: the camera and its
+the planner), white noise on every 30 Hz platform-state measurement (:class:`PlatformNoise`:
+position, velocity, heading, turn rate) fused by a fixed-gain filter (:class:`PlatformFilter`; a
+stand-in for the seed's GPS/vision EKF, not a camera model), actuator limits of
+:class:`~avp.sim.vehicle.VehicleParams`. Not modelled: the camera and its
 field of view (the static simulator's :mod:`~avp.sim.camera`), platform accelerations the model
 does not predict, wind.
 
@@ -40,7 +41,7 @@ from .odometry import OdometryNoise, noisy_odometry
 from .run import _hold, _odometry_state
 from .vehicle import RigidBodyState, VehicleParams
 
-__all__ = ["MovingSimResult", "MovingSimScenario", "PlatformNoise", "noisy_platform", "simulate_moving"]
+__all__ = ["MovingSimResult", "MovingSimScenario", "PlatformFilter", "PlatformNoise", "noisy_platform", "simulate_moving"]
 
 
 @dataclass(frozen=True)
@@ -75,6 +76,33 @@ def noisy_platform(truth: MovingTarget, noise: PlatformNoise | None, rng: np.ran
     )
 
 
+class PlatformFilter:
+    """Fixed-gain (alpha) filter of the platform estimates, a stand-in for the seed's EKF: each
+    new measurement ``m`` at ``t`` moves the model's prediction of the fused state toward it,
+    ``x <- x_pred + gain (m - x_pred)`` for the position, heading (wrapped), speed and turn rate;
+    the pad frame turns with the heading correction. ``gain = 1`` passes measurements through."""
+
+    def __init__(self, gain: float) -> None:
+        if not (math.isfinite(gain) and 0.0 < gain <= 1.0):
+            raise ConfigError("filter_gain", f"must be in (0, 1], got {gain}")
+        self.gain = gain
+        self.fused: MovingTarget | None = None
+
+    def update(self, m: MovingTarget) -> MovingTarget:
+        if self.fused is None or self.gain == 1.0:
+            self.fused = m
+            return m
+        p = self.fused.at(m.time)
+        k = self.gain
+        dpsi = k * math.remainder(m.heading - p.heading, 2.0 * math.pi)
+        self.fused = MovingTarget(
+            point=p.point + k * (m.point - p.point), R_WS=rot_z(dpsi) @ p.R_WS, heading=p.heading + dpsi,
+            speed=p.speed + k * (m.speed - p.speed), turn_rate=p.turn_rate + k * (m.turn_rate - p.turn_rate),
+            vertical_speed=p.vertical_speed + k * (m.vertical_speed - p.vertical_speed), time=m.time, model=p.model,
+        )
+        return self.fused
+
+
 @dataclass(frozen=True, eq=False)
 class MovingSimScenario:
     """A platform and a vehicle tracking it.
@@ -95,6 +123,8 @@ class MovingSimScenario:
     criteria: SuccessCriteria = field(default_factory=SuccessCriteria)
     replan_rate_hz: float = 30.0
     timeout: float = 0.5
+    filter_gain: float = 0.2
+    """Gain of the :class:`PlatformFilter` on the 30 Hz platform estimates (1: raw estimates)."""
     idle_after_plan: bool = True
     """After the committed plan ends short of the pad: keep the attitude and cut the thrust to the
     vehicle's minimum (the static simulator's ``AfterPlan.IDLE_THRUST``), instead of holding
@@ -175,7 +205,8 @@ def simulate_moving(
         )
 
     believed = state if odo is None else noisy_odometry(state, odo, rng_plan)
-    rp = MovingReplanner(noisy_platform(truth.at(0.0), sc.platform_noise, rng_est), config, rcfg, moving)
+    filt = PlatformFilter(sc.filter_gain)
+    rp = MovingReplanner(filt.update(noisy_platform(truth.at(0.0), sc.platform_noise, rng_est)), config, rcfg, moving)
     step0 = rp.step(0.0, _odometry_state(believed, 0.0, zero_ref), rp.target)
     if rp.trajectory is None:
         return finish(f"no plan: {step0.reason}", rp=rp)
@@ -210,7 +241,8 @@ def simulate_moving(
             break
         if n > 0:
             b = state if odo is None else noisy_odometry(state, odo, rng_plan)
-            rp.step(t, _odometry_state(b, t, reference(t)), noisy_platform(truth.at(t), sc.platform_noise, rng_est))
+            est = filt.update(noisy_platform(truth.at(t), sc.platform_noise, rng_est))
+            rp.step(t, _odometry_state(b, t, reference(t)), est)
         n += 1
         k_next = max(int(round(n * period / dt)), k + 1)
         res = fly(state, reference, t, (k_next - k) * dt, sc.vehicle, sc.gains, dt=dt,
