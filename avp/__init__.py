@@ -57,7 +57,9 @@ from .config import (
     Workspace,
 )
 from .metrics import Visibility, visibility
+from .moving import MovingConfig, MovingPlanResult, MovingReplanner, plan_moving, plan_moving_detailed
 from .planner import PlanResult, PlanStatus, PlanTimings, plan, plan_detailed
+from .platform import MotionModel, MovingTarget
 from .safety import SafetyReport
 from .replan import ReplanAction, ReplanConfig, Replanner, ReplanStep
 from .trajectory import Derivative, FlatOutput, Provenance, Trajectory
@@ -75,6 +77,11 @@ __all__ += [
     "FovConfig",
     "FovPointPolicy",
     "HalfSpace",
+    "MotionModel",
+    "MovingConfig",
+    "MovingPlanResult",
+    "MovingReplanner",
+    "MovingTarget",
     "PerchTarget",
     "PlanResult",
     "PlanStatus",
@@ -99,5 +106,7 @@ __all__ += [
     "Workspace",
     "plan",
     "plan_detailed",
+    "plan_moving",
+    "plan_moving_detailed",
     "visibility",
 ]

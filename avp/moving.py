@@ -39,7 +39,15 @@ from . import _validate as v
 from .bounds import BoundReport, certify_spline
 from .camera import FovConfig
 from .config import PlannerConfig
-from .errors import AvpError, BoundsNotCertifiedError, ConfigError, InfeasibleError, PlanningError, SolverError
+from .errors import (
+    AvpError,
+    BoundsNotCertifiedError,
+    ConfigError,
+    InfeasibleError,
+    PlanningError,
+    SolverError,
+    WorkspaceNotCertifiedError,
+)
 from .moving_clearance import ClearanceReport, certify_moving_clearance
 from .planner import PlanStatus
 from .platform import MovingTarget
@@ -466,6 +474,8 @@ def plan_moving(
         raise SolverError(message, result)
     if result.status is PlanStatus.BOUNDS_NOT_CERTIFIED:
         raise BoundsNotCertifiedError(message, result)
+    if result.status is PlanStatus.WORKSPACE_NOT_CERTIFIED:
+        raise WorkspaceNotCertifiedError(message, result)
     raise PlanningError(message, result)
 
 
