@@ -40,16 +40,11 @@ from .bounds import BoundReport, certify_spline
 from .camera import FovConfig
 from .config import PlannerConfig
 from .errors import (
-    AvpError,
-    BoundsNotCertifiedError,
     ConfigError,
     InfeasibleError,
-    PlanningError,
-    SolverError,
-    WorkspaceNotCertifiedError,
 )
 from .moving_clearance import ClearanceReport, certify_moving_clearance
-from .planner import PlanStatus
+from .planner import PlanStatus, planning_error
 from .platform import MovingTarget
 from .qp.moving import MovingQpBuilder, TerminalYaw, contact_point, objective
 from .replan import ReplanConfig, Replanner, ReplanStep
@@ -468,15 +463,7 @@ def plan_moving(
     if result.ok and result.trajectory is not None:
         return result.trajectory
     message = f"no perching trajectory on the moving pad: {result.status.value}; " + "; ".join(result.log[-2:])
-    if result.status is PlanStatus.INFEASIBLE:
-        raise InfeasibleError(message, result)
-    if result.status is PlanStatus.SOLVER_FAILED:
-        raise SolverError(message, result)
-    if result.status is PlanStatus.BOUNDS_NOT_CERTIFIED:
-        raise BoundsNotCertifiedError(message, result)
-    if result.status is PlanStatus.WORKSPACE_NOT_CERTIFIED:
-        raise WorkspaceNotCertifiedError(message, result)
-    raise PlanningError(message, result)
+    raise planning_error(result.status)(message, result)
 
 
 class MovingReplanner(Replanner):
@@ -507,18 +494,9 @@ class MovingReplanner(Replanner):
             raise ConfigError("target_estimate", f"expected avp.platform.MovingTarget, got {type(target_estimate).__name__}")
         return super().step(t, odometry, target_estimate)
 
-    def _plan(  # type: ignore[override]  # returns the duck-compatible MovingPlanResult
+    def _solve(  # type: ignore[override]  # returns the duck-compatible MovingPlanResult
         self, state: State, durations: Array | None, previous: Trajectory | None, config: PlannerConfig
-    ) -> tuple[MovingPlanResult | None, float, str | None]:
-        t0 = time.perf_counter()
+    ) -> MovingPlanResult:
         assert isinstance(self.target, MovingTarget)
-        try:
-            duration = float(np.sum(durations)) if durations is not None else None
-            result = plan_moving_detailed(state, self.target, self.config, self.moving, duration=duration)
-        except AvpError as exc:  # never raise for a planning or solver failure
-            elapsed = time.perf_counter() - t0
-            self._solve_times.append(elapsed)
-            return None, elapsed, f"{type(exc).__name__}: {exc}"
-        elapsed = time.perf_counter() - t0
-        self._solve_times.append(elapsed)
-        return result, elapsed, None
+        duration = float(np.sum(durations)) if durations is not None else None
+        return plan_moving_detailed(state, self.target, self.config, self.moving, duration=duration)

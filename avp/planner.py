@@ -438,3 +438,14 @@ def plan(
     if result.status is PlanStatus.WORKSPACE_NOT_CERTIFIED:
         raise WorkspaceNotCertifiedError(message, result)
     raise PlanningError(message, result)
+
+
+def planning_error(status: PlanStatus) -> type[PlanningError]:
+    """The :class:`~avp.errors.PlanningError` subclass that reports a plan ending in ``status``
+    (:func:`avp.moving.plan_moving` raises it; ``plan`` above spells out the same mapping)."""
+    return {
+        PlanStatus.INFEASIBLE: InfeasibleError,
+        PlanStatus.SOLVER_FAILED: SolverError,
+        PlanStatus.BOUNDS_NOT_CERTIFIED: BoundsNotCertifiedError,
+        PlanStatus.WORKSPACE_NOT_CERTIFIED: WorkspaceNotCertifiedError,
+    }.get(status, PlanningError)
