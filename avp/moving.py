@@ -363,7 +363,8 @@ def plan_moving_detailed(
                    f"{speed:.2f} m/s); the limits may not allow catching this platform")
     return MovingPlanResult(status, None, last.pad, np.full(cfg.n_segments, last.T / cfg.n_segments), last.report,
                             next((e.clearance for e in reversed(evals) if e.clearance is not None), None),
-                            math.inf, candidates, tuple(log), solve_time, total, None)
+                            math.inf, candidates, tuple(log), solve_time, total, None,
+                            next((e.safety for e in reversed(evals) if e.safety is not None), None))
 
 
 def _search(run: Any, T1: float, mcfg: MovingConfig, log: list[str]) -> None:
@@ -499,4 +500,4 @@ class MovingReplanner(Replanner):
     ) -> MovingPlanResult:
         assert isinstance(self.target, MovingTarget)
         duration = float(np.sum(durations)) if durations is not None else None
-        return plan_moving_detailed(state, self.target, self.config, self.moving, duration=duration)
+        return plan_moving_detailed(state, self.target, config, self.moving, duration=duration)

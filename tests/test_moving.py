@@ -317,3 +317,20 @@ def test_replanner_follows_platform_estimates():
     err = contact_errors(final, faster, MovingConfig())
     assert err.position < 1e-3 and err.attitude < math.radians(0.5) and abs(err.normal_velocity) < 1e-3
     assert np.linalg.norm(final(final.tf) - first.at(final.tf).point) > 0.1  # it did follow the change
+
+
+def test_static_workspace_regions_are_certified_on_moving_plans():
+    """The 1.5 rad perch swings about 1 m below the pad: a ground 0.5 m below the pad rejects it
+    (honest status, the report names the region); a ground far below certifies."""
+    from dataclasses import replace
+    tgt = platform(1.5, 2.0, 0.2)
+    low = replace(CONFIG, workspace=avp.Workspace(ground_z=0.5))
+    res = plan_moving_detailed(behind(tgt), tgt, low)
+    assert res.status is avp.PlanStatus.WORKSPACE_NOT_CERTIFIED and res.trajectory is None
+    assert res.safety is not None and not res.safety.certified
+    with pytest.raises(avp.WorkspaceNotCertifiedError):
+        plan_moving(behind(tgt), tgt, low)
+    ok = plan_moving_detailed(behind(tgt), tgt, replace(CONFIG, workspace=avp.Workspace(ground_z=-5.0)))
+    assert ok.ok and ok.safety is not None and ok.safety.certified
+    z = ok.trajectory(ok.trajectory.sample(1e-3))[:, 2]
+    assert z.min() > -5.0 and z.min() < 0.5  # the swing that the first ground rejects
