@@ -6,18 +6,21 @@ model (:mod:`avp.platform`) and the perching QP is linear (:mod:`avp.qp.moving`)
 time is then searched in one dimension (``docs/moving.md``):
 
 1. ``T_1`` is the fixed point of the time-allocation rule (:class:`~avp.config.TimeAllocation`)
-   with the distance to the *predicted* pad and the speed relative to it (three iterations).
+   with the gap to the *predicted* pad that the vehicle must add to coasting and its speed
+   relative to the pad (three iterations).
 2. Each candidate ``T`` is solved and its actuator bounds certified (Algorithm 1, Rust
    kernels, :func:`avp.bounds.certify_spline`). Its score is the certified cost
    ``Phi(T) = J(T) + rho_T T``: the QP objective (snap integral plus slip cost ``w |nu|^2``, in
    physical units) plus a time weight, as the time regularisation of Gao et al. (their (53));
    an uncertified or infeasible ``T`` scores ``+inf``.
-3. Bracketing: while ``T`` is not certified it is multiplied by ``growth``; once one is, the
-   next candidate is the minimiser of ``Phi`` under the power law ``J ~ T^-k`` fitted through the
-   two latest certified points (a log-log secant step; on the first certified point the second
-   point is ``T / growth``), clamped to the known-uncertified side. At most ``max_solves``.
-4. The best certified candidate gets the moving-plane clearance certificate
-   (:mod:`avp.moving_clearance`); if it fails, the next best is tried.
+3. Bracketing: while ``T`` is not certified it is multiplied by ``growth``; when the reason
+   changes between two failures (tilt rate, then thrust) the window between them is bisected.
+   Once one ``T`` certifies, a second certified point one growth step away (shorter first) and
+   one log-log secant step to the minimiser of ``Phi`` under ``J ~ T^-k``. At most
+   ``max_solves`` QP solves.
+4. The best-scoring certified candidate gets the moving-plane clearance certificate
+   (:mod:`avp.moving_clearance`) and the static workspace regions (:mod:`avp.safety`); if they
+   fail, the next best is tried.
 
 The result is the best certified candidate *evaluated*, not a proven global minimiser of ``Phi``
 (certification is not monotone in ``T``). A platform that outruns the vehicle (no duration up
