@@ -28,6 +28,7 @@ from .safety import SafetyReport, certify_workspace, check_endpoints, refinement
 from .solve import WARM_START_SOLVERS, QpOutcome, solve_perching_qp
 from .timing import check_durations, initial_durations
 from .trajectory import Provenance, Trajectory
+from .platform import MovingTarget
 from .types import PerchTarget, State
 
 __all__ = ["PlanResult", "PlanStatus", "PlanTimings", "plan", "plan_detailed"]
@@ -121,6 +122,8 @@ def _check_inputs(state: Any, target: Any, config: Any) -> PlannerConfig:
         raise ConfigError("state", f"expected avp.State, got {type(state).__name__}")
     if not isinstance(target, PerchTarget):
         raise ConfigError("target", f"expected avp.PerchTarget, got {type(target).__name__}")
+    if isinstance(target, MovingTarget) and not target.is_static:
+        raise ConfigError("target", "is a moving pad: plan with avp.plan_moving (or pass target.static())")
     if config is None:
         config = PlannerConfig()
     if not isinstance(config, PlannerConfig):

@@ -334,3 +334,12 @@ def test_static_workspace_regions_are_certified_on_moving_plans():
     assert ok.ok and ok.safety is not None and ok.safety.certified
     z = ok.trajectory(ok.trajectory.sample(1e-3))[:, 2]
     assert z.min() > -5.0 and z.min() < 0.5  # the swing that the first ground rejects
+
+
+def test_the_static_planner_refuses_a_moving_pad():
+    """avp.plan would freeze the pad at its current pose: a typed error points to plan_moving."""
+    state = avp.State.hover([-3.0, 0.0, 1.0])
+    with pytest.raises(avp.ConfigError, match="plan_moving"):
+        avp.plan_detailed(state, platform(0.5, 2.0), CONFIG)
+    still = MovingTarget.from_pad(avp.PerchTarget.from_incline([0.0, 0.0, 1.0], 0.5))
+    assert avp.plan_detailed(state, still, CONFIG).ok  # a pad that does not move is a static pad
