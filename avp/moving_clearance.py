@@ -109,13 +109,20 @@ class _IPoly:
         return np.nextafter(self.mid - self.rad * (1 + 4 * EPS), -np.inf)
 
 
+MAX_TAYLOR_ORDER = 18
+"""Cap on ``K``: the clearance polynomial has degree ``2K + 3`` at most, and the Rust kernel takes
+degree <= 40. Beyond the cap the (rigorous) remainder is simply larger, so a very long or fast
+turn is certified conservatively (or not at all), never wrongly."""
+
+
 def _taylor_order(omega: float, sigma_max: float) -> int:
-    """Smallest ``K`` with ``|omega sigma_max|^(K+1) / (K+1)! <= REMAINDER_TOL`` (0 if no turn)."""
+    """Smallest ``K`` with ``|omega sigma_max|^(K+1) / (K+1)! <= REMAINDER_TOL`` (0 if no turn),
+    at most :data:`MAX_TAYLOR_ORDER`."""
     x = abs(omega) * sigma_max
     if x == 0.0:
         return 0
     K, term = 0, x
-    while term > REMAINDER_TOL and K < 30:
+    while term > REMAINDER_TOL and K < MAX_TAYLOR_ORDER:
         K += 1
         term *= x / (K + 1)
     return K

@@ -343,3 +343,19 @@ def test_the_static_planner_refuses_a_moving_pad():
         avp.plan_detailed(state, platform(0.5, 2.0), CONFIG)
     still = MovingTarget.from_pad(avp.PerchTarget.from_incline([0.0, 0.0, 1.0], 0.5))
     assert avp.plan_detailed(state, still, CONFIG).ok  # a pad that does not move is a static pad
+
+
+@pytest.mark.parametrize("turn", [0.8, 1.5, -2.0])
+def test_fast_turns_cap_the_taylor_order_soundly(turn):
+    """A fast or long turn needs more than the kernel's degree 40: the order is capped and the
+    larger remainder keeps the verdict sound."""
+    from avp.moving_clearance import MAX_TAYLOR_ORDER
+    tgt = platform(0.5, 3.0, turn)
+    traj, _ = solve_fixed(behind(tgt), tgt, 4.0)
+    rep = certify_moving_clearance(traj, tgt)
+    assert rep.taylor_order <= MAX_TAYLOR_ORDER
+    h = clearance(traj, tgt, np.linspace(traj.t0, traj.tf, 20001))
+    if rep.certified:
+        assert h[:-1].min() > min(0.0, rep.contact_residual_lower) - 1e-12
+    if h.min() < -1e-9:
+        assert not rep.certified
