@@ -46,12 +46,13 @@ from .config import (
     BoundsPolicy,
     ContactVelocity,
     HalfSpace,
+    OverhangFlip,
     PlannerConfig,
     PreImpactMode,
     QpForm,
     Relaxation,
-    TimeAllocation,
     Sphere,
+    TimeAllocation,
     TimeSearch,
     VehicleLimits,
     Workspace,
@@ -60,8 +61,8 @@ from .metrics import Visibility, visibility
 from .moving import MovingConfig, MovingPlanResult, MovingReplanner, plan_moving, plan_moving_detailed
 from .planner import PlanResult, PlanStatus, PlanTimings, plan, plan_detailed
 from .platform import MotionModel, MovingTarget
-from .safety import SafetyReport
 from .replan import ReplanAction, ReplanConfig, Replanner, ReplanStep
+from .safety import SafetyReport
 from .trajectory import Derivative, FlatOutput, Provenance, Trajectory
 from .types import PerchTarget, State
 
@@ -82,6 +83,7 @@ __all__ += [
     "MovingPlanResult",
     "MovingReplanner",
     "MovingTarget",
+    "OverhangFlip",
     "PerchTarget",
     "PlanResult",
     "PlanStatus",

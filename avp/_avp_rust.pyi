@@ -78,8 +78,9 @@ def certify_spline(
     """Bound certificates of a (S, 4, C) spline: ``(codes (5, S), t (5, S))``.
 
     ``limits`` = ``[thrust_max, thrust_min, thrust_rate_max, tilt_rate_max, body_rate_max]``
-    (mass-normalised, ``inf`` = not checked); codes 0 within, 1 violated, 2 unknown,
-    3 not checked; ``t`` the estimated absolute time of a violation (NaN otherwise).
+    (mass-normalised, ``inf`` = not checked); codes 0 within, 1 violated, 2 unknown (with
+    ``exact`` only for a body rate whose roll level is undecided), 3 not checked; ``t`` the
+    estimated absolute time of a violation (NaN otherwise).
     """
 
 def bound_polynomial(
@@ -91,7 +92,7 @@ def bound_polynomial(
     g: float = 9.81,
 ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
     """Rigorous enclosure ``(lo, hi)`` of the checked polynomial of row ``bound`` on ``segment``
-    in ``u = (t - knots[i]) / (knots[i+1] - knots[i])``."""
+    in ``u = (t - knots[i]) / (knots[i+1] - knots[i])`` (the body rate at the 45 deg roll level)."""
 
 # --- workspace certificates (regions.rs) ------------------------------------------------------
 

@@ -52,8 +52,10 @@ class Bound(Enum):
     TILT_RATE = "tilt_rate"
     """``||j||^2 - w_max^2 ||f||^2 < 0``, sufficient for ``w1^2 + w2^2 < w_max^2``, eq. (22)."""
     BODY_RATE = "body_rate"
-    """``3||j||^2 + (4 psidot^2 - w_max^2)||f||^2 < 0``, sufficient for ``||w|| < w_max`` when the
-    roll stays within ``|phi| <= pi/4`` (assumption (25)); replaces the paper's (26)-(29)."""
+    """``A||j||^2 + (B psidot^2 - w_max^2)||f||^2 < 0`` with the roll ``sin^2 phi < S`` of the
+    construction (13) certified per segment (levels 45, 60, 69.3, 75.5 deg; ``(A, B) = (3, 4)``
+    at the paper's assumption (25)): sufficient for ``||w|| < w_max`` at every attitude; replaces
+    the paper's (26)-(29). UNKNOWN when the roll level is not decided (docs/bounds.md)."""
 
 
 _BOUNDS = tuple(Bound)
@@ -179,13 +181,15 @@ def certify_spline(
     tilt_rate_max:
         Limit on ``sqrt(w1^2 + w2^2)`` (rad/s) through ``||j||^2 < w^2 ||f||^2``, eq. (22).
     body_rate_max:
-        Limit on ``||w||`` (rad/s) including the yaw rate, after (24)-(29) under the roll
-        assumption (25) ``|phi| <= pi/4``: ``3||j||^2 + (4 psidot^2 - w^2)||f||^2 < 0``.
+        Limit on ``||w||`` (rad/s) including the yaw rate, after (24)-(29): the roll level
+        ``sin^2 phi < S`` is certified first, then ``A||j||^2 + (B psidot^2 - w^2)||f||^2 < 0``
+        (``(A, B) = (3, 4)`` for ``|phi| < pi/4``, assumption (25)); see docs/bounds.md.
     g:
         Gravity (m/s^2).
     exact:
         Fall back to exact arithmetic when the floating-point path is unsure (default). With
-        ``False`` undecided cells are :attr:`Certificate.UNKNOWN`.
+        ``False`` undecided cells are :attr:`Certificate.UNKNOWN`. The body rate's roll level
+        has no exact path: a segment whose roll is not decided is UNKNOWN either way.
 
     Returns
     -------

@@ -23,13 +23,14 @@ __all__ = [
     "BoundsPolicy",
     "ContactVelocity",
     "HalfSpace",
+    "OverhangFlip",
     "PlannerConfig",
     "PreImpactMode",
     "QpForm",
     "Relaxation",
+    "Sphere",
     "TimeAllocation",
     "TimeSearch",
-    "Sphere",
     "VehicleLimits",
     "Workspace",
 ]
@@ -61,7 +62,7 @@ class VehicleLimits:
     ``thrust_rate_max`` bounds ``|d tau/dt|`` through ``m |j|`` (21); ``tilt_rate_max`` bounds
     ``sqrt(w1^2 + w2^2)`` exactly through ``|j|^2 <= w^2 |a + g e3|^2`` (22) (equal to the body
     rate for a yaw-free, roll-free manoeuvre); ``body_rate_max`` bounds ``|w|`` including the yaw
-    term, conservatively, under the roll assumption (25). The rate limits may be ``inf`` (not
+    term, conservatively, with the roll bound it needs (25) certified too. The rate limits may be ``inf`` (not
     checked). Defaults: 0.5 kg, thrust in [0.5, 2 g] m/s^2 mass-normalised, tilt rate 10 rad/s
     (without a rate limit a relaxed plan can be "certified" while flipping at 100+ rad/s).
     """
@@ -71,7 +72,7 @@ class VehicleLimits:
     thrust_max: float = 0.5 * 2.0 * GRAVITY  # N, 2 g
     thrust_rate_max: float = math.inf  # N/s
     tilt_rate_max: float = 10.0  # rad/s, on sqrt(w1^2 + w2^2)
-    body_rate_max: float = math.inf  # rad/s, on |w| including yaw (assumption (25))
+    body_rate_max: float = math.inf  # rad/s, on |w| including yaw (roll level certified)
 
     def __post_init__(self) -> None:
         v.positive_float("limits.mass", self.mass)
@@ -151,6 +152,54 @@ class TimeAllocation:
     def total(self, distance: float, speed: float) -> float:
         a = self.nominal_acceleration
         return max(self.min_duration, self.attitude_time + math.sqrt(2.0 * distance / a) + speed / a)
+
+
+@dataclass(frozen=True)
+class OverhangFlip:
+    """Thrust through the horizontal on an overhang (incline above ``min_incline``, up to a
+    ceiling at 180 deg).
+
+    The thrust ``f = a + g e3`` must turn from about ``+e3`` (flying) to ``s3`` (pointing down at
+    contact). Min-snap alone interpolates it through (almost) zero: every ceiling plan failed
+    ``thrust_min`` and the tilt rate (up to 550 rad/s). The planner therefore asks, at
+    ``t_w = t_f - t_k - (incline - 90 deg) / turn_rate``, for a horizontal thrust along the
+    horizontal part ``u`` of ``s1`` of at least ``thrust`` (m/s^2, mass-normalised):
+    ``f(t_w) . e3 = 0``, ``f(t_w) . (e3 x u) = 0``, ``f(t_w) . u >= thrust`` (linear rows;
+    ``thrust`` defaults to ``max(2.5, 2 f_min)``, below the middle of the thrust range).
+    ``turn_rate`` defaults to 0.7 x ``limits.tilt_rate_max`` (7 rad/s without a tilt limit):
+    the time left to turn from the horizontal to ``s3`` before the band (14). With ``cone_band``
+    an overhang's pre-impact band (14) in PAPER mode is imposed as the tilt cone (CONE): the
+    componentwise box pins the thrust upside down and blocked most overhangs. Measured in
+    ``docs/decisions.md``.
+    """
+
+    enabled: bool = True
+    min_incline: float = math.radians(95.0)
+    cone_band: bool = True
+    thrust: float | None = None
+    turn_rate: float | None = None
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.min_incline) and math.pi / 2 <= self.min_incline <= math.pi):
+            raise ConfigError("flip.min_incline", f"must be in [pi/2, pi] rad, got {self.min_incline}")
+        if self.thrust is not None:
+            v.positive_float("flip.thrust", self.thrust)
+        if self.turn_rate is not None:
+            v.positive_float("flip.turn_rate", self.turn_rate)
+
+    def horizontal_thrust(self, limits: VehicleLimits) -> float:
+        """Least horizontal thrust (m/s^2) at the waypoint: ``thrust``, or by default
+        ``max(2.5, 2 f_min)`` kept below the middle of the thrust range."""
+        if self.thrust is not None:
+            return self.thrust
+        lo, hi = limits.accel_min, limits.accel_max
+        return min(max(2.5, 2.0 * lo), 0.5 * (lo + hi))
+
+    def rate(self, limits: VehicleLimits) -> float:
+        """The planned turn rate (rad/s) of the thrust from the horizontal to ``s3``."""
+        if self.turn_rate is not None:
+            return self.turn_rate
+        return 0.7 * (limits.tilt_rate_max if math.isfinite(limits.tilt_rate_max) else 10.0)
 
 
 class TimeSearch(Enum):
@@ -359,6 +408,8 @@ class PlannerConfig:
     workspace:
         :class:`Workspace`: perch-plane clearance, ground, speed, half-spaces and spheres,
         certified and never relaxed.
+    flip:
+        :class:`OverhangFlip`: the thrust turns through the horizontal on overhangs (> 95 deg).
     """
 
     n_segments: int = 3
@@ -386,6 +437,7 @@ class PlannerConfig:
     fov: FovConfig = field(default_factory=FovConfig)
     bounds: BoundsPolicy = field(default_factory=BoundsPolicy)
     workspace: Workspace = field(default_factory=Workspace)
+    flip: OverhangFlip = field(default_factory=OverhangFlip)
 
     def __post_init__(self) -> None:
         for name, lo in (("n_segments", 1), ("degree", 1), ("position_cost_order", 1),
@@ -428,6 +480,14 @@ class PlannerConfig:
             raise ConfigError("config.workspace", f"must be an avp.Workspace, got {self.workspace!r}")
         if not isinstance(self.bounds, BoundsPolicy):
             raise ConfigError("config.bounds", f"must be a BoundsPolicy, got {self.bounds!r}")
+        if not isinstance(self.flip, OverhangFlip):
+            raise ConfigError("config.flip", f"must be an OverhangFlip, got {self.flip!r}")
+        if self.flip.thrust is not None and not self.limits.accel_min < self.flip.thrust < self.limits.accel_max:
+            raise ConfigError(
+                "flip.thrust",
+                f"{self.flip.thrust} m/s^2 must lie strictly inside the thrust limits "
+                f"({self.limits.accel_min:.2f}, {self.limits.accel_max:.2f}) m/s^2 (limits / mass)",
+            )
         if self.alpha is not None and not self.limits.accel_min < self.alpha < self.limits.accel_max:
             raise ConfigError(
                 "config.alpha",

@@ -9,13 +9,19 @@ construction (13): ``b2_des = [-sin psi, cos psi, 0]``, ``b1 = (b2_des x b3)/|.|
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import numpy.typing as npt
 
+from .errors import ConfigError
+
 __all__ = [
     "GRAVITY",
+    "MAX_CONTACT_ROLL",
     "attitude",
     "body_rates",
+    "contact_yaw",
     "rotation_error_angle",
     "thrust_magnitude",
     "thrust_vector",
@@ -109,6 +115,50 @@ def yaw_from_b2(b2: npt.ArrayLike) -> float:
     """
     v = np.asarray(b2, dtype=float)
     return float(np.arctan2(-v[0], v[1]))
+
+
+MAX_CONTACT_ROLL = math.asin(math.sqrt(0.9375))
+"""Largest roll (rad, about 75.5 deg) of a contact attitude the planner accepts: the top roll
+level ``sin^2 phi < 15/16`` of the body-rate certificate (docs/bounds.md). The construction (13)
+is singular at 90 deg; near it the yaw term of the body rate grows as ``1/cos phi``."""
+
+
+def contact_yaw(R_WS: npt.ArrayLike) -> tuple[float, float]:
+    """Yaw ``psi`` for which the construction (13) with ``b3 = s3`` gives exactly
+    ``R_WB = R_WS``, and the roll ``phi`` (rad) of that attitude.
+
+    The construction is ``R_WB = Rz(psi) Ry(theta) Rx(phi)`` with ``cos phi > 0``; it gives
+    ``b1 = s1`` iff ``b2_des`` is horizontal, orthogonal to ``s1`` and has ``b2_des . s2 > 0``:
+    ``b2_des = sign(s3z) (s3z s2 - s2z s3) / sqrt(s2z^2 + s3z^2)``, with ``cos phi =
+    |s3z| / sqrt(s2z^2 + s3z^2)``. When ``s1`` is vertical (``s2z = s3z = 0``, a wall in its
+    natural frame) ``b2_des = s2`` and ``phi = 0``. A pad with ``s3z = 0`` and ``s2z != 0``
+    (horizontal thrust, ``s1`` not vertical, e.g. a vertical ``s2``) has ``|phi| = 90 deg``: the
+    construction cannot represent it.
+
+    Raises
+    ------
+    ConfigError
+        ``target.R_WS`` when ``|phi|`` exceeds :data:`MAX_CONTACT_ROLL`.
+    """
+    R = np.asarray(R_WS, dtype=float)
+    s2, s3 = R[:, 1], R[:, 2]
+    w = s3[2] * s2 - s2[2] * s3
+    wn = float(np.hypot(s2[2], s3[2]))
+    if wn < 1e-12:  # s1 vertical: any horizontal b2_des along s2 works, phi = 0
+        b2d = np.array([s2[0], s2[1], 0.0])
+        roll = 0.0
+    else:
+        roll = math.atan2(abs(s2[2]), abs(s3[2]))
+        b2d = math.copysign(1.0, s3[2]) * w / wn
+    if roll > MAX_CONTACT_ROLL:
+        raise ConfigError(
+            "target.R_WS",
+            f"the contact attitude R_WS has a roll of {math.degrees(roll):.1f} deg in the attitude "
+            f"construction (13) (yaw-pitch-roll, singular at 90 deg); at most "
+            f"{math.degrees(MAX_CONTACT_ROLL):.1f} deg is supported: choose s1 (up_slope) so that "
+            "s2 = s3 x s1 is closer to horizontal"
+        )
+    return float(math.atan2(-b2d[0], b2d[1])), math.copysign(roll, -float(b2d @ s3)) if roll else 0.0
 
 
 def rotation_error_angle(R_a: npt.ArrayLike, R_b: npt.ArrayLike) -> Array:

@@ -24,7 +24,14 @@ from .errors import (
 )
 from .qp.assemble import ConstraintBlock, build_perching_qp
 from .qp.layout import DecisionLayout, layout_for
-from .safety import SafetyReport, certify_workspace, check_endpoints, refinement_blocks, workspace_blocks
+from .request import check_request
+from .safety import (
+    SafetyReport,
+    certify_workspace,
+    check_endpoints,
+    refinement_blocks,
+    workspace_blocks,
+)
 from .solve import WARM_START_SOLVERS, QpOutcome, solve_perching_qp
 from .timing import check_durations, initial_durations
 from .trajectory import Provenance, Trajectory
@@ -304,6 +311,7 @@ def plan_detailed(
     t_start = time.perf_counter()
     cfg = _check_inputs(state, target, config)
     T0 = check_durations(durations, cfg) if durations is not None else initial_durations(state, target, cfg)
+    check_request(state, target, cfg, float(T0.sum()))  # physical sense of the request
     log: list[str] = [f"durations {np.round(T0, 4).tolist()} s ({'given' if durations is not None else 'allocated'})"]
     build = solve = certify = 0.0
     attempts = 0
@@ -353,7 +361,12 @@ def plan_detailed(
             if warm_start is not None and cfg.solver in WARM_START_SOLVERS:
                 knots = state.time + np.concatenate([[0.0], np.cumsum(T)])
                 initvals = _fit_initvals(warm_start, layout_for(cfg.n_segments, cfg.degree), knots)
-            attempt = _solve_at(state, target, stage_cfg, T, log, previous, initvals)
+            # The search runs without the FoV rows after the first solve; the rows are added back
+            # once a duration certifies (they change the plan little and cost 2-3 QPs each).
+            first = stage is None and factor == 1.0
+            attempt_cfg = stage_cfg if first or not stage_cfg.fov.enabled else replace(
+                stage_cfg, fov=replace(stage_cfg.fov, enabled=False))
+            attempt = _solve_at(state, target, attempt_cfg, T, log, previous, initvals)
             attempts += 1
             build += attempt.build
             solve += attempt.solve
@@ -375,6 +388,15 @@ def plan_detailed(
             certify += time.perf_counter() - t_cert
             if report.certified and attempt.safe:
                 log.append("bounds certified (Algorithm 1, exact)")
+                if attempt_cfg is not stage_cfg:
+                    with_fov, fov_report = _with_fov(state, target, stage_cfg, T, log, previous, initvals)
+                    attempts += 1
+                    build, solve, certify = (build + with_fov.build, solve + with_fov.solve,
+                                             certify + with_fov.certify + fov_report[1])
+                    if fov_report[0] is not None:
+                        report = fov_report[0]
+                        return finish(solved(with_fov), with_fov, T)
+                    attempt.fov_dropped = True
                 return finish(solved(attempt), attempt, T)
             if report.certified:
                 unsafe = attempt
@@ -390,8 +412,40 @@ def plan_detailed(
         log.append(f"no duration in the search and no relaxation kept the workspace certified "
                    f"({attempts} solves): {failed} could not be met")
         return finish(PlanStatus.WORKSPACE_NOT_CERTIFIED, unsafe, unsafe.trajectory.durations)
-    log.append(f"no duration in the search and no relaxation gave certified bounds ({attempts} solves)")
+    log.append(f"no duration in the search and no relaxation gave certified bounds ({attempts} solves); "
+               + _measured(last.trajectory, target, cfg))
     return finish(PlanStatus.BOUNDS_NOT_CERTIFIED, last, last.trajectory.durations)
+
+
+def _measured(traj: Trajectory, target: PerchTarget, cfg: PlannerConfig) -> str:
+    """The last plan's extremes on a 1 ms grid against the limits, for the failure message."""
+    t = traj.sample(1e-3)
+    f = traj.thrust(t)
+    lim = cfg.limits
+    tilt = float(np.linalg.norm(traj.body_rates(t)[:, :2], axis=1).max())
+    return (f"the last plan ({traj.duration:.2f} s, incline {np.degrees(target.incline):.0f} deg) measured "
+            f"thrust {f.min():.2f}..{f.max():.2f} m/s^2 against limits {lim.accel_min:.2f}..{lim.accel_max:.2f}, "
+            f"tilt rate up to {tilt:.1f} rad/s against {lim.tilt_rate_max:g}")
+
+
+def _with_fov(
+    state: State, target: PerchTarget, cfg: PlannerConfig, T: Array, log: list[str],
+    previous: Trajectory | None, initvals: Array | None,
+) -> tuple[_Attempt, tuple[BoundReport | None, float]]:
+    """Re-solve a certified search step with the FoV rows; ``(attempt, (report, seconds))`` with
+    ``report`` set only when that plan certifies too (bounds and workspace)."""
+    attempt = _solve_at(state, target, cfg, T, log, previous, initvals)
+    if attempt.trajectory is None or not attempt.safe or attempt.fov_dropped:
+        log.append("FoV rows dropped (16): the plan with them did not solve or certify")
+        return attempt, (None, 0.0)
+    t0 = time.perf_counter()
+    report = _certify(attempt.trajectory, cfg)
+    seconds = time.perf_counter() - t0
+    if not report.certified:
+        log.append("FoV rows dropped: the plan with them did not certify the bounds")
+        return attempt, (None, seconds)
+    log.append("FoV rows added back: bounds certified")
+    return attempt, (report, seconds)
 
 
 def _infeasible(attempt: _Attempt) -> bool:

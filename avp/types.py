@@ -69,6 +69,14 @@ class PerchTarget:
     pad is level). Incline is the angle between ``s3`` and ``e3``: 0 floor, 90 deg wall,
     180 deg ceiling.
 
+    A plan ends with ``attitude(t_f) == R_WS`` exactly (to rounding) for every target the
+    planner accepts: the terminal yaw (13) is :func:`avp.frames.contact_yaw`. That holds for any
+    ``R_WS`` whose roll in the attitude construction (13) (yaw-pitch-roll, ``cos(roll) =
+    |s3z| / sqrt(s2z^2 + s3z^2)``) is at most :data:`avp.frames.MAX_CONTACT_ROLL` (75.5 deg);
+    ``from_incline`` and ``from_normal`` without ``up_slope`` always give roll 0. Others (e.g.
+    a horizontal normal with a vertical ``s2``) are rejected by the planner with a
+    ``ConfigError`` on ``target.R_WS``.
+
     The target is static; :meth:`at` is the hook a moving target (roadmap, seed 004) overrides.
     """
 
@@ -116,14 +124,20 @@ class PerchTarget:
     @classmethod
     def from_incline(cls, point: Any, incline: float, heading: float = 0.0) -> PerchTarget:
         """A pad inclined by ``incline`` (rad, 0 floor .. pi/2 wall .. pi ceiling) that faces a
-        vehicle flying horizontally along ``heading`` (rad): ``s3 = cos(i) e3 - sin(i) h``."""
+        vehicle flying horizontally along ``heading`` (rad): ``s3 = cos(i) e3 - sin(i) h``,
+        ``s1 = sin(i) e3 + cos(i) h`` and ``s2 = e3 x h``, continuous in ``i`` on ``[0, pi]``
+        (a floor has ``s1 = h``, a ceiling ``s1 = -h``)."""
         inc = v.finite_float("target.incline", incline)
         if not 0.0 <= inc <= math.pi:
             raise ConfigError("target.incline", f"must be in [0, pi] rad (0 floor, pi ceiling), got {inc}")
         hd = v.finite_float("target.heading", heading)
         h = np.array([math.cos(hd), math.sin(hd), 0.0])
-        s3 = math.cos(inc) * np.array([0.0, 0.0, 1.0]) - math.sin(inc) * h
-        return cls.from_normal(point, s3, approach_heading=hd)
+        e3 = np.array([0.0, 0.0, 1.0])
+        # The frame turns about s2 = e3 x h with the incline, continuously up to a ceiling
+        # (s1 = -h at pi): from_normal's level-pad fallback (s1 = +h) would flip it at pi.
+        s3 = math.cos(inc) * e3 - math.sin(inc) * h
+        s1 = math.sin(inc) * e3 + math.cos(inc) * h
+        return cls(point=point, R_WS=np.column_stack([s1, np.cross(s3, s1), s3]))
 
     # -- frame axes -----------------------------------------------------------------------
     @property

@@ -19,10 +19,10 @@ import avp
 
 LIMITS = avp.VehicleLimits(mass=1.0, thrust_min=5.0, thrust_max=17.0, tilt_rate_max=3.0)
 CASES = {
-    "paper contact velocity (0.3 in, slide)": dict(alpha=5.5),
-    "rest-to-rest (zero contact velocity)": dict(
+    "paper contact velocity (0.3 in, slide)": dict(),
+    "near rest-to-rest (0.05 m/s into the pad)": dict(
         alpha=5.5,
-        contact_velocity=avp.ContactVelocity(normal=0.0, slope=0.0, lateral=0.0),
+        contact_velocity=avp.ContactVelocity(normal=-0.05, slope=0.0, lateral=0.0),
         bounds=avp.BoundsPolicy(relaxations=(avp.Relaxation.CONE_BAND, avp.Relaxation.NO_BAND, avp.Relaxation.ALPHA_RANGE)),
     ),
     "paper band only, no relaxation": dict(alpha=5.5, bounds=avp.BoundsPolicy(relaxations=())),

@@ -2,7 +2,8 @@
 
 Sign convention (docs/perception.md, DESIGN.md): the paper's tables swap the component names.
 Columns are the speed *into* the pad (our ``ContactVelocity.normal = -v``, the paper's "v_S1" in
-{0, 1, 2}); rows are the slide along the slope (our ``ContactVelocity.slope``, the paper's "v_S3"
+{0, 1, 2}; its 0 column is planned at 0.05 m/s, since a contact velocity with ``v . s3 >= 0``
+never reaches the pad and is rejected); rows are the slide along the slope (our ``ContactVelocity.slope``, the paper's "v_S3"
 in {free, -3, -2, -1, 0, 1}; negative = down the slope). Every plan has the same duration (as in
 the paper), a 90 deg wall 3.5 m ahead, start hovering at the pad height facing it.
 
@@ -28,7 +29,7 @@ from avp import (
 )
 from avp.timing import initial_durations
 
-INTO_PAD = (0.0, 1.0, 2.0)
+INTO_PAD = (0.05, 1.0, 2.0)
 SLOPE = (None, -3.0, -2.0, -1.0, 0.0, 1.0)
 
 

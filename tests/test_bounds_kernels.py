@@ -307,8 +307,14 @@ def test_certify_spline_matches_exact_oracle(sk, data):
     for b in range(5):
         for s in range(c.shape[0]):
             truth = _oracle_poly_below(_spline_F(c, knots, s, b, limits[b], g))
-            assert codes[b, s] == (WITHIN if truth else VIOLATED), (b, s)
-            assert fast_codes[b, s] in ((WITHIN, UNKNOWN) if truth else (VIOLATED, UNKNOWN)), (b, s)
+            if b == 4:
+                # body rate: WITHIN also needs a certified roll level, whose polynomial is never
+                # weaker than the 45-degree one the oracle builds; otherwise VIOLATED/UNKNOWN
+                assert truth or codes[b, s] != WITHIN, s
+                assert truth or fast_codes[b, s] != WITHIN, s
+            else:
+                assert codes[b, s] == (WITHIN if truth else VIOLATED), (b, s)
+                assert fast_codes[b, s] in ((WITHIN, UNKNOWN) if truth else (VIOLATED, UNKNOWN)), (b, s)
             if codes[b, s] == VIOLATED:
                 assert knots[s] <= times[b, s] <= knots[s + 1]
     # physical cross-check by sampling: certified thrust max means no sample above the limit

@@ -23,7 +23,7 @@ from ..types import PerchTarget, State
 from .boundary import continuity_rows, initial_state_rows
 from .cost import cost_matrix
 from .layout import DecisionLayout, layout_for
-from .perching import pre_impact_rows, terminal_rows, terminal_thrust_rows
+from .perching import flip_rows, pre_impact_rows, terminal_rows, terminal_thrust_rows
 
 Array = npt.NDArray[np.float64]
 
@@ -177,4 +177,7 @@ def build_perching_qp(
     Ga, la, ha = terminal_thrust_rows(layout, knots_rel, target, config)
     if Ga.shape[0]:
         ineq += (ConstraintBlock("contact thrust range (12)", Ga, la, ha),)
+    Gf, lf, hf = flip_rows(layout, knots_rel, target, config)
+    if Gf.shape[0]:
+        ineq += (ConstraintBlock("overhang flip: thrust through the horizontal", Gf, lf, hf),)
     return PerchingQp(layout=layout, durations=T, t0=state.time, P=P, equalities=eq, inequalities=ineq)

@@ -9,7 +9,7 @@ import numpy as np
 import numpy.typing as npt
 
 from ..config import PlannerConfig, PreImpactMode
-from ..frames import yaw_from_b2
+from ..frames import contact_yaw
 from ..types import PerchTarget
 from .layout import YAW, DecisionLayout
 from .rows import derivative_rows, vector_rows
@@ -24,8 +24,10 @@ def terminal_acceleration(target: PerchTarget, alpha: float, g: float) -> Array:
 
 
 def terminal_yaw(target: PerchTarget, near: float) -> float:
-    """Yaw with ``b2_des`` parallel to ``s2`` (13), unwrapped to within pi of ``near``."""
-    psi = yaw_from_b2(target.s2)
+    """Yaw (13) whose attitude with ``b3 = s3`` is exactly ``R_WS`` (:func:`avp.frames.contact_yaw`),
+    unwrapped to within pi of ``near``. Raises ConfigError for a contact attitude the
+    construction cannot represent."""
+    psi, _ = contact_yaw(target.R_WS)
     return psi + 2.0 * math.pi * round((near - psi) / (2.0 * math.pi))
 
 
@@ -87,6 +89,39 @@ def terminal_thrust_rows(
     return (target.s3 @ A)[None, :], np.array([lo - gs3]), np.array([hi - gs3])
 
 
+def is_overhang(target: PerchTarget, config: PlannerConfig) -> bool:
+    """The pad is an overhang for :class:`~avp.config.OverhangFlip` (incline above its minimum)."""
+    return config.flip.enabled and target.incline > config.flip.min_incline
+
+
+def flip_time(target: PerchTarget, config: PlannerConfig, tf: float) -> float | None:
+    """Time (relative, s) of the overhang's horizontal-thrust waypoint, or ``None`` when the
+    pad is not an overhang for ``config.flip`` or the plan is too short to hold it."""
+    if not is_overhang(target, config):
+        return None
+    t_w = tf - config.t_k - (target.incline - 0.5 * math.pi) / config.flip.rate(config.limits)
+    return t_w if t_w > 0.05 * tf else None
+
+
+def flip_rows(
+    layout: DecisionLayout, knots_rel: Array, target: PerchTarget, config: PlannerConfig
+) -> tuple[Array, Array, Array]:
+    """Overhang (:class:`~avp.config.OverhangFlip`): at ``t_w`` the thrust ``a + g e3`` is
+    horizontal, along the horizontal part ``u`` of ``s1`` and at least ``flip.thrust``:
+    ``a_z = -g``, ``a . (e3 x u) = 0``, ``a . u >= thrust`` (rows ``lower <= G c_hat <= upper``)."""
+    n = layout.n_variables
+    t_w = flip_time(target, config, float(knots_rel[-1]))
+    if t_w is None:
+        return np.zeros((0, n)), np.zeros(0), np.zeros(0)
+    s1h = np.array([target.s1[0], target.s1[1], 0.0])
+    u = s1h / np.linalg.norm(s1h)  # nonzero: s1 is vertical only when s3 is horizontal
+    side = np.cross(E3, u)
+    A = vector_rows(layout, knots_rel, 2, t_w)[0]
+    G = np.vstack([A[2], side @ A, u @ A])
+    thrust = config.flip.horizontal_thrust(config.limits)
+    return G, np.array([-config.g, 0.0, thrust]), np.array([-config.g, 0.0, np.inf])
+
+
 def band_times(config: PlannerConfig, tf: float) -> Array:
     """Sample times ``t_f - t_k + j dt``, ``0 <= j < round(t_k/dt)``, of (14), clipped to ``t >= 0``."""
     t = tf - config.t_k + config.dt * np.arange(config.band_samples)
@@ -109,7 +144,10 @@ def pre_impact_rows(
     faces, so the true tilt never exceeds the angle).
     """
     n = layout.n_variables
-    if config.pre_impact is PreImpactMode.OFF:
+    mode = config.pre_impact
+    if mode is PreImpactMode.PAPER and config.flip.cone_band and is_overhang(target, config):
+        mode = PreImpactMode.CONE  # OverhangFlip.cone_band: the box blocks overhangs
+    if mode is PreImpactMode.OFF:
         return np.zeros((0, n)), np.zeros(0), np.zeros(0)
     times = band_times(config, float(knots_rel[-1]))
     if times.size == 0:
@@ -117,7 +155,7 @@ def pre_impact_rows(
     A = vector_rows(layout, knots_rel, 2, times)  # (m, 3, n)
     alpha = config.contact_alpha(target.incline)
     alpha_lo, alpha_hi = config.alpha_range if config.alpha_range is not None else (alpha, alpha)
-    if config.pre_impact is PreImpactMode.PAPER:
+    if mode is PreImpactMode.PAPER:
         c_lo = terminal_acceleration(target, alpha_lo, config.g)
         c_hi = (1.0 + config.q) * terminal_acceleration(target, alpha_hi, config.g)
         lo = np.minimum(c_lo, c_hi)

@@ -12,7 +12,13 @@
 //! | [`BoundKind::ThrustMin`] | `f_min² − ‖f‖²` | (15) |
 //! | [`BoundKind::ThrustRate`] | `‖j‖² − ḟ_max²` (since `ḟ = b3·j`, `|ḟ| ≤ ‖j‖`) | (19)-(21) |
 //! | [`BoundKind::TiltRate`] | `‖j‖² − w_max² ‖f‖²` (`ω1²+ω2² ≤ ‖j‖²/‖f‖²`) | (22) |
-//! | [`BoundKind::BodyRate`] | `3‖j‖² + (4ψ̇² − w_max²) ‖f‖²` (`‖ω‖² ≤ 3‖j‖²/‖f‖² + 4ψ̇²` for `|φ| ≤ π/4`) | (24)-(29) |
+//! | [`BoundKind::BodyRate`] | `A‖j‖² + (Bψ̇² − w_max²) ‖f‖²` (`‖ω‖² ≤ A‖j‖²/‖f‖² + Bψ̇²` while `sin²φ ≤ S`) | (24)-(29) |
+//!
+//! The body-rate inequality needs a bound on the roll `φ` of the attitude construction (13):
+//! it is **certified** per segment by [`crate::roll`] for the levels `S` of
+//! [`crate::roll::ROLL_LEVELS`] (45° .. 75.5°), and the smallest proven level gives `(A, B)`
+//! (`(3, 4)` at the paper's 45°, assumption (25)). A segment whose roll is proven above the
+//! largest level is Violated; one whose roll is not decided is Unknown.
 //!
 //! The polynomials are built twice with the same generic code ([`Scalar`]): in outward-rounded
 //! interval arithmetic for the fast path (so `lo_k <= F_k <= hi_k` holds for the exact
@@ -22,10 +28,11 @@ use num_bigint::BigInt;
 use num_rational::BigRational;
 use num_traits::Zero;
 
-use crate::certify::{certify_enclosure, certify_unit_exact, Certificate, UnitVerdict};
+use crate::certify::{certify_enclosure, certify_unit_exact, to_time, Certificate, UnitVerdict};
 use crate::error::{Error, Result};
 use crate::exact;
 use crate::poly::falling_factorial;
+use crate::roll::{self, RollInput, RollVerdict};
 use crate::spline::SplineView;
 use crate::sturm::{Iv, MAX_DEGREE};
 
@@ -40,7 +47,8 @@ pub enum BoundKind {
     ThrustRate = 2,
     /// `‖j‖ < w_max ‖a + g e3‖`, sufficient for `ω1² + ω2² < w_max²`, eq. (22).
     TiltRate = 3,
-    /// `3‖j‖² + 4ψ̇²‖f‖² < w_max²‖f‖²`, sufficient for `‖ω‖ < w_max` when `|φ| ≤ π/4`, (24)-(29).
+    /// `A‖j‖² + Bψ̇²‖f‖² < w_max²‖f‖²` and a certified roll bound `sin²φ < S`, together
+    /// sufficient for `‖ω‖ < w_max`, (24)-(29); `(A, B) = (3, 4)` for `S = 1/2` (25).
     BodyRate = 4,
 }
 
@@ -239,6 +247,9 @@ struct SegmentPolys<S> {
     f2: Vec<S>,
     j2: Vec<S>,
     psid2: Vec<S>,
+    /// `f = a + g e3` per axis and the yaw, for the roll certificate.
+    f: Vec<Vec<S>>,
+    psi: Vec<S>,
 }
 
 fn segment_polys<S: Scalar>(view: &SplineView<'_>, seg: usize, g: f64) -> SegmentPolys<S> {
@@ -256,11 +267,14 @@ fn segment_polys<S: Scalar>(view: &SplineView<'_>, seg: usize, g: f64) -> Segmen
         f2: sq_norm(&acc),
         j2: sq_norm(&jerk),
         psid2: pmul(&psid, &psid),
+        psi: scaled_derivative(view.poly(seg, 3), 0, &h),
+        f: acc,
     }
 }
 
-/// The checked polynomial `F` of one bound (negative everywhere iff the bound holds).
-fn bound_poly<S: Scalar>(kind: BoundKind, p: &SegmentPolys<S>, limit: f64) -> Vec<S> {
+/// The checked polynomial `F` of one bound (negative everywhere iff the bound holds); for the
+/// body rate, at the roll level `sin²φ <= roll_s2` (see [`roll::body_rate_constants`]).
+fn bound_poly<S: Scalar>(kind: BoundKind, p: &SegmentPolys<S>, limit: f64, roll_s2: f64) -> Vec<S> {
     let l = S::from_f64(limit);
     let l2 = l.mul(&l);
     match kind {
@@ -272,10 +286,11 @@ fn bound_poly<S: Scalar>(kind: BoundKind, p: &SegmentPolys<S>, limit: f64) -> Ve
         BoundKind::ThrustRate => minus_const(&p.j2, &l2),
         // (22): ‖j‖² - w² ‖f‖²
         BoundKind::TiltRate => padd(&p.j2, &pscale(&p.f2, &S::zero().sub(&l2))),
-        // (24)-(29), |phi| <= pi/4: 3 ‖j‖² + (4 ψ̇² - w²) ‖f‖²
+        // (24)-(29), sin²φ <= S: A ‖j‖² + (B ψ̇² - w²) ‖f‖² (A = 3, B = 4 at |φ| <= pi/4)
         BoundKind::BodyRate => {
-            let factor = minus_const(&pscale(&p.psid2, &S::from_f64(4.0)), &l2);
-            padd(&pscale(&p.j2, &S::from_f64(3.0)), &pmul(&factor, &p.f2))
+            let (a, b) = roll::body_rate_constants(roll_s2);
+            let factor = minus_const(&pscale(&p.psid2, &S::from_f64(b)), &l2);
+            padd(&pscale(&p.j2, &S::from_f64(a)), &pmul(&factor, &p.f2))
         }
     }
 }
@@ -292,7 +307,7 @@ pub fn bound_degree(kind: BoundKind, n_coeffs: usize) -> usize {
 }
 
 /// The checked polynomial of one bound on one segment, in `u` on `[0, 1]`, as an interval
-/// enclosure `(lo, hi)` of the exact coefficients.
+/// enclosure `(lo, hi)` of the exact coefficients (the body rate at the 45° roll level).
 pub fn bound_enclosure(
     view: &SplineView<'_>,
     seg: usize,
@@ -301,7 +316,7 @@ pub fn bound_enclosure(
     g: f64,
 ) -> (Vec<f64>, Vec<f64>) {
     let polys = segment_polys::<Iv>(view, seg, g);
-    let f = bound_poly(kind, &polys, limit);
+    let f = bound_poly(kind, &polys, limit, roll::ROLL_LEVELS[0]);
     (
         f.iter().map(|x| x.lo).collect(),
         f.iter().map(|x| x.hi).collect(),
@@ -333,11 +348,31 @@ fn validate(view: &SplineView<'_>, limits: &Limits, g: f64) -> Result<()> {
     Ok(())
 }
 
+/// The smallest level `S` of [`roll::ROLL_LEVELS`] with `sin²φ < S` proven on the segment, or
+/// the body-rate verdict when there is none: Violated where the roll is proven above the
+/// largest level, Unsure (reported Unknown) when it is not decided.
+fn certified_roll_level(p: &SegmentPolys<Iv>) -> std::result::Result<f64, UnitVerdict> {
+    let input = RollInput {
+        f: [&p.f[0], &p.f[1], &p.f[2]],
+        psi: &p.psi,
+    };
+    let mut last = UnitVerdict::Unsure;
+    for s2 in roll::ROLL_LEVELS {
+        match roll::roll_below(&input, s2) {
+            RollVerdict::Within => return Ok(s2),
+            RollVerdict::Violated(u) => last = UnitVerdict::Violated(u),
+            RollVerdict::Unsure => last = UnitVerdict::Unsure,
+        }
+    }
+    Err(last)
+}
+
 /// Certifies every checked bound on every segment (Algorithm 1 per bound and segment).
 ///
 /// Output order is bound-major (`ALL_BOUNDS` x segments). With `exact = true` every checked
-/// verdict is Within or Violated (never Unknown): undecided fast-path cases are rebuilt and
-/// decided in exact rational arithmetic. Violation times are absolute (`t_i + T u`).
+/// polynomial verdict is Within or Violated: undecided fast-path cases are rebuilt and
+/// decided in exact rational arithmetic. The body rate's roll certificate has no exact
+/// fallback: a segment whose roll is neither proven below 75.5° nor above it is Unknown. Violation times are absolute (`t_i + T u`).
 pub fn certify_spline(
     view: &SplineView<'_>,
     limits: &Limits,
@@ -369,24 +404,27 @@ pub fn certify_spline(
                 continue;
             }
             let limit = limits.get(kind);
-            let f = bound_poly(kind, &fast, limit);
+            let mut roll_s2 = roll::ROLL_LEVELS[0];
+            if kind == BoundKind::BodyRate {
+                match certified_roll_level(&fast) {
+                    Ok(s2) => roll_s2 = s2,
+                    Err(v) => {
+                        verdicts[row * n_seg + seg].certificate = Some(to_time(v, t0, t1));
+                        continue;
+                    }
+                }
+            }
+            let f = bound_poly(kind, &fast, limit, roll_s2);
             let lo: Vec<f64> = f.iter().map(|x| x.lo).collect();
             let hi: Vec<f64> = f.iter().map(|x| x.hi).collect();
             let mut v = certify_enclosure(&lo, &hi);
             if v == UnitVerdict::Unsure && exact {
                 let ep =
                     exact_polys.get_or_insert_with(|| segment_polys::<BigRational>(view, seg, g));
-                let fe = bound_poly(kind, ep, limit);
+                let fe = bound_poly(kind, ep, limit, roll_s2);
                 v = certify_unit_exact(&exact::int_poly_from_rational(&fe));
             }
-            let cert = match v {
-                UnitVerdict::Within => Certificate::Within,
-                UnitVerdict::Violated(u) => Certificate::Violated {
-                    t: (t0 + (t1 - t0) * u).clamp(t0, t1),
-                },
-                UnitVerdict::Unsure => Certificate::Unknown,
-            };
-            verdicts[row * n_seg + seg].certificate = Some(cert);
+            verdicts[row * n_seg + seg].certificate = Some(to_time(v, t0, t1));
         }
     }
     Ok(verdicts)
@@ -548,6 +586,50 @@ mod tests {
                 &c,
                 &k,
                 limits([INF, 0.0, INF, INF, 1.0]),
+                BoundKind::BodyRate
+            ),
+            Certificate::Violated { .. }
+        ));
+    }
+
+    #[test]
+    fn body_rate_at_large_roll_uses_the_certified_level() {
+        // |f| = 15 tilted 75 deg towards -y, yaw turning at 1 rad/s around 0: roll ~75 deg and
+        // the true |w| = w3 ~ 1/cos(75 deg) = 3.86 rad/s. The 45-degree inequality
+        // (3, 4) would accept w = 2.5; the certified level (31, 32) needs w^2 > 32.
+        let th = 75f64.to_radians();
+        let ay = -15.0 * th.sin();
+        let az = 15.0 * th.cos() - 9.81;
+        let c = spline(
+            [
+                &[0.0],
+                &[0.0, 0.0, 0.5 * ay],
+                &[0.0, 0.0, 0.5 * az],
+                &[-0.1, 1.0],
+            ],
+            8,
+        );
+        let k = [0.0, 0.2];
+        let body = |w: f64| verdict(&c, &k, limits([INF, 1.0, INF, INF, w]), BoundKind::BodyRate);
+        assert!(matches!(body(2.5), Certificate::Violated { .. }));
+        assert!(matches!(body(5.6), Certificate::Violated { .. }));
+        assert_eq!(body(5.7), Certificate::Within); // sqrt(32) = 5.657
+                                                    // 80 deg: beyond the top level, whatever the limit
+        let th = 80f64.to_radians();
+        let c = spline(
+            [
+                &[0.0],
+                &[0.0, 0.0, -7.5 * th.sin()],
+                &[0.0, 0.0, 7.5 * th.cos() - 4.905],
+                &[0.0, 0.1],
+            ],
+            8,
+        );
+        assert!(matches!(
+            verdict(
+                &c,
+                &k,
+                limits([INF, 1.0, INF, INF, 1e3]),
                 BoundKind::BodyRate
             ),
             Certificate::Violated { .. }

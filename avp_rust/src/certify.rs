@@ -238,7 +238,8 @@ pub fn unit_enclosure(coeffs: &[f64], a: f64, b: f64) -> (Vec<f64>, Vec<f64>) {
     )
 }
 
-fn to_time(v: UnitVerdict, a: f64, b: f64) -> Certificate {
+/// A unit-interval verdict on `[a, b]` in time (`t = a + (b - a) u`).
+pub fn to_time(v: UnitVerdict, a: f64, b: f64) -> Certificate {
     match v {
         UnitVerdict::Within => Certificate::Within,
         UnitVerdict::Violated(u) => Certificate::Violated {

@@ -19,6 +19,7 @@ pub mod error;
 pub mod exact;
 pub mod poly;
 pub mod regions;
+pub mod roll;
 pub mod spline;
 pub mod sturm;
 

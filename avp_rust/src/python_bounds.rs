@@ -99,7 +99,8 @@ fn certify_below_many_py<'py>(
 /// `coeffs` shape `(S, 4, C)` (x, y, z, yaw; ascending powers of `t - knots[i]`), `knots`
 /// shape `(S + 1,)`, `limits` = `[thrust_max, thrust_min, thrust_rate_max, tilt_rate_max,
 /// body_rate_max]` (the row order) mass-normalised (`+inf` = not checked). Returns `(codes int8 (5, S),
-/// t float64 (5, S))` with codes 0 within, 1 violated (at about `t`), 2 unknown, 3 not checked.
+/// t float64 (5, S))` with codes 0 within, 1 violated (at about `t`), 2 unknown (with `exact`,
+/// only a body rate whose roll level is undecided), 3 not checked.
 #[pyfunction(name = "certify_spline")]
 #[pyo3(signature = (coeffs, knots, limits, g = 9.81, exact = true))]
 #[allow(clippy::type_complexity)]

@@ -1,0 +1,73 @@
+"""Overhangs and ceilings, 95-180 deg (issue 8, item 5): approached from below, the thrust turns
+through the horizontal while it stays above thrust_min, every bound certified."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+import avp
+from avp.qp.perching import flip_time
+
+E3 = np.array([0.0, 0.0, 1.0])
+
+
+def ceiling_case(incline_deg: float, below: float = 1.5, standoff: float = 3.0):
+    target = avp.PerchTarget.from_incline([standoff, 0.0, 3.0], math.radians(incline_deg))
+    return avp.State.hover([0.0, 0.0, 3.0 - below]), target
+
+
+@pytest.mark.parametrize("incline_deg", [120.0, 150.0, 165.0, 180.0])
+def test_overhangs_are_certified_without_relaxation(incline_deg) -> None:
+    state, target = ceiling_case(incline_deg)
+    config = avp.PlannerConfig()
+    result = avp.plan_detailed(state, target, config)
+    assert result.ok and not result.relaxations, result.log[-3:]
+    traj = result.trajectory
+    t = traj.sample(5e-4)
+    f = traj(t, 2) + config.g * E3
+    fn = np.linalg.norm(f, axis=1)
+    lim = config.limits
+    assert fn.min() > lim.accel_min and fn.max() < lim.accel_max
+    w = traj.body_rates(t)
+    assert np.linalg.norm(w[:, :2], axis=1).max() < lim.tilt_rate_max
+    # from below: on the outward side of the pad's plane until contact
+    side = (traj(t) - target.point) @ target.s3
+    assert side[t < traj.tf - 1e-3].min() > 0.0
+    # the thrust goes from up to down (s3) through the horizontal, along s1's horizontal part
+    t_w = flip_time(target, config, traj.duration)
+    assert t_w is not None
+    f_w = traj(traj.t0 + t_w, 2) + config.g * E3
+    u = target.s1 * [1.0, 1.0, 0.0] / np.linalg.norm(target.s1[:2])
+    assert abs(f_w[2]) < 1e-6 and f_w @ u >= config.flip.horizontal_thrust(lim) - 1e-6
+    assert f[0] @ E3 > 0.0 and f[-1] @ target.s3 > 0.9 * np.linalg.norm(f[-1])
+
+
+def test_without_the_flip_rows_a_ceiling_is_not_certified() -> None:
+    """The rows are what makes it work: the min-snap thrust otherwise passes through ~0."""
+    state, target = ceiling_case(180.0)
+    config = avp.PlannerConfig(flip=avp.OverhangFlip(enabled=False), bounds=avp.BoundsPolicy(relaxations=()))
+    result = avp.plan_detailed(state, target, config)
+    assert not result.ok
+    bad = {v.bound for v in result.bounds.violations}
+    assert avp.Bound.THRUST_MIN in bad or avp.Bound.TILT_RATE in bad
+
+
+def test_walls_and_slopes_are_unchanged_by_the_overhang_rows() -> None:
+    state = avp.State.hover([0.0, 0.0, 2.5])
+    for incline in (0.0, 45.0, 90.0):
+        target = avp.PerchTarget.from_incline([3.5, 0.0, 1.5], math.radians(incline))
+        a = avp.plan_detailed(state, target).trajectory
+        b = avp.plan_detailed(state, target, avp.PlannerConfig(flip=avp.OverhangFlip(enabled=False))).trajectory
+        assert a is not None and np.array_equal(a.coefficients, b.coefficients)
+
+
+def test_flip_settings_are_validated() -> None:
+    with pytest.raises(avp.ConfigError) as exc:
+        avp.PlannerConfig(flip=avp.OverhangFlip(thrust=25.0))
+    assert exc.value.field == "flip.thrust"
+    with pytest.raises(avp.ConfigError) as exc:
+        avp.OverhangFlip(min_incline=0.5)
+    assert exc.value.field == "flip.min_incline"
