@@ -1,127 +1,610 @@
-"""Command line: ``avp demo`` plans a perch, prints a summary and writes a plot.
+"""Command line: ``avp demo`` (one perch, summary, plot), ``avp simulate`` (seeded closed-loop
+trials, one-shot planning vs AVP) and ``avp campaign`` (a grid x seeds of trials on a process
+pool or Ray, resumable results, summary).
 
-``python -m avp demo --help`` lists the flags. Degrees appear only here (``--incline-deg``).
+``avp --help`` and ``avp COMMAND --help`` list the flags with their defaults. Every planner,
+vehicle, camera and replanner knob can be set from a TOML file (``--config``, see
+``docs/configuration.md``); the common ones also from flags, which win over the file. Degrees
+appear only here (``--incline-deg``, ``--camera-half-fov-deg``); everything else is SI.
+
+Exit codes (:data:`EXIT_CODES`): 0 a plan that meets every constraint and certificate, 3 a plan
+that needed a relaxation, 1 no certified plan, 2 bad input (usage or configuration).
 """
 
 from __future__ import annotations
 
 import argparse
+import json
+import logging
 import math
+import re
 import sys
 import time
 from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
 
 import numpy as np
 
-from .config import PlannerConfig
-from .errors import AvpError
-from .frames import rotation_error_angle
-from .planner import plan_detailed
-from .types import PerchTarget, State
+from .configfile import Settings, load_settings, to_mapping
+from .errors import AvpError, ConfigError
+from .export import trajectory_to_dict
+
+__all__ = ["EXIT_CODES", "EXIT_FAILED", "EXIT_RELAXED", "EXIT_SOLVED", "EXIT_USAGE", "main", "plan_exit_code"]
+
+EXIT_SOLVED = 0
+EXIT_FAILED = 1
+EXIT_USAGE = 2
+EXIT_RELAXED = 3
+EXIT_CODES = {
+    EXIT_SOLVED: "solved: every constraint and certificate met",
+    EXIT_FAILED: "no certified plan (infeasible, solver failure, or a certificate failed)",
+    EXIT_USAGE: "bad input: usage or configuration error",
+    EXIT_RELAXED: "solved after relaxing a soft constraint (slide, band or alpha)",
+}
+
+PLOT_HINT = "matplotlib is not installed: pip install \"avp[plot]\" (or pip install matplotlib) for plots"
+
+log = logging.getLogger("avp.cli")
 
 
-def _demo_parser(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
-    p = sub.add_parser("demo", help="plan one perch, print a summary, write a PNG")
-    p.add_argument("--incline-deg", type=float, default=90.0, help="pad incline: 0 floor, 90 wall (default), 180 ceiling")
-    p.add_argument("--distance", type=float, default=3.5, help="horizontal stand-off from the pad (m), default 3.5")
-    p.add_argument("--lateral", type=float, default=0.0, help="lateral offset of the start along s2 (m)")
-    p.add_argument("--height", type=float, default=None, help="start height above the pad (m); default 0, or 1 below 45 deg incline")
-    p.add_argument("--solver", default=PlannerConfig.solver, help="qpsolvers back-end (daqp, proxqp, osqp)")
+# -- exit codes -------------------------------------------------------------------------------
+
+def plan_exit_code(result: Any) -> int:
+    """:data:`EXIT_SOLVED`, :data:`EXIT_RELAXED` or :data:`EXIT_FAILED` for a
+    :class:`~avp.planner.PlanResult`. A plan is relaxed when its status is ``SOLVED_RELAXED`` or,
+    with planners that report relaxations only in ``result.relaxations``, when that is non-empty;
+    it fails when it has no trajectory or a certificate (bounds, workspace) is not met."""
+    if not result.ok:
+        return EXIT_FAILED
+    bounds = getattr(result, "bounds", None)
+    if bounds is not None and not bounds.certified:
+        return EXIT_FAILED
+    safety = getattr(result, "safety", None)
+    if safety is not None and not getattr(safety, "certified", True):
+        return EXIT_FAILED
+    if result.status.name == "SOLVED_RELAXED" or tuple(getattr(result, "relaxations", ())):
+        return EXIT_RELAXED
+    return EXIT_SOLVED
+
+
+def plan_label(result: Any) -> str:
+    """``"SOLVED"``, ``"RELAXED"`` or ``"FAILED"``: how a plot and the summary mark the plan."""
+    return {EXIT_SOLVED: "SOLVED", EXIT_RELAXED: "RELAXED"}.get(plan_exit_code(result), "FAILED")
+
+
+# -- logging and progress ---------------------------------------------------------------------
+
+class _Below(logging.Filter):
+    def __init__(self, level: int) -> None:
+        super().__init__()
+        self.level = level
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        return record.levelno < self.level
+
+
+def _setup_logging(verbose: int, quiet: bool, machine_output: bool) -> None:
+    """Messages of the ``avp`` loggers: INFO and DEBUG to stdout (the human summary), WARNING and
+    above to stderr. ``-q``: warnings only; ``-v``: also debug lines (the planner's log). With
+    ``--json`` stdout carries only the JSON document."""
+    level = logging.WARNING if quiet or machine_output else (logging.DEBUG if verbose else logging.INFO)
+    logger = logging.getLogger("avp")
+    for h in list(logger.handlers):
+        if getattr(h, "_avp_cli", False):
+            logger.removeHandler(h)
+    out = logging.StreamHandler(sys.stdout)
+    out.addFilter(_Below(logging.WARNING))
+    err = logging.StreamHandler(sys.stderr)
+    err.setLevel(logging.WARNING)
+    err.setFormatter(logging.Formatter("avp: %(levelname)s: %(message)s"))
+    for h in (out, err):
+        h._avp_cli = True  # type: ignore[attr-defined]
+        logger.addHandler(h)
+    logger.setLevel(level)
+    logger.propagate = False
+
+
+def progress(iterable: Any, total: int, desc: str) -> Any:
+    """``tqdm`` progress bar on stderr when stderr is a terminal; otherwise the items unchanged
+    (no ``\\r`` updates in log files) with a log line every tenth of the work."""
+    if sys.stderr.isatty():
+        try:
+            from tqdm import tqdm  # type: ignore[import-untyped]
+        except ImportError:  # pragma: no cover - tqdm is a dependency
+            pass
+        else:
+            return tqdm(iterable, total=total, desc=desc, unit="trial", leave=False)
+    return _logged(iterable, total, desc)
+
+
+def _logged(iterable: Any, total: int, desc: str) -> Any:
+    step = max(1, math.ceil(total / 10))
+    t0 = time.perf_counter()
+    for k, item in enumerate(iterable, 1):
+        yield item
+        if k % step == 0 or k == total:
+            log.info("%s: %d/%d (%.0f s)", desc, k, total, time.perf_counter() - t0)
+
+
+# -- flags shared by the commands -------------------------------------------------------------
+
+class _HelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
+    """Shows ``(default: X)`` except for flags whose default is ``None`` (their help says what
+    ``None`` means) or ``False``."""
+
+    def _get_help_string(self, action: argparse.Action) -> str:
+        if action.default is None or action.default is False or action.default is argparse.SUPPRESS:
+            return action.help or ""
+        return super()._get_help_string(action) or ""
+
+
+def _free_float(text: str) -> float | str:
+    if text.strip().lower() in ("free", "none"):
+        return "none"
+    try:
+        return float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number or 'free', got {text!r}") from None
+
+
+def _common_parser() -> argparse.ArgumentParser:
+    from .camera import Camera
+    from .config import ContactVelocity, PlannerConfig, VehicleLimits
+
+    lim, cv, cam = VehicleLimits(), ContactVelocity(), Camera()
+    p = argparse.ArgumentParser(add_help=False)
+    g = p.add_argument_group("output")
+    g.add_argument("-v", "--verbose", action="count", default=0,
+                   help="more detail: the planner's log and debug messages")
+    g.add_argument("-q", "--quiet", action="store_true", help="warnings and errors only")
+    g.add_argument("--json", action="store_true", help="print one JSON document on stdout instead of the summary")
+    c = p.add_argument_group("configuration (flags win over --config)")
+    c.add_argument("--config", metavar="FILE.toml",
+                   help="TOML file with [planner], [replan], [scenario] tables (docs/configuration.md)")
+    c.add_argument("--solver", help=f"qpsolvers back-end: daqp, proxqp, osqp... (default {PlannerConfig.solver})")
+    c.add_argument("--mass", type=float, help=f"vehicle mass, kg (default {lim.mass})")
+    c.add_argument("--thrust-min", type=float, help=f"minimum thrust, N (default {lim.thrust_min:g})")
+    c.add_argument("--thrust-max", type=float, help=f"maximum thrust, N (default {lim.thrust_max:g})")
+    c.add_argument("--thrust-rate-max", type=float, help=f"thrust rate limit, N/s (default {lim.thrust_rate_max})")
+    c.add_argument("--tilt-rate-max", type=float, help=f"tilt rate limit, rad/s (default {lim.tilt_rate_max:g})")
+    c.add_argument("--body-rate-max", type=float, help=f"body rate limit, rad/s (default {lim.body_rate_max})")
+    alpha = "max(4, g cos(incline))" if PlannerConfig.alpha is None else f"{PlannerConfig.alpha:g}"
+    c.add_argument("--alpha", type=float, help=f"mass-normalised thrust at contact, m/s^2 (default {alpha})")
+    c.add_argument("--contact-normal", type=_free_float, metavar="V|free",
+                   help=f"v.s3 at contact, m/s, negative into the pad (default {cv.normal:g})")
+    c.add_argument("--contact-slope", type=_free_float, metavar="V|free",
+                   help=f"v.s1 at contact, m/s, negative down the slope (default {cv.slope:g}, times sin(incline))")
+    c.add_argument("--contact-lateral", type=_free_float, metavar="V|free",
+                   help=f"v.s2 at contact, m/s (default {cv.lateral:g})")
+    c.add_argument("--camera-half-fov-deg", type=float,
+                   help=f"half-angle of the camera cone, deg (default {math.degrees(cam.half_fov):g})")
+    c.add_argument("--no-fov", action="store_true", help="plan without the field-of-view rows")
+    return p
+
+
+def _flag_overrides(args: argparse.Namespace) -> dict[str, Any]:
+    """The flags given, as a mapping with the nesting of the configuration file."""
+    planner: dict[str, Any] = {}
+    limits = {k: getattr(args, k) for k in ("mass", "thrust_min", "thrust_max", "thrust_rate_max",
+                                             "tilt_rate_max", "body_rate_max") if getattr(args, k) is not None}
+    contact = {k: getattr(args, f"contact_{k}") for k in ("normal", "slope", "lateral")
+               if getattr(args, f"contact_{k}") is not None}
+    if args.solver is not None:
+        planner["solver"] = args.solver
+    if args.alpha is not None:
+        planner["alpha"] = args.alpha
+    if limits:
+        planner["limits"] = limits
+    if contact:
+        planner["contact_velocity"] = contact
+    fov: dict[str, Any] = {}
+    if args.no_fov:
+        fov["enabled"] = False
+    if args.camera_half_fov_deg is not None:
+        fov["camera"] = {"half_fov": math.radians(args.camera_half_fov_deg)}
+    if fov:
+        planner["fov"] = fov
+    return {"planner": planner} if planner else {}
+
+
+def _settings(args: argparse.Namespace, defaults: dict[str, Any] | None = None) -> Settings:
+    return load_settings(args.config, _flag_overrides(args), defaults)
+
+
+def _emit_json(doc: Any) -> None:
+    """Strict JSON on stdout: NaN becomes ``null``, infinities the strings ``"inf"`` / ``"-inf"``
+    (as the configuration file writes them)."""
+    sys.stdout.write(json.dumps(_finite(doc), indent=2, allow_nan=False, default=_json_default) + "\n")
+
+
+def _finite(obj: Any) -> Any:
+    if isinstance(obj, float) and not math.isfinite(obj):
+        return None if math.isnan(obj) else ("inf" if obj > 0 else "-inf")
+    if isinstance(obj, dict):
+        return {k: _finite(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_finite(v) for v in obj]
+    return obj
+
+
+def _json_default(obj: Any) -> Any:
+    if isinstance(obj, (np.floating, np.integer, np.bool_)):
+        return obj.item()
+    if isinstance(obj, np.ndarray):
+        return obj.tolist()
+    return to_mapping(obj) if hasattr(obj, "__dataclass_fields__") else str(obj)
+
+
+# -- avp demo ---------------------------------------------------------------------------------
+
+DEMO_PAD_HEIGHT = 1.5
+"""Height (m) of the demo's pad centre, or of its start when the start is below the pad."""
+
+
+def demo_geometry(incline_deg: float, distance: float, lateral: float, height: float | None) -> tuple[Any, Any, float]:
+    """The demo's start state, pad and start height above the pad (m).
+
+    Default height above the pad: 1 m below a 45 deg incline, 0 up to 90 deg, and -1 m (below the
+    pad) for ceilings and overhangs above 90 deg, whose outward side faces down. The lower of
+    start and pad is at :data:`DEMO_PAD_HEIGHT`, the ground is at z = 0."""
+    from .types import PerchTarget, State
+
+    if not 0.0 <= incline_deg <= 180.0:
+        raise ConfigError("--incline-deg", f"must be in [0, 180] deg, got {incline_deg}")
+    if height is None:
+        height = 1.0 if incline_deg < 45.0 else (0.0 if incline_deg <= 90.0 else -1.0)
+    pad = np.array([distance, 0.0, DEMO_PAD_HEIGHT + max(0.0, -height)])
+    target = PerchTarget.from_incline(pad, math.radians(incline_deg), heading=0.0)
+    start = pad + np.array([-distance, 0.0, height]) + lateral * target.s2
+    return State.hover(start), target, height
+
+
+def _demo_parser(sub: Any, common: argparse.ArgumentParser) -> None:
+    p = sub.add_parser("demo", parents=[common], formatter_class=_HelpFormatter,
+                       help="plan one perch, print a summary, write a PNG",
+                       description="Plan one perch from hover, print a summary (or --json), plot it. "
+                                   "A ground plane at z = 0 is passed to the planner when it supports "
+                                   "workspace limits (unless the config file sets one).")
+    p.add_argument("--incline-deg", type=float, default=90.0, help="pad incline: 0 floor, 90 wall, 180 ceiling")
+    p.add_argument("--distance", type=float, default=3.5, help="horizontal stand-off from the pad, m")
+    p.add_argument("--lateral", type=float, default=0.0, help="lateral offset of the start along s2, m")
+    p.add_argument("--height", type=float, default=None,
+                   help="start height above the pad, m (default: 1 below 45 deg, 0 up to 90 deg, "
+                        "-1 i.e. below the pad above 90 deg)")
     p.add_argument("--output", default="perch_demo.png", help="PNG path for the plot")
     p.add_argument("--no-plot", action="store_true", help="skip the plot")
+    p.add_argument("--export", metavar="FILE", help="write the plan to FILE (.json, .csv or .npz by suffix)")
+    p.add_argument("--export-rate", type=float, metavar="HZ",
+                   help="sample the export at HZ (default: exact coefficients only)")
+
+
+def _ground_default(planner_cls: type) -> dict[str, Any]:
+    """``{"planner": {"workspace": {"ground_z": 0.0}}}`` when the planner has workspace limits."""
+    import dataclasses
+
+    names = {f.name for f in dataclasses.fields(planner_cls)}
+    return {"planner": {"workspace": {"ground_z": 0.0}}} if "workspace" in names else {}
 
 
 def demo(args: argparse.Namespace) -> int:
-    incline = math.radians(args.incline_deg)
-    height = args.height if args.height is not None else (1.0 if args.incline_deg < 45 else 0.0)
-    pad = np.array([args.distance, 0.0, 1.5])
-    target = PerchTarget.from_incline(pad, incline, heading=0.0)
-    start = pad + np.array([-args.distance, 0.0, height]) + args.lateral * target.s2
-    state = State.hover(start)
-    config = PlannerConfig(solver=args.solver)
+    from .config import PlannerConfig
+    from .frames import rotation_error_angle
+    from .planner import plan_detailed
+
+    settings = _settings(args, defaults=_ground_default(PlannerConfig))
+    config = settings.planner
+    state, target, height = demo_geometry(args.incline_deg, args.distance, args.lateral, args.height)
     t0 = time.perf_counter()
     result = plan_detailed(state, target, config)
     first_call = time.perf_counter() - t0
     repeat = plan_detailed(state, target, config)  # steady state: caches and imports warm
-    print(f"avp demo: perch on a {args.incline_deg:g} deg pad, {args.distance:g} m away "
-          f"(lateral {args.lateral:g} m, height {height:g} m), solver {args.solver}")
-    print(f"  status          : {result.status.value}")
+    code = plan_exit_code(result)
+    label = plan_label(result)
+    ground = getattr(getattr(config, "workspace", None), "ground_z", None)
+    log.info("avp demo: perch on a %g deg pad, %g m away (lateral %g m, height %g m), solver %s%s",
+             args.incline_deg, args.distance, args.lateral, height, config.solver,
+             "" if ground is None else f", ground at z = {ground:g} m")
+    log.info("  status          : %s (%s)", result.status.value, label)
+    if result.relaxations:
+        log.info("  relaxations     : %s", ", ".join(r.name.lower() for r in result.relaxations))
     for line in result.log:
-        print(f"    - {line}")
+        log.debug("    - %s", line)
     traj = result.trajectory
-    if traj is None:
-        print("  no trajectory")
-        return 1
-    tf = traj.tf
-    pos_err = float(np.linalg.norm(traj(tf) - target.point))
-    b3 = traj.attitude(tf)[:, 2]
-    att_err = math.degrees(math.acos(max(-1.0, min(1.0, float(b3 @ target.s3)))))
-    frame_err = math.degrees(float(rotation_error_angle(traj.attitude(tf), target.R_WS)))
-    v_S = target.to_target_frame(traj(tf, 1))
-    want = config.contact_velocity.components(target.incline)
-    v_err = max((abs(v_S[i] - w) for i, w in enumerate(want) if w is not None), default=0.0)
-    ts = traj.sample(1e-3)
-    thrust = traj.thrust(ts)
-    rates = np.linalg.norm(traj.body_rates(ts), axis=-1)
-    print(f"  duration        : {traj.duration:.3f} s ({traj.n_segments} segments, degree {traj.degree})")
-    print(f"  contact position: {np.round(traj(tf), 4).tolist()} m (error {pos_err * 1e3:.2e} mm)")
-    print(f"  attitude error  : b3 vs s3 {att_err:.2e} deg, R_WB vs R_WS {frame_err:.2e} deg")
-    print(f"  contact velocity: v_S = {np.round(v_S, 4).tolist()} m/s (error {v_err * 1e3:.2e} mm/s)")
-    print(f"  peak thrust     : {thrust.max():.2f} m/s^2 ({thrust.max() * config.limits.mass:.2f} N at "
-          f"{config.limits.mass} kg), min {thrust.min():.2f} m/s^2; peak body rate {rates.max():.2f} rad/s")
+    summary: dict[str, Any] = {}
+    if traj is not None:
+        tf = traj.tf
+        b3 = traj.attitude(tf)[:, 2]
+        v_S = target.to_target_frame(traj(tf, 1))
+        want = config.contact_velocity.components(target.incline)
+        ts = traj.sample(1e-3)
+        thrust = traj.thrust(ts)
+        rates = np.linalg.norm(traj.body_rates(ts), axis=-1)
+        summary = {
+            "duration_s": traj.duration, "n_segments": traj.n_segments, "degree": traj.degree,
+            "contact_position_m": traj(tf).tolist(),
+            "contact_position_error_m": float(np.linalg.norm(traj(tf) - target.point)),
+            "b3_error_deg": math.degrees(math.acos(max(-1.0, min(1.0, float(b3 @ target.s3))))),
+            "frame_error_deg": math.degrees(float(rotation_error_angle(traj.attitude(tf), target.R_WS))),
+            "contact_velocity_S": v_S.tolist(),
+            "contact_velocity_error_m_s": max((abs(v_S[i] - w) for i, w in enumerate(want) if w is not None), default=0.0),
+            "thrust_max_m_s2": float(thrust.max()), "thrust_min_m_s2": float(thrust.min()),
+            "body_rate_max_rad_s": float(rates.max()),
+            "min_height_m": float(traj(ts)[:, 2].min()),
+        }
+        log.info("  duration        : %.3f s (%d segments, degree %d)", traj.duration, traj.n_segments, traj.degree)
+        log.info("  contact position: %s m (error %.2e mm)", np.round(traj(tf), 4).tolist(),
+                 summary["contact_position_error_m"] * 1e3)
+        log.info("  attitude error  : b3 vs s3 %.2e deg, R_WB vs R_WS %.2e deg", summary["b3_error_deg"],
+                 summary["frame_error_deg"])
+        log.info("  contact velocity: v_S = %s m/s (error %.2e mm/s)", np.round(v_S, 4).tolist(),
+                 summary["contact_velocity_error_m_s"] * 1e3)
+        log.info("  peak thrust     : %.2f m/s^2 (%.2f N at %g kg), min %.2f m/s^2; peak body rate %.2f rad/s; "
+                 "lowest point z = %.2f m", thrust.max(), thrust.max() * config.limits.mass, config.limits.mass,
+                 thrust.min(), rates.max(), summary["min_height_m"])
     tm = repeat.timings
-    print(f"  solve time      : {tm.total * 1e3:.2f} ms (build {tm.build * 1e3:.2f}, QP {tm.solve * 1e3:.2f}, "
-          f"certificate {tm.certify * 1e3:.2f}); first call {first_call * 1e3:.1f} ms with one-time setup")
-    if not args.no_plot:
-        from .plotting import plot_perch
+    log.info("  solve time      : %.2f ms (build %.2f, QP %.2f, certificate %.2f); first call %.1f ms with one-time setup",
+             tm.total * 1e3, tm.build * 1e3, tm.solve * 1e3, tm.certify * 1e3, first_call * 1e3)
+    if code == EXIT_FAILED:
+        shown = result.log[-3:]
+        log.warning("no certified plan: %s%s", result.status.value,
+                    "".join(f"\n    - {line}" for line in shown)
+                    + (f"\n    ({len(result.log) - len(shown)} earlier planner log lines with -v)"
+                       if len(result.log) > len(shown) and args.verbose == 0 else ""))
+    elif code == EXIT_RELAXED:
+        log.warning("the plan needed relaxations: %s", ", ".join(r.name.lower() for r in result.relaxations) or
+                    result.status.value)
+    exported = None
+    if args.export and traj is not None:
+        exported = _export(traj, Path(args.export), args.export_rate)
+        log.info("  export          : %s", exported)
+    plot = None
+    if not args.no_plot and traj is not None:
+        plot = _plot_demo(result, target, config, args, 0.0 if ground is None else ground)
+    if args.json:
+        _emit_json({
+            "command": "demo", "exit_code": code, "label": label, "status": result.status.name,
+            "status_text": result.status.value,
+            "relaxations": [r.name.lower() for r in result.relaxations],
+            "bounds_certified": None if result.bounds is None else bool(result.bounds.certified),
+            "workspace_certified": _workspace_certified(result),
+            "start": {"position": state.position.tolist(), "yaw": state.yaw},
+            "target": {"point": target.point.tolist(), "R_WS": target.R_WS.tolist(), "incline_deg": args.incline_deg},
+            "summary": summary, "log": list(result.log),
+            "timings_ms": {"build": tm.build * 1e3, "solve": tm.solve * 1e3, "certify": tm.certify * 1e3,
+                           "total": tm.total * 1e3, "first_call": first_call * 1e3},
+            "config": {"planner": to_mapping(config)},
+            "trajectory": None if traj is None else trajectory_to_dict(traj),
+            "plot": None if plot is None else str(plot), "export": None if exported is None else str(exported),
+        })
+    return code
 
-        out = plot_perch(traj, target, args.output, title=f"{args.incline_deg:g} deg pad, {args.distance:g} m")
-        print(f"  plot            : {out}")
-    return 0
+
+def _workspace_certified(result: Any) -> bool | None:
+    safety = getattr(result, "safety", None)
+    return None if safety is None else bool(getattr(safety, "certified", False))
 
 
-def _simulate_parser(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
-    p = sub.add_parser("simulate", help="closed-loop trials: one-shot planning vs AVP replanning")
-    p.add_argument("--trials", type=int, default=5, help="seeded trials per distance and mode (default 5)")
-    p.add_argument("--incline-deg", type=float, default=90.0, help="pad incline (default 90: wall)")
-    p.add_argument("--distance", type=float, nargs="+", default=[4.5, 7.5], help="stand-off(s) in m (default 4.5 7.5)")
-    p.add_argument("--lateral", type=float, default=0.0, help="start offset along s2 (m)")
-    p.add_argument("--height", type=float, default=None, help="start height above the pad (m)")
-    p.add_argument("--seed", type=int, default=0, help="first seed (default 0)")
+def _export(traj: Any, path: Path, rate: float | None) -> Path:
+    suffix = path.suffix.lower()
+    if suffix == ".json":
+        traj.to_json(path, rate=rate, indent=1)
+    elif suffix == ".csv":
+        traj.to_csv(path, rate=rate)
+    elif suffix == ".npz":
+        traj.to_npz(path, rate=rate)
+    else:
+        raise ConfigError("--export", f"unknown format {suffix!r}: use a .json, .csv or .npz file name")
+    return path
+
+
+def _plot_demo(result: Any, target: Any, config: Any, args: argparse.Namespace, ground: float) -> Path | None:
+    try:
+        from . import plotting
+    except ImportError:  # pragma: no cover - plotting imports matplotlib lazily
+        log.warning(PLOT_HINT)
+        return None
+    try:
+        out = plotting.plot_plan(result, target, args.output, config=config, ground_z=ground,
+                                 title=f"{args.incline_deg:g} deg pad, {args.distance:g} m", label=plan_label(result))
+    except plotting.MatplotlibMissingError:
+        log.warning(PLOT_HINT)
+        return None
+    log.info("  plot            : %s", out)
+    return out
+
+
+# -- avp simulate -----------------------------------------------------------------------------
+
+def _sweep_flags(p: argparse.ArgumentParser, distances: Sequence[float]) -> None:
+    p.add_argument("--incline-deg", type=float, nargs="+", default=[90.0], help="pad incline(s), deg")
+    p.add_argument("--distance", type=float, nargs="+", default=list(distances), help="stand-off(s), m")
+    p.add_argument("--lateral", type=float, nargs="+", default=[0.0], help="start offset(s) along s2, m")
+    p.add_argument("--height", type=_free_float, nargs="+", default=["none"], metavar="H|none",
+                   help="start height(s) above the pad, m; none: 1 below 45 deg, else 0")
+    p.add_argument("--seed", type=int, default=0, help="first seed")
+    p.add_argument("--backend", choices=("auto", "serial", "pool", "ray"), default="serial",
+                   help="where trials run: serial, a local process pool, or Ray (auto: Ray if installed, else the pool)")
+    p.add_argument("--workers", type=int, default=None, help="parallel workers (default: the CPU count)")
+    p.add_argument("--address", default=None,
+                   help="Ray cluster address (e.g. ray://head:10001 or auto); default: a local Ray instance")
+
+
+def _simulate_parser(sub: Any, common: argparse.ArgumentParser) -> None:
+    p = sub.add_parser("simulate", parents=[common], formatter_class=_HelpFormatter,
+                       help="closed-loop trials: one-shot planning vs AVP replanning",
+                       description="Seeded closed-loop trials of every condition in both modes, with "
+                                   "the paired tables of success, interception and anticipation error.")
+    p.add_argument("--trials", type=int, default=5, help="seeded trials per condition and mode")
+    _sweep_flags(p, (4.5, 7.5))
     p.add_argument("--output-dir", default="avp_simulation", help="directory for the plots")
     p.add_argument("--no-plot", action="store_true", help="skip the plots")
+    p.add_argument("--gif", metavar="FILE.gif", help="animate the first AVP trial of the first condition")
+
+
+PAPER_NOTE = re.compile(r"\s*\((?:cf\. )?paper Table [^()]*\)|;\s*paper: [^\n]*")
+"""The paper's numbers quoted in the tables' headers (a 90 deg wall, no offsets)."""
+
+
+def without_paper_notes(text: str) -> str:
+    """The report without the paper's figures, for conditions the paper did not fly."""
+    return PAPER_NOTE.sub("", text)
 
 
 def simulate(args: argparse.Namespace) -> int:
-    from .sim.evaluate import compare  # the core never imports avp.sim at import time
+    from . import campaign
+    from .sim.evaluate import Comparison, Condition
 
     if args.trials < 1:
-        print("avp: error: --trials must be >= 1", file=sys.stderr)
-        return 2
-    comp = compare(args.trials, inclines=[math.radians(args.incline_deg)], distances=args.distance,
-                   lateral_offsets=[args.lateral], height_offsets=[args.height], seed=args.seed)
-    print(comp.report())
+        raise ConfigError("--trials", f"must be >= 1, got {args.trials}")
+    settings = _settings(args)
+    trials = campaign.grid(args.incline_deg, args.distance, args.lateral, _heights(args.height),
+                           ("one_shot", "avp"), range(args.seed, args.seed + args.trials))
+    runner = campaign.Runner(settings.data, keep_result=True)
+    comp = Comparison([], [args.seed + k for k in range(args.trials)])
+    t0 = time.perf_counter()
+    rows = []
+    outputs = campaign.execute(runner, trials, backend=args.backend, workers=args.workers, address=args.address)
+    for trial, (row, sim) in progress(outputs, len(trials), "simulate"):
+        cond = Condition(trial.incline, trial.distance, trial.lateral, trial.height)
+        if cond not in comp.conditions:
+            comp.conditions.append(cond)
+        comp.results.setdefault((cond, sim.mode), []).append(sim)
+        rows.append(row)
+    comp.wall_time = time.perf_counter() - t0
+    order = {c: k for k, c in enumerate(Condition(t.incline, t.distance, t.lateral, t.height) for t in trials)}
+    comp.conditions.sort(key=order.__getitem__)
+    for runs in comp.results.values():
+        runs.sort(key=lambda r: r.seed)
+    paper = all(abs(c.incline - math.pi / 2) < 1e-9 and c.lateral == 0 and c.height is None for c in comp.conditions)
+    report = comp.report() if paper else without_paper_notes(comp.report())
+    if args.json:
+        _emit_json({"command": "simulate", "rows": sorted(rows, key=lambda r: r["trial_id"]),
+                    "summary": campaign.summarize(rows), "wall_time_s": comp.wall_time})
+    else:
+        log.info("%s", report)
     if not args.no_plot:
-        for path in comp.plot(args.output_dir):
-            print(f"plot: {path}")
-    return 0
+        try:
+            for path in comp.plot(args.output_dir):
+                log.info("plot: %s", path)
+        except ImportError:
+            log.warning(PLOT_HINT)
+    if args.gif:
+        from .sim.run import Mode
+
+        runs = comp.runs(comp.conditions[0], Mode.AVP)
+        try:
+            from .plotting import animate_run
+
+            log.info("animation: %s", animate_run(runs[0], args.gif))
+        except ImportError:
+            log.warning(PLOT_HINT)
+    return EXIT_SOLVED
+
+
+def _heights(values: Sequence[Any]) -> list[float | None]:
+    return [None if v == "none" else float(v) for v in values]
+
+
+# -- avp campaign -----------------------------------------------------------------------------
+
+def _campaign_parser(sub: Any, common: argparse.ArgumentParser) -> None:
+    p = sub.add_parser("campaign", parents=[common], formatter_class=_HelpFormatter,
+                       help="Monte Carlo campaign: a grid x seeds of closed-loop trials on a pool or Ray",
+                       description="Runs every grid cell x mode x seed as one closed-loop trial, on Ray "
+                                   "(local, or a cluster with --address) or a local process pool, and "
+                                   "appends one row per trial to the results file. Re-running with the "
+                                   "same results file skips the trials already there (same grid cell, "
+                                   "seed, mode and configuration), so an interrupted campaign resumes.")
+    p.add_argument("--seeds", type=int, default=10, help="seeds per grid cell and mode")
+    _sweep_flags(p, (1.5, 3.5, 4.5, 7.5))
+    p.set_defaults(backend="auto")
+    p.add_argument("--modes", nargs="+", choices=("one_shot", "avp"), default=["one_shot", "avp"], help="planning modes")
+    p.add_argument("--results", default="avp_campaign.csv", help="results file, .csv or .parquet (needs pyarrow)")
+    p.add_argument("--summary-plot", default="avp_campaign.png", help="PNG of the success rates")
+    p.add_argument("--no-plot", action="store_true", help="skip the plot")
+
+
+def run_campaign(args: argparse.Namespace) -> int:
+    from . import campaign
+
+    if args.seeds < 1:
+        raise ConfigError("--seeds", f"must be >= 1, got {args.seeds}")
+    settings = _settings(args)
+    trials = campaign.grid(args.incline_deg, args.distance, args.lateral, _heights(args.height), args.modes,
+                           range(args.seed, args.seed + args.seeds))
+    stats = campaign.run(trials, settings.data, args.results, backend=args.backend, workers=args.workers,
+                         address=args.address, progress=progress)
+    rows = campaign.ResultStore(args.results).rows()
+    config_id = campaign.config_id(settings.data)
+    rows = [r for r in rows if r["config_id"] == config_id]
+    summary = campaign.summarize(rows)
+    plot = None
+    if not args.no_plot and rows:
+        try:
+            plot = campaign.plot_summary(summary, args.summary_plot)
+        except ImportError:
+            log.warning(PLOT_HINT)
+    if args.json:
+        _emit_json({"command": "campaign", "results": str(args.results), **stats, "summary": summary,
+                    "plot": None if plot is None else str(plot)})
+    else:
+        log.info("%s", campaign.format_summary(summary))
+        log.info("%d trials run, %d already in %s (skipped); backend %s; %.1f trials/min",
+                 stats["ran"], stats["skipped"], args.results, stats["backend"], stats["trials_per_minute"])
+        if plot is not None:
+            log.info("plot: %s", plot)
+    return EXIT_SOLVED
+
+
+# -- entry point ------------------------------------------------------------------------------
+
+def _version() -> str:
+    try:
+        from . import __version__
+
+        return __version__
+    except ImportError:  # pragma: no cover
+        from importlib.metadata import version
+
+        return version("avp")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="avp", formatter_class=_HelpFormatter,
+        description="Active visual perching planner. Exit codes: "
+                    + "; ".join(f"{k} {v}" for k, v in sorted(EXIT_CODES.items())) + ".")
+    parser.add_argument("--version", action="version", version=f"avp {_version()}")
+    sub = parser.add_subparsers(dest="command", required=True, metavar="{demo,simulate,campaign}")
+    common = _common_parser()
+    _demo_parser(sub, common)
+    _simulate_parser(sub, common)
+    _campaign_parser(sub, common)
+    return parser
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="avp", description="Active visual perching planner")
-    sub = parser.add_subparsers(dest="command", required=True)
-    _demo_parser(sub)
-    _simulate_parser(sub)
+    parser = build_parser()
     args = parser.parse_args(argv)
+    _setup_logging(args.verbose, args.quiet, args.json)
     try:
         if args.command == "demo":
             return demo(args)
         if args.command == "simulate":
             return simulate(args)
+        if args.command == "campaign":
+            return run_campaign(args)
     except AvpError as exc:
-        print(f"avp: error: {exc}", file=sys.stderr)
-        return 2
-    return 1  # pragma: no cover
+        log.error("%s", exc)
+        if args.json:
+            _emit_json({"command": args.command, "exit_code": EXIT_USAGE, "error": str(exc),
+                        "field": getattr(exc, "field", None)})
+        return EXIT_USAGE
+    except KeyboardInterrupt:  # pragma: no cover - interactive
+        log.error("interrupted")
+        return 130
+    return EXIT_USAGE  # pragma: no cover
 
 
 if __name__ == "__main__":  # pragma: no cover

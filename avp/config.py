@@ -388,12 +388,13 @@ class PlannerConfig:
         (14) with the perch-plane clearance.
     alpha_range:
         If given, ``(lo, hi)``: the contact thrust is a decision variable in that range (the
-        terminal acceleration is only required to be along ``s3``), as seed 004 does.
+        terminal acceleration is only required to be along ``s3``), as Gao et al., "Adaptive
+        Tracking and Perching for Quadrotor in Dynamic Scenarios" do.
     q, t_k, dt:
         Pre-impact band (14): width ``q``, window ``t_k`` before contact sampled every ``dt``.
     band_min_width:
         PAPER mode: floor (m/s^2) on each component's band width; 0 reproduces the paper's
-        zero-width rows where a component of ``alpha s3 - g e3`` is zero (DESIGN.md).
+        zero-width rows where a component of ``alpha s3 - g e3`` is zero.
     cone_half_angle, cone_facets:
         CONE mode: tilt cone of ``a + g e3`` about ``s3`` (rad), inner polyhedral approximation.
     min_distance:

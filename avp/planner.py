@@ -100,8 +100,9 @@ class PlanResult:
     bounds:
         The :class:`~avp.bounds.BoundReport` of the returned (or last) trajectory.
     relaxations:
-        What was relaxed to obtain certified bounds (:class:`~avp.config.Relaxation`); non-empty
-        exactly when the status is ``SOLVED_RELAXED``.
+        What was relaxed for the returned (or, on failure, the last) trajectory
+        (:class:`~avp.config.Relaxation`); a certified plan has it non-empty exactly when the
+        status is ``SOLVED_RELAXED``.
     safety:
         The :class:`~avp.safety.SafetyReport` (workspace certificates) of the returned (or last)
         trajectory; ``None`` when no workspace limit is active or nothing was solved.
@@ -158,6 +159,7 @@ class _Attempt:
     solve: float
     certify: float = 0.0
     safety: SafetyReport | None = None
+    relaxations: tuple[Relaxation, ...] = ()
 
     @property
     def safe(self) -> bool:
@@ -325,7 +327,7 @@ def plan_detailed(
         if traj is not None:
             traj.provenance = Provenance(
                 status=status.value,
-                relaxations=tuple(r.name for r in relaxed) if status.has_trajectory else (),
+                relaxations=tuple(r.name for r in attempt.relaxations) if attempt else (),
                 bounds_certified=bool(report is not None and report.certified and status.has_trajectory),
                 workspace_certified=bool(attempt is not None and attempt.safe and attempt.safety is not None),
                 fov_dropped=bool(attempt and attempt.fov_dropped),
@@ -334,7 +336,7 @@ def plan_detailed(
             status, traj, T, attempt.outcome if attempt else None,
             tuple(log), PlanTimings(build, solve, certify, time.perf_counter() - t_start),
             bool(attempt and attempt.fov_dropped), max(attempts - 1, 0),
-            report, tuple(relaxed) if status.has_trajectory else (),
+            report, attempt.relaxations if attempt else (),
             attempt.safety if attempt else None,
         )
 
@@ -367,6 +369,7 @@ def plan_detailed(
             attempt_cfg = stage_cfg if first or not stage_cfg.fov.enabled else replace(
                 stage_cfg, fov=replace(stage_cfg.fov, enabled=False))
             attempt = _solve_at(state, target, attempt_cfg, T, log, previous, initvals)
+            attempt.relaxations = tuple(relaxed)
             attempts += 1
             build += attempt.build
             solve += attempt.solve
@@ -390,6 +393,7 @@ def plan_detailed(
                 log.append("bounds certified (Algorithm 1, exact)")
                 if attempt_cfg is not stage_cfg:
                     with_fov, fov_report = _with_fov(state, target, stage_cfg, T, log, previous, initvals)
+                    with_fov.relaxations = attempt.relaxations
                     attempts += 1
                     build, solve, certify = (build + with_fov.build, solve + with_fov.solve,
                                              certify + with_fov.certify + fov_report[1])

@@ -219,6 +219,47 @@ class Trajectory:
         n = int(np.ceil(self.duration / dt - 1e-9))
         return np.minimum(self.t0 + dt * np.arange(n + 1), self.tf)
 
+    # -- exports (avp.export) ---------------------------------------------------------------
+    def to_json(self, path: Any = None, *, rate: float | None = None, indent: int | None = None) -> str:
+        """JSON text with the exact coefficients (and samples at ``rate`` Hz if given); also
+        written to ``path`` if given. :meth:`from_json` reads it back."""
+        from . import export
+
+        return export.write_json(self, path, rate=rate, indent=indent)
+
+    def to_npz(self, path: Any, *, rate: float | None = None) -> Any:
+        """NumPy ``.npz`` with the exact coefficients (and samples at ``rate`` Hz if given)."""
+        from . import export
+
+        return export.write_npz(self, path, rate=rate)
+
+    def to_csv(self, path: Any, *, rate: float | None = None) -> Any:
+        """CSV of samples at ``rate`` Hz (:data:`avp.export.SAMPLE_COLUMNS`), or without a rate
+        one row of exact coefficients per segment and flat output (:meth:`from_csv` reads it)."""
+        from . import export
+
+        return export.write_csv(self, path, rate=rate)
+
+    @classmethod
+    def from_json(cls, source: Any) -> Trajectory:
+        """A trajectory from :meth:`to_json` output (a path or the JSON text)."""
+        from . import export
+
+        return export.read_json(source)
+
+    @classmethod
+    def from_npz(cls, path: Any) -> Trajectory:
+        from . import export
+
+        return export.read_npz(path)
+
+    @classmethod
+    def from_csv(cls, path: Any) -> Trajectory:
+        """A trajectory from a coefficient CSV written by :meth:`to_csv` without a rate."""
+        from . import export
+
+        return export.read_csv(path)
+
     def to_rotorpy(self) -> RotorpyTrajectory:
         """Adapter with rotorpy's trajectory protocol ``update(t) -> flat_output dict``."""
         return RotorpyTrajectory(self)

@@ -1,5 +1,5 @@
 """Public value types at the planner boundary: the vehicle :class:`State` and the
-:class:`PerchTarget` with its frame S (DESIGN.md "Frames and conventions").
+:class:`PerchTarget` with its frame S (``docs/conventions.md``).
 
 All vectors are in the world frame W (z up) unless a name says otherwise; SI units.
 """
@@ -77,7 +77,8 @@ class PerchTarget:
     a horizontal normal with a vertical ``s2``) are rejected by the planner with a
     ``ConfigError`` on ``target.R_WS``.
 
-    The target is static; :meth:`at` is the hook a moving target (roadmap, seed 004) overrides.
+    The target is static; :meth:`at` is the hook a moving target overrides (roadmap: moving
+    platforms, as in Gao et al., "Adaptive Tracking and Perching for Quadrotor in Dynamic Scenarios").
     """
 
     point: Array

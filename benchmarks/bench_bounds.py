@@ -1,6 +1,6 @@
 """Cost of the sound bound certificates (Algorithm 1) against sampling and numpy.roots.
 
-Run: ``/work/venv/bin/python benchmarks/bench_bounds.py``. Prints
+Run: ``python benchmarks/bench_bounds.py``. Prints
 
 * microseconds per certificate for degree 10/20/30 polynomials on [0, 1] (median and p95 over
   batches, fast path only and with the exact fallback), with the fast-path unknown rate;

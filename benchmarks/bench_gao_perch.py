@@ -1,4 +1,4 @@
-"""The benchmark setting of seed 004 (Gao et al., Table IV), which reports that Mao et al.'s
+"""The benchmark setting of Gao et al., "Adaptive Tracking and Perching for Quadrotor in Dynamic Scenarios" (Table IV), which reports that Mao et al.'s
 planner fails at 90 deg: rest start 3 m from the pad at its height, mass-normalised thrust in
 [5, 17] m/s^2, body rate <= 3 rad/s (a planar perch has no roll or yaw motion, so the tilt-rate
 bound is the body-rate bound). Reports whether avp finds a certified plan, the durations, what

@@ -101,7 +101,7 @@ def main() -> None:
     if base is not None:
         print(row("cvxpy + OSQP (build+solve)", base, None))
         print(row("cvxpy + OSQP (solve only)", cached, base_med))
-    # The perching QP alone (issue 2's target): no FoV rows, no certificate.
+    # The perching QP alone: no FoV rows, no certificate.
     bare = dict(fov=avp.FovConfig(enabled=False), bounds=avp.BoundsPolicy(certify=False))
     for solver in ("daqp", "proxqp", "osqp"):
         if solver not in qpsolvers.available_solvers:

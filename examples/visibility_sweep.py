@@ -1,6 +1,6 @@
 """The paper's Table I: target visibility (time % / path %) against the contact velocity.
 
-Sign convention (docs/perception.md, DESIGN.md): the paper's tables swap the component names.
+Sign convention (docs/perception.md, docs/conventions.md): the paper's tables swap the component names.
 Columns are the speed *into* the pad (our ``ContactVelocity.normal = -v``, the paper's "v_S1" in
 {0, 1, 2}; its 0 column is planned at 0.05 m/s, since a contact velocity with ``v . s3 >= 0``
 never reaches the pad and is rejected); rows are the slide along the slope (our ``ContactVelocity.slope``, the paper's "v_S3"

@@ -89,7 +89,7 @@ def gao_case(incline_deg: float):
 
 
 def test_gao_90_deg_fails_with_the_paper_band_and_no_relaxation() -> None:
-    """Reproduces seed 004's claim: with band (14) active, no duration certifies at 90 deg."""
+    """Reproduces Gao et al.'s claim: with band (14) active, no duration certifies at 90 deg."""
     state, target = gao_case(90)
     config = avp.PlannerConfig(limits=GAO, alpha=5.5, bounds=avp.BoundsPolicy(relaxations=()))
     result = avp.plan_detailed(state, target, config)

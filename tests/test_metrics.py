@@ -37,7 +37,7 @@ def test_known_fractions() -> None:
 
 
 def test_target_behind_is_never_visible() -> None:
-    """The one-sided cone: a target straight behind the camera does not count (DESIGN.md)."""
+    """The one-sided cone: a target straight behind the camera does not count."""
     vis = visibility(_hover_then_cruise(), _target([-3.0, 0.0, 0.0]))
     assert vis.time_fraction == 0.0 and vis.path_fraction == 0.0
 

@@ -6,7 +6,7 @@ flatness map (11), (13), the target is visible when
     h(x, psi, a) = cos(half_fov) |n_d| - n_d . e_c <= 0.                                  (7)
 
 This is the one-sided form of the paper's (7): ``|n_d - n_proj| <= tan(half_fov) |n_proj|`` with
-an unsigned ``|n_proj|`` also admits a target behind the camera (DESIGN.md). Around an anticipated
+an unsigned ``|n_proj|`` also admits a target behind the camera. Around an anticipated
 point ``z0 = (x0, psi0, a0)`` the row (8) is ``h(z0) + grad h(z0) . (z - z0) <= 0``, divided by
 ``|n_d(z0)|`` so that every row is dimensionless (``h/|n_d|`` is ``cos(half_fov)`` minus the cosine
 of the angle off the optical axis). ``x``, ``psi`` and ``a`` at the linearisation times are linear

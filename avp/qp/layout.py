@@ -2,7 +2,7 @@
 
 The decision vector stacks, for each flat output (x, y, z, yaw) and segment, the
 ``N + 1`` **normalised** coefficients ``c_hat_k = c_k T_i^k`` of ``p_i(u) = sum_k c_hat_k u^k``
-with ``u = (t - t_i)/T_i`` in ``[0, 1]`` (DESIGN.md: normalised time keeps the constraint
+with ``u = (t - t_i)/T_i`` in ``[0, 1]`` (normalised time keeps the constraint
 matrix well scaled). Column of ``(axis, segment, k)`` is ``(axis * S + segment) * (N + 1) + k``.
 """
 

@@ -1,0 +1,236 @@
+"""Exports of a :class:`~avp.trajectory.Trajectory` for other tools, and loaders back.
+
+Two forms:
+
+- **coefficients** (exact): the knots and the ``(S, 4, N + 1)`` ascending-power coefficients of
+  x, y, z, yaw per segment (local time ``t - t_i``), and ``g``; JSON and NPZ also keep the
+  trajectory's provenance (status, relaxations, certificates) when the planner recorded one. JSON writes floats with Python's
+  shortest round-trip representation, NPZ stores the float64 arrays, CSV writes one row per
+  segment and flat output with ``repr`` floats, so loading back gives bit-identical coefficients.
+- **samples** at a rate (Hz): one row per time with the flat outputs and derivatives, the
+  mass-normalised thrust (10), the attitude ``R_WB`` (11) as a quaternion ``(qw, qx, qy, qz)``
+  and the body rates (22) in B. :func:`read_samples` loads them back as named arrays.
+
+Every writer takes a path and returns it; :meth:`Trajectory.to_json` without a path returns the
+text. The ``Trajectory`` methods ``to_csv``, ``to_json``, ``to_npz``, ``from_csv``, ``from_json``,
+``from_npz`` call these functions.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+from collections.abc import Mapping
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+import numpy.typing as npt
+
+from .errors import ConfigError
+
+if TYPE_CHECKING:  # pragma: no cover
+    from .trajectory import Trajectory
+
+__all__ = [
+    "FORMAT",
+    "SAMPLE_COLUMNS",
+    "read_samples",
+    "sample_table",
+    "trajectory_from_dict",
+    "trajectory_to_dict",
+]
+
+Array = npt.NDArray[np.float64]
+
+FORMAT = "avp.trajectory"
+VERSION = 1
+
+SAMPLE_COLUMNS = (
+    "t", "x", "y", "z", "yaw",
+    "vx", "vy", "vz", "yaw_rate",
+    "ax", "ay", "az", "yaw_acceleration",
+    "jx", "jy", "jz", "sx", "sy", "sz",
+    "thrust", "qw", "qx", "qy", "qz", "wx", "wy", "wz",
+)
+"""Columns of a sampled export: time (s); position (m), yaw (rad); velocity (m/s), yaw rate
+(rad/s); acceleration (m/s^2), yaw acceleration (rad/s^2); jerk (m/s^3); snap (m/s^4);
+mass-normalised thrust (m/s^2); attitude quaternion ``R_WB`` (scalar first); body rates (rad/s, B)."""
+
+
+def _times(traj: Trajectory, rate: float) -> Array:
+    if not (isinstance(rate, (int, float)) and math.isfinite(rate) and rate > 0):
+        raise ConfigError("rate", f"must be a positive sample rate in Hz, got {rate!r}")
+    return traj.sample(1.0 / float(rate))
+
+
+def sample_table(traj: Trajectory, rate: float) -> Array:
+    """``(n, len(SAMPLE_COLUMNS))`` samples at ``rate`` Hz from ``t0`` to ``tf`` (both included)."""
+    from scipy.spatial.transform import Rotation  # type: ignore[import-untyped]
+
+    t = _times(traj, rate)
+    d = traj.derivatives(t)  # (5, n, 4)
+    q_xyzw = Rotation.from_matrix(traj.attitude(t)).as_quat()
+    return np.column_stack([
+        t, d[0], d[1], d[2], d[3, :, :3], d[4, :, :3],
+        traj.thrust(t), q_xyzw[:, 3], q_xyzw[:, :3], traj.body_rates(t),
+    ])
+
+
+def trajectory_to_dict(traj: Trajectory, rate: float | None = None) -> dict[str, Any]:
+    """JSON-ready dict: format tag, ``g``, knots, coefficients, the provenance if the trajectory
+    has one, and with ``rate`` (Hz) a ``samples`` table ``{column: [values]}``."""
+    out: dict[str, Any] = {
+        "format": FORMAT,
+        "version": VERSION,
+        "g": traj.g,
+        "knots": traj.knots.tolist(),
+        "coefficients": traj.coefficients.tolist(),
+    }
+    prov = getattr(traj, "provenance", None)
+    if prov is not None:
+        from .configfile import to_mapping
+
+        out["provenance"] = to_mapping(prov)
+    if rate is not None:
+        table = sample_table(traj, rate)
+        out["samples"] = {name: table[:, k].tolist() for k, name in enumerate(SAMPLE_COLUMNS)}
+    return out
+
+
+def trajectory_from_dict(data: Mapping[str, Any]) -> Trajectory:
+    """The trajectory of a :func:`trajectory_to_dict` dict (samples, if any, are ignored)."""
+    from .trajectory import Trajectory
+
+    if not isinstance(data, Mapping) or data.get("format") != FORMAT:
+        raise ConfigError("format", f"not an {FORMAT} document (expected a 'format': '{FORMAT}' entry)")
+    if data.get("version") != VERSION:
+        raise ConfigError("version", f"unsupported version {data.get('version')!r}; this avp reads {VERSION}")
+    for key in ("knots", "coefficients", "g"):
+        if key not in data:
+            raise ConfigError(key, "missing from the trajectory document")
+    traj = Trajectory(data["coefficients"], data["knots"], g=float(data["g"]))
+    _restore_provenance(traj, data.get("provenance"))
+    return traj
+
+
+def _restore_provenance(traj: Trajectory, data: Any) -> None:
+    """Set ``traj.provenance`` from its exported mapping (planners that record one)."""
+    if data is None:
+        return
+    from . import trajectory as tr_mod
+    from .configfile import from_mapping
+
+    cls = getattr(tr_mod, "Provenance", None)
+    if cls is not None:
+        traj.provenance = from_mapping(cls, data, "provenance")
+
+
+def write_json(traj: Trajectory, path: str | Path | None = None, rate: float | None = None,
+               indent: int | None = None) -> str:
+    text = json.dumps(trajectory_to_dict(traj, rate), indent=indent, allow_nan=False)
+    if path is not None:
+        Path(path).write_text(text + "\n")
+    return text
+
+
+def read_json(source: str | Path) -> Trajectory:
+    """From a path, or from JSON text (a string starting with ``{``)."""
+    text = source if isinstance(source, str) and source.lstrip().startswith("{") else Path(source).read_text()
+    try:
+        data = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise ConfigError("json", f"not valid JSON: {exc}") from exc
+    return trajectory_from_dict(data)
+
+
+def write_npz(traj: Trajectory, path: str | Path, rate: float | None = None) -> Path:
+    """``coefficients``, ``knots``, ``g`` and, with ``rate``, ``samples`` plus ``columns``."""
+    arrays: dict[str, Any] = {"format": np.array(FORMAT), "version": np.array(VERSION),
+                              "coefficients": traj.coefficients, "knots": traj.knots, "g": np.array(traj.g)}
+    prov = getattr(traj, "provenance", None)
+    if prov is not None:
+        from .configfile import to_mapping
+
+        arrays["provenance"] = np.array(json.dumps(to_mapping(prov)))
+    if rate is not None:
+        arrays["samples"] = sample_table(traj, rate)
+        arrays["columns"] = np.array(SAMPLE_COLUMNS)
+    p = Path(path)
+    with p.open("wb") as fh:  # a file object: numpy does not append ".npz" to the name
+        np.savez(fh, **arrays)
+    return p
+
+
+def read_npz(path: str | Path) -> Trajectory:
+    from .trajectory import Trajectory
+
+    with np.load(path, allow_pickle=False) as z:
+        if "format" not in z.files or str(z["format"]) != FORMAT:
+            raise ConfigError("path", f"{str(path)!r} is not an {FORMAT} NPZ file")
+        traj = Trajectory(z["coefficients"], z["knots"], g=float(z["g"]))
+        if "provenance" in z.files:
+            _restore_provenance(traj, json.loads(str(z["provenance"])))
+        return traj
+
+
+COEFFICIENT_HEADER = ("segment", "output", "t_start", "t_end", "g")
+
+
+def write_csv(traj: Trajectory, path: str | Path, rate: float | None = None) -> Path:
+    """With ``rate`` (Hz): one row per sample, columns :data:`SAMPLE_COLUMNS`. Without: one row per
+    segment and flat output (``x, y, z, yaw``) with ``t_start, t_end, g, c0 ... cN`` (ascending
+    powers of ``t - t_start``), which :func:`read_csv` turns back into the trajectory."""
+    p = Path(path)
+    with p.open("w", newline="") as fh:
+        w = csv.writer(fh)
+        if rate is not None:
+            w.writerow(SAMPLE_COLUMNS)
+            for row in sample_table(traj, rate):
+                w.writerow([repr(float(x)) for x in row])
+            return p
+        w.writerow([*COEFFICIENT_HEADER, *(f"c{k}" for k in range(traj.degree + 1))])
+        for s in range(traj.n_segments):
+            for i, name in enumerate(("x", "y", "z", "yaw")):
+                w.writerow([s, name, repr(float(traj.knots[s])), repr(float(traj.knots[s + 1])), repr(traj.g),
+                            *(repr(float(c)) for c in traj.coefficients[s, i])])
+    return p
+
+
+def read_csv(path: str | Path) -> Trajectory:
+    from .trajectory import Trajectory
+
+    with Path(path).open(newline="") as fh:
+        rows = list(csv.reader(fh))
+    if not rows or tuple(rows[0][: len(COEFFICIENT_HEADER)]) != COEFFICIENT_HEADER:
+        raise ConfigError("path", f"{str(path)!r} is not a coefficient CSV (header {COEFFICIENT_HEADER}...); "
+                                  "a sampled CSV has no polynomial: load it with avp.export.read_samples")
+    body = rows[1:]
+    n_seg = len(body) // 4
+    if n_seg == 0 or len(body) != 4 * n_seg:
+        raise ConfigError("path", f"{str(path)!r}: expected 4 rows (x, y, z, yaw) per segment, got {len(body)}")
+    coeffs = np.array([[float(x) for x in r[len(COEFFICIENT_HEADER):]] for r in body]).reshape(n_seg, 4, -1)
+    knots = [float(body[4 * s][2]) for s in range(n_seg)] + [float(body[-1][3])]
+    return Trajectory(coeffs, knots, g=float(body[0][4]))
+
+
+def read_samples(path: str | Path) -> dict[str, Array]:
+    """Sampled data of a CSV, JSON or NPZ export as ``{column: array}`` (:data:`SAMPLE_COLUMNS`)."""
+    p = Path(path)
+    if p.suffix == ".npz":
+        with np.load(p, allow_pickle=False) as z:
+            if "samples" not in z.files:
+                raise ConfigError("path", f"{str(p)!r} holds no samples (written without a rate)")
+            return {str(c): z["samples"][:, k].copy() for k, c in enumerate(z["columns"])}
+    if p.suffix == ".json":
+        data = json.loads(p.read_text())
+        if "samples" not in data:
+            raise ConfigError("path", f"{str(p)!r} holds no samples (written without a rate)")
+        return {k: np.asarray(v, dtype=float) for k, v in data["samples"].items()}
+    with p.open(newline="") as fh:
+        rows = list(csv.reader(fh))
+    if not rows or tuple(rows[0]) != SAMPLE_COLUMNS:
+        raise ConfigError("path", f"{str(p)!r} is not a sampled CSV (header {SAMPLE_COLUMNS[:3]}...)")
+    table = np.array([[float(x) for x in r] for r in rows[1:]], dtype=float).reshape(-1, len(SAMPLE_COLUMNS))
+    return {name: table[:, k] for k, name in enumerate(SAMPLE_COLUMNS)}
