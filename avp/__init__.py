@@ -58,7 +58,9 @@ from .config import (
     Workspace,
 )
 from .metrics import Visibility, visibility
+from .moving import MovingConfig, MovingPlanResult, MovingReplanner, plan_moving, plan_moving_detailed
 from .planner import PlanResult, PlanStatus, PlanTimings, plan, plan_detailed
+from .platform import MotionModel, MovingTarget
 from .replan import ReplanAction, ReplanConfig, Replanner, ReplanStep
 from .safety import SafetyReport
 from .trajectory import Derivative, FlatOutput, Provenance, Trajectory
@@ -76,6 +78,11 @@ __all__ += [
     "FovConfig",
     "FovPointPolicy",
     "HalfSpace",
+    "MotionModel",
+    "MovingConfig",
+    "MovingPlanResult",
+    "MovingReplanner",
+    "MovingTarget",
     "OverhangFlip",
     "PerchTarget",
     "PlanResult",
@@ -101,5 +108,7 @@ __all__ += [
     "Workspace",
     "plan",
     "plan_detailed",
+    "plan_moving",
+    "plan_moving_detailed",
     "visibility",
 ]
