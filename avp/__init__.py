@@ -60,7 +60,9 @@ from .config import (
 from .line import LineTarget, LineYaw
 from .line_planner import LineOptions, LinePlanResult, LineStatus, plan_line
 from .metrics import Visibility, visibility
+from .moving import MovingConfig, MovingPlanResult, MovingReplanner, plan_moving, plan_moving_detailed
 from .planner import PlanResult, PlanStatus, PlanTimings, plan, plan_detailed
+from .platform import MotionModel, MovingTarget
 from .replan import ReplanAction, ReplanConfig, Replanner, ReplanStep
 from .safety import SafetyReport
 from .trajectory import Derivative, FlatOutput, Provenance, Trajectory
@@ -78,6 +80,11 @@ __all__ += [
     "FovConfig",
     "FovPointPolicy",
     "HalfSpace",
+    "MotionModel",
+    "MovingConfig",
+    "MovingPlanResult",
+    "MovingReplanner",
+    "MovingTarget",
     "OverhangFlip",
     "PerchTarget",
     "PlanResult",
@@ -103,6 +110,8 @@ __all__ += [
     "Workspace",
     "plan",
     "plan_detailed",
+    "plan_moving",
+    "plan_moving_detailed",
     "visibility",
 ]
 

@@ -240,10 +240,7 @@ class Replanner:
     ) -> tuple[PlanResult | None, float, str | None]:
         t0 = time.perf_counter()
         try:
-            result = plan_detailed(
-                state, self.target, config, durations=durations, previous=previous,
-                warm_start=previous if self.replan.warm_start else None,
-            )
+            result = self._solve(state, durations, previous, config)
         except AvpError as exc:  # never raise for a planning or solver failure
             elapsed = time.perf_counter() - t0
             self._solve_times.append(elapsed)
@@ -251,3 +248,12 @@ class Replanner:
         elapsed = time.perf_counter() - t0
         self._solve_times.append(elapsed)
         return result, elapsed, None
+
+    def _solve(
+        self, state: State, durations: Array | None, previous: Trajectory | None, config: PlannerConfig
+    ) -> PlanResult:
+        """One planning call (the hook a subclass for another target model overrides)."""
+        return plan_detailed(
+            state, self.target, config, durations=durations, previous=previous,
+            warm_start=previous if self.replan.warm_start else None,
+        )
