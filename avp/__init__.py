@@ -60,7 +60,13 @@ from .config import (
 from .line import LineTarget, LineYaw
 from .line_planner import LineOptions, LinePlanResult, LineStatus, plan_line
 from .metrics import Visibility, visibility
-from .moving import MovingConfig, MovingPlanResult, MovingReplanner, plan_moving, plan_moving_detailed
+from .moving import (
+    MovingConfig,
+    MovingPlanResult,
+    MovingReplanner,
+    plan_moving,
+    plan_moving_detailed,
+)
 from .planner import PlanResult, PlanStatus, PlanTimings, plan, plan_detailed
 from .platform import MotionModel, MovingTarget
 from .replan import ReplanAction, ReplanConfig, Replanner, ReplanStep

@@ -14,7 +14,6 @@ import numpy.typing as npt
 
 from .bounds import BoundReport, certify_spline
 from .config import PlannerConfig, PreImpactMode, Relaxation
-from .frames import MAX_CONTACT_ROLL, contact_frame_error
 from .errors import (
     BoundsNotCertifiedError,
     ConfigError,
@@ -24,6 +23,8 @@ from .errors import (
     SolverError,
     WorkspaceNotCertifiedError,
 )
+from .frames import MAX_CONTACT_ROLL, contact_frame_error
+from .platform import MovingTarget
 from .qp.assemble import ConstraintBlock, build_perching_qp
 from .qp.layout import DecisionLayout, layout_for
 from .request import check_request
@@ -37,7 +38,6 @@ from .safety import (
 from .solve import WARM_START_SOLVERS, QpOutcome, solve_perching_qp
 from .timing import check_durations, initial_durations
 from .trajectory import Provenance, Trajectory
-from .platform import MovingTarget
 from .types import PerchTarget, State
 
 __all__ = ["PlanResult", "PlanStatus", "PlanTimings", "plan", "plan_detailed"]
