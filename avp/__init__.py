@@ -57,8 +57,18 @@ from .config import (
     VehicleLimits,
     Workspace,
 )
+from .line import LineTarget, LineYaw
+from .line_planner import LineOptions, LinePlanResult, LineStatus, plan_line
 from .metrics import Visibility, visibility
+from .moving import (
+    MovingConfig,
+    MovingPlanResult,
+    MovingReplanner,
+    plan_moving,
+    plan_moving_detailed,
+)
 from .planner import PlanResult, PlanStatus, PlanTimings, plan, plan_detailed
+from .platform import MotionModel, MovingTarget
 from .replan import ReplanAction, ReplanConfig, Replanner, ReplanStep
 from .safety import SafetyReport
 from .trajectory import Derivative, FlatOutput, Provenance, Trajectory
@@ -76,6 +86,11 @@ __all__ += [
     "FovConfig",
     "FovPointPolicy",
     "HalfSpace",
+    "MotionModel",
+    "MovingConfig",
+    "MovingPlanResult",
+    "MovingReplanner",
+    "MovingTarget",
     "OverhangFlip",
     "PerchTarget",
     "PlanResult",
@@ -101,5 +116,11 @@ __all__ += [
     "Workspace",
     "plan",
     "plan_detailed",
+    "plan_moving",
+    "plan_moving_detailed",
     "visibility",
 ]
+
+# Line and powerline perches (docs/lines.md)
+__all__ += ["LineOptions", "LinePlanResult", "LineStatus", "LineTarget", "LineYaw", "plan_line"]
+

@@ -18,6 +18,7 @@ import json
 import logging
 import math
 import re
+import signal
 import sys
 import time
 from collections.abc import Sequence
@@ -587,6 +588,8 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
+    if argv is None and hasattr(signal, "SIGPIPE"):  # `avp demo | head`: end quietly, as Unix tools do
+        signal.signal(signal.SIGPIPE, signal.SIG_DFL)
     _setup_logging(args.verbose, args.quiet, args.json)
     try:
         if args.command == "demo":

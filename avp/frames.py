@@ -14,8 +14,6 @@ import math
 import numpy as np
 import numpy.typing as npt
 
-from .errors import ConfigError
-
 __all__ = [
     "GRAVITY",
     "MAX_CONTACT_ROLL",

@@ -14,7 +14,6 @@ import numpy.typing as npt
 
 from .bounds import BoundReport, certify_spline
 from .config import PlannerConfig, PreImpactMode, Relaxation
-from .frames import MAX_CONTACT_ROLL, contact_frame_error
 from .errors import (
     BoundsNotCertifiedError,
     ConfigError,
@@ -24,6 +23,8 @@ from .errors import (
     SolverError,
     WorkspaceNotCertifiedError,
 )
+from .frames import MAX_CONTACT_ROLL, contact_frame_error
+from .platform import MovingTarget
 from .qp.assemble import ConstraintBlock, build_perching_qp
 from .qp.layout import DecisionLayout, layout_for
 from .request import check_request
@@ -131,6 +132,8 @@ def _check_inputs(state: Any, target: Any, config: Any) -> PlannerConfig:
         raise ConfigError("state", f"expected avp.State, got {type(state).__name__}")
     if not isinstance(target, PerchTarget):
         raise ConfigError("target", f"expected avp.PerchTarget, got {type(target).__name__}")
+    if isinstance(target, MovingTarget) and not target.is_static:
+        raise ConfigError("target", "is a moving pad: plan with avp.plan_moving (or pass target.static())")
     if config is None:
         config = PlannerConfig()
     if not isinstance(config, PlannerConfig):
@@ -503,3 +506,14 @@ def plan(
     if result.status is PlanStatus.WORKSPACE_NOT_CERTIFIED:
         raise WorkspaceNotCertifiedError(message, result)
     raise PlanningError(message, result)
+
+
+def planning_error(status: PlanStatus) -> type[PlanningError]:
+    """The :class:`~avp.errors.PlanningError` subclass that reports a plan ending in ``status``
+    (:func:`avp.moving.plan_moving` raises it; ``plan`` above spells out the same mapping)."""
+    return {
+        PlanStatus.INFEASIBLE: InfeasibleError,
+        PlanStatus.SOLVER_FAILED: SolverError,
+        PlanStatus.BOUNDS_NOT_CERTIFIED: BoundsNotCertifiedError,
+        PlanStatus.WORKSPACE_NOT_CERTIFIED: WorkspaceNotCertifiedError,
+    }.get(status, PlanningError)

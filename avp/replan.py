@@ -370,7 +370,8 @@ class Replanner:
         if result is None or not result.ok or result.trajectory is None:
             return False, result.status.value if result is not None else "planning failed", None
         relaxed = getattr(PlanStatus, "SOLVED_RELAXED", None)
-        if not self.replan.allow_relaxed and (result.relaxations or (relaxed is not None and result.status is relaxed)):
+        if not self.replan.allow_relaxed and (getattr(result, "relaxations", ()) or
+                                              (relaxed is not None and result.status is relaxed)):
             return False, "relaxed plan (allow_relaxed is off)", None
         if self.config.bounds.certify and (result.bounds is None or not result.bounds.certified):
             return False, "actuator bounds not certified", None
@@ -412,7 +413,7 @@ class Replanner:
         def record(action: ReplanAction, reason: str, **kw: object) -> ReplanStep:
             err, _ = _target_change(self.committed_target, self.target)
             if action in (ReplanAction.KEPT_PREVIOUS, ReplanAction.FROZEN_NEAR_CONTACT, ReplanAction.PARTIAL) \
-                    and err > rc.reach_tolerance:
+                    and err > rc.reach_tolerance and self._static_pad:
                 reason = (f"{action.name.lower()}: committed contact point {err:.3f} m from the estimate "
                           f"(tolerance {rc.reach_tolerance:.3f} m, budget {budget:.3f} m in "
                           f"{max(remaining, 0.0):.2f} s); {reason}")
@@ -429,19 +430,20 @@ class Replanner:
         e_p = float(np.linalg.norm(odometry.position - ref[0, :3]))
         e_v = float(np.linalg.norm(odometry.velocity - ref[1, :3]))
         anchored = e_p <= rc.anchor_position and e_v <= rc.anchor_velocity
-        if anchored and shift <= rc.target_tolerance and turn <= rc.target_tolerance:
+        if anchored and shift <= rc.target_tolerance and turn <= rc.target_tolerance and self._static_pad:
             return record(ReplanAction.HELD, f"tracking {e_p:.3f} m / {e_v:.3f} m/s, estimate moved {shift:.4f} m",
                           anchored=True)
         try:
             start = _plan_state(committed, t_ex) if anchored else anticipate(committed, odometry, t, t_ex, rc.measured_orders)
         except ConfigError as exc:
             return record(ReplanAction.KEPT_PREVIOUS, f"no start state: {exc}")
-        f_max = 1.0 if shift <= budget else budget / shift
+        f_max = 1.0 if shift <= budget or not self._static_pad else budget / shift
+        fractions = rc.partial_fractions if self._static_pad else (1.0,)
         elapsed_total, n_solves, last_reason = 0.0, 0, ""
         last_result: PlanResult | None = None
-        for frac in rc.partial_fractions:
+        for frac in fractions:
             f = frac * f_max
-            goal = _blend(self.committed_target, self.target, f)
+            goal = _blend(self.committed_target, self.target, f) if f < 1.0 else self.target
             durations = np.full(self.config.n_segments, self._retimed(remaining, goal) / self.config.n_segments)
             result, elapsed, error = self._plan(start, goal, durations, committed, self._replan_config)
             elapsed_total += elapsed
@@ -482,10 +484,10 @@ class Replanner:
     ) -> tuple[PlanResult | None, float, str | None]:
         t0 = time.perf_counter()
         try:
-            result = plan_detailed(
-                state, target, config, durations=durations, previous=previous,
-                warm_start=previous if self.replan.warm_start else None,
-            )
+            if target is self.target:
+                result = self._solve(state, durations, previous, config)
+            else:  # a blended (partial) target: only the static-pad hook plans to another target
+                result = Replanner._solve(self, state, durations, previous, config, target=target)
         except _PLANNING_ERRORS as exc:  # never raise for a planning or solver failure
             elapsed = time.perf_counter() - t0
             self._solve_times.append(elapsed)
@@ -493,3 +495,20 @@ class Replanner:
         elapsed = time.perf_counter() - t0
         self._solve_times.append(elapsed)
         return result, elapsed, None
+
+    def _solve(
+        self, state: State, durations: Array | None, previous: Trajectory | None, config: PlannerConfig,
+        target: PerchTarget | None = None,
+    ) -> PlanResult:
+        """One planning call to ``target`` (default: the latest estimate); the hook a subclass for
+        another target model overrides (it then plans to its own ``self.target``, and the policy
+        uses full corrections only: no blending, reach budget or ``CANNOT_REACH``)."""
+        return plan_detailed(
+            state, target if target is not None else self.target, config, durations=durations,
+            previous=previous, warm_start=previous if self.replan.warm_start else None,
+        )
+
+    @property
+    def _static_pad(self) -> bool:
+        """Whether planning uses this class's static-pad hook (partial corrections available)."""
+        return type(self)._solve is Replanner._solve

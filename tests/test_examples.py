@@ -36,3 +36,11 @@ def test_visibility_sweep_example_writes_table_and_heatmap(tmp_path: Path) -> No
     rows = [line for line in proc.stdout.splitlines() if "|" in line and "%" in line]
     assert len(rows) == 6  # free, -3, -2, -1, 0, +1 slide rows
     assert out.read_bytes()[:4] == b"\x89PNG"
+
+
+def test_moving_perch_example(tmp_path: Path) -> None:
+    proc = subprocess.run([sys.executable, str(EXAMPLES / "moving_perch.py")], capture_output=True,
+                          text=True, timeout=120, cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.startswith("status: SOLVED")
+    assert "bounds certified: True" in proc.stdout and "clearance: certified" in proc.stdout

@@ -1,0 +1,506 @@
+"""Perching on a moving platform: arrival-time search over the terminal map of Gao et al.,
+"Adaptive Tracking and Perching for Quadrotor in Dynamic Scenarios" (IEEE T-RO 2023), Sec. V-D.
+
+For a fixed duration ``T`` the pad's state at ``t_f = t_0 + T`` is predicted by the platform
+model (:mod:`avp.platform`) and the perching QP is linear (:mod:`avp.qp.moving`). The arrival
+time is then searched in one dimension (``docs/moving.md``):
+
+1. ``T_1`` is the fixed point of the time-allocation rule (:class:`~avp.config.TimeAllocation`)
+   with the gap to the *predicted* pad that the vehicle must add to coasting and its speed
+   relative to the pad (three iterations).
+2. Each candidate ``T`` is solved and its actuator bounds certified (Algorithm 1, Rust
+   kernels, :func:`avp.bounds.certify_spline`). Its score is the certified cost
+   ``Phi(T) = J(T) + rho_T T``: the QP objective (snap integral plus slip cost ``w |nu|^2``, in
+   physical units) plus a time weight, as the time regularisation of Gao et al. (their (53));
+   an uncertified or infeasible ``T`` scores ``+inf``.
+3. Bracketing: while ``T`` is not certified it is multiplied by ``growth``; when the reason
+   changes between two failures (tilt rate, then thrust) the window between them is bisected.
+   Once one ``T`` certifies, a second certified point one growth step away (shorter first) and
+   one log-log secant step to the minimiser of ``Phi`` under ``J ~ T^-k``. At most
+   ``max_solves`` QP solves.
+4. The best-scoring certified candidate gets the moving-plane clearance certificate
+   (:mod:`avp.moving_clearance`) and the static workspace regions (:mod:`avp.safety`); if they
+   fail, the next best is tried.
+
+The result is the best certified candidate *evaluated*, not a proven global minimiser of ``Phi``
+(certification is not monotone in ``T``). A platform that outruns the vehicle (no duration up
+to ``max_duration`` certifies) is an honest ``BOUNDS_NOT_CERTIFIED`` result; :func:`plan_moving`
+raises the matching :class:`~avp.errors.PlanningError`.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from . import _validate as v
+from .bounds import BoundReport, certify_spline
+from .camera import FovConfig
+from .config import PlannerConfig
+from .errors import (
+    ConfigError,
+    InfeasibleError,
+)
+from .moving_clearance import ClearanceReport, certify_moving_clearance
+from .planner import PlanStatus, planning_error
+from .platform import MovingTarget
+from .qp.moving import MovingQpBuilder, TerminalYaw, contact_point, objective
+from .replan import ReplanConfig, Replanner, ReplanStep
+from .safety import RESIDUAL_TOL, SafetyReport, certify_workspace
+from .solve import solve_perching_qp
+from .trajectory import Trajectory
+from .types import PerchTarget, State
+
+__all__ = [
+    "ContactErrors", "MovingConfig", "MovingPlanResult", "MovingReplanner", "contact_errors", "plan_moving",
+    "plan_moving_detailed",
+]
+
+Array = npt.NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class MovingConfig:
+    """Terminal map and arrival-time search for a moving pad (Gao et al. Sec. V-D, VI).
+
+    Parameters
+    ----------
+    normal_speed:
+        ``v_n`` (m/s, > 0): relative speed into the surface at contact (their (45)).
+    slip_max:
+        Bound on each tangential relative speed ``|nu_x|, |nu_y|`` (m/s) (their (46)); 0 asks
+        for zero tangential relative velocity (equality rows).
+    slip_weight:
+        ``w`` of the slip cost ``w |nu|^2`` (their (47)), in units of the snap cost per (m/s)^2.
+    zero_jerk:
+        ``p'''(t_f) = 0`` (their Sec. V-D): no body rate at contact.
+    yaw:
+        :class:`~avp.qp.moving.TerminalYaw`.
+    contact_thrust_margin:
+        The contact thrust ``alpha`` is free in the thrust limits shrunk by this fraction of their
+        span at each end (their ``tau_e``, (50)); ``None`` keeps ``config.alpha_range`` /
+        ``config.alpha``.
+    time_weight:
+        ``rho_T`` of the searched score ``J(T) + rho_T T``.
+    growth:
+        Factor on ``T`` while no candidate is certified (> 1).
+    max_solves:
+        QP solves per plan at most.
+    max_duration:
+        Longest duration tried (s).
+    retime:
+        With a fixed ``duration`` (replans): factors tried in order on it when the plan at the
+        given duration does not certify (a plan planned at the edge of the limits would
+        otherwise keep the stale plan); ``()`` keeps the duration strictly.
+
+    The landing-gear offset ``l`` (their (43): the CoM at contact is ``rho + l s3``) and the
+    clearance switch come from ``config.workspace`` (``body_offset``, ``perch_clearance``), as for
+    a static pad.
+    """
+
+    normal_speed: float = 0.3
+    slip_max: float = 1.0
+    slip_weight: float = 1000.0
+    zero_jerk: bool = True
+    yaw: TerminalYaw = TerminalYaw.HEADING
+    contact_thrust_margin: float | None = 0.05
+    time_weight: float = 1000.0
+    growth: float = 1.25
+    max_solves: int = 7
+    max_duration: float = 12.0
+    retime: tuple[float, ...] = (1.03, 0.97)
+
+    def __post_init__(self) -> None:
+        v.positive_float("moving.normal_speed", self.normal_speed)
+        for name in ("slip_max", "slip_weight", "time_weight"):
+            val = v.finite_float(f"moving.{name}", getattr(self, name))
+            if val < 0.0:
+                raise ConfigError(f"moving.{name}", f"must be >= 0, got {val}")
+        if self.contact_thrust_margin is not None:
+            m = v.finite_float("moving.contact_thrust_margin", self.contact_thrust_margin)
+            if not 0.0 <= m < 0.5:
+                raise ConfigError("moving.contact_thrust_margin", f"must be in [0, 0.5), got {m}")
+        g = v.finite_float("moving.growth", self.growth)
+        if g <= 1.0:
+            raise ConfigError("moving.growth", f"must be > 1, got {g}")
+        if isinstance(self.max_solves, bool) or not isinstance(self.max_solves, int) or self.max_solves < 1:
+            raise ConfigError("moving.max_solves", f"must be an integer >= 1, got {self.max_solves!r}")
+        v.positive_float("moving.max_duration", self.max_duration)
+        if any(not (math.isfinite(f) and f > 0.0) for f in self.retime):
+            raise ConfigError("moving.retime", f"every factor must be finite and > 0, got {self.retime}")
+        if not isinstance(self.yaw, TerminalYaw):
+            raise ConfigError("moving.yaw", f"must be an avp.qp.moving.TerminalYaw, got {self.yaw!r}")
+
+
+@dataclass(frozen=True)
+class Candidate:
+    """One arrival time tried by the search."""
+
+    duration: float
+    score: float
+    objective: float
+    certified: bool
+    note: str
+
+
+@dataclass(frozen=True)
+class ContactErrors:
+    """Contact state of a plan against the predicted pad (at ``t_f``).
+
+    ``position``: ``|p(t_f) - (rho + l s3)|`` (m); ``attitude``: angle between ``b3`` and ``s3``
+    (rad); ``normal_velocity``: ``(v - v_pad) . s3 + v_n`` (m/s, 0 when as asked); ``slip``:
+    tangential relative velocity ``(nu_x, nu_y)`` (m/s); ``thrust``: contact thrust (m/s^2).
+    """
+
+    position: float
+    attitude: float
+    normal_velocity: float
+    slip: tuple[float, float]
+    thrust: float
+
+
+@dataclass(frozen=True)
+class MovingPlanResult:
+    """Outcome of :func:`plan_moving_detailed` (duck-compatible with ``PlanResult``: ``status``,
+    ``ok``, ``trajectory``, ``log``)."""
+
+    status: PlanStatus
+    trajectory: Trajectory | None
+    pad: MovingTarget | None
+    durations: Array
+    bounds: BoundReport | None = None
+    clearance: ClearanceReport | None = None
+    score: float = math.inf
+    candidates: tuple[Candidate, ...] = ()
+    log: tuple[str, ...] = ()
+    solve_time: float = 0.0
+    total_time: float = 0.0
+    contact: ContactErrors | None = field(default=None)
+    safety: SafetyReport | None = None
+
+    @property
+    def ok(self) -> bool:
+        return self.status.has_trajectory and self.trajectory is not None
+
+    @property
+    def arrival_time(self) -> float:
+        """``t_f`` (s), NaN without a plan."""
+        return float(self.trajectory.tf) if self.trajectory is not None else math.nan
+
+    @property
+    def n_solves(self) -> int:
+        return len(self.candidates)
+
+
+def contact_errors(
+    traj: Trajectory, target: MovingTarget, moving: MovingConfig | None = None, body_offset: float = 0.0
+) -> ContactErrors:
+    """Contact state of ``traj`` against ``target`` predicted at ``traj.tf`` (``body_offset`` as
+    ``config.workspace.body_offset``)."""
+    moving = moving if moving is not None else MovingConfig()
+    pad = target.at(traj.tf)
+    p, vel, acc = (traj(traj.tf, order) for order in (0, 1, 2))
+    f = acc + np.array([0.0, 0.0, traj.g])
+    b3 = f / np.linalg.norm(f)
+    rel = vel - pad.velocity
+    return ContactErrors(
+        position=float(np.linalg.norm(p - contact_point(pad, body_offset))),
+        attitude=float(math.atan2(np.linalg.norm(np.cross(b3, pad.s3)), float(b3 @ pad.s3))),
+        normal_velocity=float(rel @ pad.s3 + moving.normal_speed),
+        slip=(float(rel @ pad.s1), float(rel @ pad.s2)),
+        thrust=float(np.linalg.norm(f)),
+    )
+
+
+def _planner_config(config: PlannerConfig | None, moving: MovingConfig) -> PlannerConfig:
+    cfg = config if config is not None else PlannerConfig()
+    if not isinstance(cfg, PlannerConfig):
+        raise ConfigError("config", f"expected avp.PlannerConfig, got {type(cfg).__name__}")
+    # The FoV rows (8) aim at a static pad; for a moving pad they are not formulated (docs/moving.md).
+    changes: dict[str, Any] = {}
+    if isinstance(cfg.fov, FovConfig) and cfg.fov.enabled:
+        changes["fov"] = replace(cfg.fov, enabled=False)
+    if moving.contact_thrust_margin is not None:
+        lo, hi = cfg.limits.accel_min, cfg.limits.accel_max
+        m = moving.contact_thrust_margin * (hi - lo)
+        changes["alpha_range"] = (lo + m, hi - m)
+    return replace(cfg, **changes) if changes else cfg
+
+
+def _initial_duration(state: State, target: MovingTarget, cfg: PlannerConfig, moving: MovingConfig) -> float:
+    """Fixed point of the allocation rule (three iterations) with the displacement the vehicle
+    must add to coasting, ``rho(t_0 + T) + l s3 - (p_0 + v_0 T)``, and its speed relative to the
+    predicted pad (a vehicle already tracking the platform only closes the gap)."""
+    T = cfg.time_allocation.total(float(np.linalg.norm(target.point - state.position)), 0.0)
+    for _ in range(3):
+        pad = target.at(state.time + T)
+        gap = contact_point(pad, cfg.workspace.body_offset) - (state.position + T * state.velocity)
+        T = cfg.time_allocation.total(float(np.linalg.norm(gap)), float(np.linalg.norm(state.velocity - pad.velocity)))
+    return min(T, moving.max_duration)
+
+
+@dataclass
+class _Eval:
+    T: float
+    pad: MovingTarget
+    traj: Trajectory | None
+    report: BoundReport | None
+    objective: float
+    score: float
+    note: str
+    clearance: ClearanceReport | None = None
+    safety: SafetyReport | None = None
+
+    @property
+    def failure(self) -> frozenset[str]:
+        """Why the candidate is not certified: the violated bounds (empty when certified)."""
+        if math.isfinite(self.score):
+            return frozenset()
+        if self.report is None:
+            return frozenset({"qp"})
+        return frozenset(x.bound.value for x in self.report.violations) or frozenset({"undecided"})
+
+
+def plan_moving_detailed(
+    state: State,
+    target: MovingTarget,
+    config: PlannerConfig | None = None,
+    moving: MovingConfig | None = None,
+    *,
+    duration: float | None = None,
+) -> MovingPlanResult:
+    """Plan a perch on a moving pad; never raises for infeasibility (module docstring).
+
+    Parameters
+    ----------
+    state:
+        Start state (the plan starts at ``state.time``).
+    target:
+        :class:`~avp.platform.MovingTarget` (its state at ``target.time``; predicted from there).
+    config:
+        :class:`~avp.config.PlannerConfig`: limits, spline, cost, pre-impact band. Its FoV rows
+        are not used and, with ``moving.contact_thrust_margin``, the contact thrust is free.
+    moving:
+        :class:`MovingConfig`.
+    duration:
+        Fixed total duration (s): no arrival-time search (replanning keeps the contact time).
+    """
+    t_start = time.perf_counter()
+    if not isinstance(state, State):
+        raise ConfigError("state", f"expected avp.State, got {type(state).__name__}")
+    if not isinstance(target, MovingTarget):
+        raise ConfigError("target", f"expected avp.platform.MovingTarget, got {type(target).__name__}")
+    mcfg = moving if moving is not None else MovingConfig()
+    if not isinstance(mcfg, MovingConfig):
+        raise ConfigError("moving", f"expected avp.moving.MovingConfig, got {type(mcfg).__name__}")
+    cfg = _planner_config(config, mcfg)
+    lim = cfg.limits
+    log: list[str] = []
+    evals: list[_Eval] = []
+    solve_time = 0.0
+    builder = MovingQpBuilder(state, cfg, mcfg.normal_speed, mcfg.slip_max, mcfg.slip_weight, mcfg.zero_jerk,
+                              mcfg.yaw, cfg.workspace.body_offset)
+
+    def evaluate(T: float) -> _Eval:
+        nonlocal solve_time
+        pad = target.at(state.time + T)
+        t0 = time.perf_counter()
+        qp = builder.build(pad, T)
+        try:
+            out = solve_perching_qp(qp, cfg)
+        except InfeasibleError as exc:
+            solve_time += time.perf_counter() - t0
+            return _Eval(T, pad, None, None, math.inf, math.inf, f"infeasible: {exc}")
+        solve_time += time.perf_counter() - t0
+        if not out.ok or out.c_hat is None:
+            return _Eval(T, pad, None, None, math.inf, math.inf, f"QP {out.status.value}")
+        traj = qp.trajectory(out.c_hat, cfg.g)
+        report = certify_spline(
+            traj.coefficients, traj.knots, thrust_min=lim.accel_min, thrust_max=lim.accel_max,
+            thrust_rate_max=lim.thrust_rate_max / lim.mass, tilt_rate_max=lim.tilt_rate_max,
+            body_rate_max=lim.body_rate_max, g=cfg.g,
+        )
+        J = objective(qp, out.c_hat, cfg)
+        if not report.certified:
+            note = "; ".join(str(x) for x in report.violations[:2]) or "bounds undecided"
+            return _Eval(T, pad, traj, report, J, math.inf, note)
+        return _Eval(T, pad, traj, report, J, J + mcfg.time_weight * T, "bounds certified")
+
+    def run(T: float) -> _Eval:
+        e = evaluate(T)
+        evals.append(e)
+        log.append(f"T = {T:.4f} s: {e.note}" + (f", score {e.score:.4g}" if math.isfinite(e.score) else ""))
+        return e
+
+    if duration is not None:
+        T = v.positive_float("duration", duration)
+        for factor in (1.0, *mcfg.retime):  # a fixed arrival time, nudged only if uncertified
+            if math.isfinite(run(T * factor).score):
+                break
+    else:
+        _search(run, _initial_duration(state, target, cfg, mcfg), mcfg, log)
+    best = _pick(evals, target, cfg, log)
+    total = time.perf_counter() - t_start
+    candidates = tuple(Candidate(e.T, e.score, e.objective, math.isfinite(e.score), e.note) for e in evals)
+    if best is not None and best.traj is not None:
+        return MovingPlanResult(
+            PlanStatus.SOLVED, best.traj, best.pad, best.traj.durations, best.report, best.clearance,
+            best.score, candidates, tuple(log), solve_time, total,
+            contact_errors(best.traj, target, mcfg, cfg.workspace.body_offset), best.safety,
+        )
+    last = evals[-1]
+    if any(e.clearance is not None or e.safety is not None for e in evals):
+        status = PlanStatus.WORKSPACE_NOT_CERTIFIED
+    elif all(e.traj is None for e in evals):
+        status = PlanStatus.INFEASIBLE if any(e.note.startswith("infeasible") or "no solution" in e.note for e in evals) \
+            else PlanStatus.SOLVER_FAILED
+    else:
+        status = PlanStatus.BOUNDS_NOT_CERTIFIED
+        speed = float(np.linalg.norm(target.velocity))
+        log.append(f"no certified arrival time up to {max(e.T for e in evals):.2f} s (platform speed "
+                   f"{speed:.2f} m/s); the limits may not allow catching this platform")
+    return MovingPlanResult(status, None, last.pad, np.full(cfg.n_segments, last.T / cfg.n_segments), last.report,
+                            next((e.clearance for e in reversed(evals) if e.clearance is not None), None),
+                            math.inf, candidates, tuple(log), solve_time, total, None,
+                            next((e.safety for e in reversed(evals) if e.safety is not None), None))
+
+
+def _search(run: Any, T1: float, mcfg: MovingConfig, log: list[str]) -> None:
+    """Arrival-time search (module docstring, step 3); ``run(T)`` evaluates and records ``T``."""
+    log.append(f"initial arrival-time guess {T1:.4f} s")
+    T, n, grew = T1, 0, False
+    best: _Eval | None = None
+    prev: _Eval | None = None
+    while n < mcfg.max_solves:  # bracket: grow T until certified
+        e = run(T)
+        n += 1
+        if math.isfinite(e.score):
+            best = e
+            break
+        if prev is not None and e.failure != prev.failure:
+            # The reason changed between prev.T and T (e.g. tilt rate -> thrust): a certified
+            # window, if any, lies between them; bisect geometrically.
+            _bisect(run, prev, e, mcfg.max_solves - n)
+            return  # the window is narrow: no refinement around it
+        if T >= mcfg.max_duration:
+            return
+        prev = e
+        T, grew = min(T * mcfg.growth, mcfg.max_duration), True
+    if best is None:
+        return
+    # Refine: a second certified point one growth step away (shorter first unless shorter is
+    # known to fail), then one log-log secant step to the minimiser of J + rho T under J ~ T^-k.
+    fail_below = prev.T if prev is not None and prev.T < best.T else 0.0
+    cert = [best]
+    for factor in ((1.0 / mcfg.growth, mcfg.growth) if not grew else (mcfg.growth,)):
+        if n >= mcfg.max_solves or best.T * factor > mcfg.max_duration:
+            return
+        e = run(best.T * factor)
+        n += 1
+        if math.isfinite(e.score):
+            cert.append(e)
+            break
+        if factor < 1.0:
+            fail_below = max(fail_below, e.T)
+    if len(cert) < 2 or n >= mcfg.max_solves or mcfg.time_weight == 0.0:
+        return
+    a, b = sorted(cert, key=lambda c: c.T)
+    if not a.objective > b.objective > 0.0:
+        return
+    k = math.log(a.objective / b.objective) / math.log(b.T / a.T)
+    T_star = (k * b.objective * b.T**k / mcfg.time_weight) ** (1.0 / (k + 1.0))
+    T_star = min(max(T_star, fail_below * 1.02, a.T / mcfg.growth**2), b.T * mcfg.growth**2, mcfg.max_duration)
+    if all(abs(T_star - c.T) > 0.03 * c.T for c in cert):
+        run(T_star)
+
+
+def _bisect(run: Any, lo: _Eval, hi: _Eval, budget: int) -> None:
+    """Geometric bisection between two uncertified durations that fail for different reasons,
+    until one certifies or the budget is spent."""
+    for _ in range(budget):
+        e = run(math.sqrt(lo.T * hi.T))
+        if math.isfinite(e.score):
+            return
+        if e.failure == lo.failure:
+            lo = e
+        else:
+            hi = e
+
+
+def _pick(evals: list[_Eval], target: MovingTarget, cfg: PlannerConfig, log: list[str]) -> _Eval | None:
+    """Best certified candidate that also passes the moving-plane clearance certificate and the
+    static workspace regions (ground, speed, half-spaces, spheres: :func:`avp.safety.
+    certify_workspace` without the perch plane, which moves)."""
+    ws = cfg.workspace
+    static_ws = replace(ws, perch_clearance=False)
+    check_static = ws.ground_z is not None or math.isfinite(ws.max_speed) or bool(ws.half_spaces) or bool(ws.spheres)
+    for e in sorted((e for e in evals if math.isfinite(e.score)), key=lambda e: e.score):
+        assert e.traj is not None
+        if ws.perch_clearance:
+            e.clearance = certify_moving_clearance(e.traj, target, ws.body_offset, RESIDUAL_TOL)
+            log.append(f"T = {e.T:.4f} s: {e.clearance.summary()}")
+            if not e.clearance.certified:
+                continue
+        if check_static:
+            e.safety = certify_workspace(e.traj, e.pad.static(), static_ws)
+            log.append(f"T = {e.T:.4f} s: workspace {'certified' if e.safety.certified else 'NOT certified'}")
+            if not e.safety.certified:
+                continue
+        return e
+    return None
+
+
+def plan_moving(
+    state: State,
+    target: MovingTarget,
+    config: PlannerConfig | None = None,
+    moving: MovingConfig | None = None,
+) -> Trajectory:
+    """:func:`plan_moving_detailed`, returning the trajectory or raising a
+    :class:`~avp.errors.PlanningError` subclass with ``.result``."""
+    result = plan_moving_detailed(state, target, config, moving)
+    if result.ok and result.trajectory is not None:
+        return result.trajectory
+    message = f"no perching trajectory on the moving pad: {result.status.value}; " + "; ".join(result.log[-2:])
+    raise planning_error(result.status)(message, result)
+
+
+class MovingReplanner(Replanner):
+    """:class:`~avp.replan.Replanner` for a pad on a moving platform.
+
+    ``step(t, odometry, target_estimate)`` takes the latest platform-state estimate as a
+    :class:`~avp.platform.MovingTarget` (pad pose and platform state at its own ``time``), which
+    the motion model predicts to the contact time. The first plan searches the arrival time; a
+    replan anticipates the start state (6) exactly as for a static pad and keeps the committed
+    contact time (``duration = t_f - t_ex``), so only the predicted pad changes.
+    """
+
+    def __init__(
+        self,
+        target: MovingTarget,
+        config: PlannerConfig | None = None,
+        replan: ReplanConfig | None = None,
+        moving: MovingConfig | None = None,
+        trajectory: Trajectory | None = None,
+    ) -> None:
+        if not isinstance(target, MovingTarget):
+            raise ConfigError("target", f"expected avp.platform.MovingTarget, got {type(target).__name__}")
+        super().__init__(target, config, replan, trajectory)
+        self.moving = moving if moving is not None else MovingConfig()
+
+    def step(self, t: float, odometry: State, target_estimate: PerchTarget | None = None) -> ReplanStep:
+        if target_estimate is not None and not isinstance(target_estimate, MovingTarget):
+            raise ConfigError("target_estimate", f"expected avp.platform.MovingTarget, got {type(target_estimate).__name__}")
+        return super().step(t, odometry, target_estimate)
+
+    def _solve(  # type: ignore[override]  # returns the duck-compatible MovingPlanResult
+        self, state: State, durations: Array | None, previous: Trajectory | None, config: PlannerConfig
+    ) -> MovingPlanResult:
+        assert isinstance(self.target, MovingTarget)
+        duration = float(np.sum(durations)) if durations is not None else None
+        return plan_moving_detailed(state, self.target, config, self.moving, duration=duration)

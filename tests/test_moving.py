@@ -1,0 +1,361 @@
+"""Moving perch pads (Gao et al., "Adaptive Tracking and Perching for Quadrotor in Dynamic
+Scenarios"): the platform model, the terminal map at the predicted pad, the moving-plane
+clearance certificate, the arrival-time search and bad input."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from scipy.integrate import solve_ivp
+
+import avp
+from avp.moving import MovingConfig, contact_errors, plan_moving, plan_moving_detailed
+from avp.moving_clearance import certify_moving_clearance, clearance
+from avp.platform import MotionModel, MovingTarget
+from avp.qp.moving import MovingQpBuilder, TerminalYaw
+from avp.solve import solve_perching_qp
+
+LIMITS = avp.VehicleLimits(mass=1.0, thrust_min=5.0, thrust_max=17.0, tilt_rate_max=3.0)
+"""The seed's limits (its Table III): mass-normalised thrust 5-17 m/s^2, rate 3 rad/s."""
+CONFIG = avp.PlannerConfig(limits=LIMITS, alpha=5.5, pre_impact=avp.PreImpactMode.OFF)
+QP_CONFIG = avp.PlannerConfig(limits=LIMITS, alpha=5.5, pre_impact=avp.PreImpactMode.OFF,
+                              fov=avp.FovConfig(enabled=False), alpha_range=(5.6, 16.4))
+
+speeds = st.floats(-4.0, 4.0)
+turn_rates = st.floats(-0.5, 0.5)
+angles = st.floats(-math.pi, math.pi)
+
+
+def platform(incline: float, speed: float, turn_rate: float = 0.0, heading: float = 0.0,
+             vertical: float = 0.0, model: MotionModel = MotionModel.CTRV) -> MovingTarget:
+    return MovingTarget.on_platform([0.0, 0.0, 1.0], incline=incline, heading=heading, speed=speed,
+                                    turn_rate=turn_rate, vertical_speed=vertical, model=model)
+
+
+def behind(target: MovingTarget, distance: float = 3.0, height: float = 0.0) -> avp.State:
+    """Start ``distance`` behind the pad along the heading, moving with the platform."""
+    h = np.array([math.cos(target.heading), math.sin(target.heading), 0.0])
+    return avp.State(position=target.point - distance * h + [0.0, 0.0, height], velocity=target.velocity,
+                     yaw=target.heading)
+
+
+# -- platform model ------------------------------------------------------------------------
+
+@given(speed=speeds, turn=turn_rates, heading=angles, vertical=st.floats(-1, 1), dt=st.floats(-3.0, 5.0))
+def test_ctrv_prediction_matches_integrating_the_model(speed, turn, heading, vertical, dt):
+    """at(t) equals a numerical integration of d rho/dt = (v cos theta, v sin theta, v_v)."""
+    tgt = platform(0.7, speed, turn, heading, vertical)
+    sol = solve_ivp(lambda t, x: [speed * math.cos(x[3]), speed * math.sin(x[3]), vertical, turn],
+                    (0.0, dt), [*tgt.point, heading], rtol=1e-11, atol=1e-12) if dt != 0 else None
+    ref = sol.y[:3, -1] if sol is not None else tgt.point
+    pad = tgt.at(dt)
+    assert np.allclose(pad.point, ref, atol=1e-8)
+    assert pad.heading == pytest.approx(heading + turn * dt)
+    assert np.allclose(pad.velocity, [speed * math.cos(heading + turn * dt), speed * math.sin(heading + turn * dt), vertical])
+    # the pad frame turns with the heading: s3 keeps its height and rotates about e3 by turn*dt
+    assert np.allclose(pad.R_WS, avp.platform.rot_z(turn * dt) @ tgt.R_WS, atol=1e-12)
+    assert pad.at(0.0).point == pytest.approx(tgt.point, abs=1e-9)
+
+
+@given(speed=speeds, heading=angles, dt=st.floats(0.0, 5.0))
+def test_constant_velocity_and_vanishing_turn_rate_agree(speed, heading, dt):
+    cv = platform(0.3, speed, 0.2, heading, 0.1, model=MotionModel.CONSTANT_VELOCITY)  # turn rate ignored
+    ctrv = platform(0.3, speed, 1e-12, heading, 0.1)
+    assert np.allclose(cv.at(dt).point, cv.point + dt * cv.velocity, atol=1e-12)
+    assert np.allclose(cv.at(dt).point, ctrv.at(dt).point, atol=1e-9)
+    assert np.array_equal(cv.at(dt).R_WS, cv.R_WS)
+
+
+def test_static_pads_are_unchanged():
+    pad = avp.PerchTarget.from_incline([1.0, 2.0, 1.5], 0.8)
+    assert pad.at(12.0) is pad
+    still = MovingTarget.from_pad(pad)
+    assert still.is_static
+    assert np.array_equal(still.at(5.0).point, pad.point) and np.array_equal(still.at(5.0).R_WS, pad.R_WS)
+
+
+# -- terminal map (fixed arrival time) ---------------------------------------------------
+
+def solve_fixed(state, target, T, **kw):
+    opts = dict(normal_speed=0.3, slip_max=1.0, slip_weight=1000.0, zero_jerk=True, yaw=TerminalYaw.HEADING,
+                body_offset=0.0)
+    opts.update(kw)
+    builder = MovingQpBuilder(state, QP_CONFIG, **opts)
+    pad = target.at(state.time + T)
+    qp = builder.build(pad, T)
+    out = solve_perching_qp(qp, QP_CONFIG)
+    assert out.ok
+    return qp.trajectory(out.c_hat, QP_CONFIG.g), pad
+
+
+@settings(max_examples=25)
+@given(incline=st.floats(0.0, 1.5), speed=speeds, turn=turn_rates, heading=angles, T=st.floats(1.5, 4.0),
+       offset=st.floats(0.0, 0.1), t0=st.floats(-2.0, 2.0))
+def test_terminal_conditions_on_random_platforms(incline, speed, turn, heading, T, offset, t0):
+    """The seed's terminal map holds at the predicted pad whatever the platform does."""
+    tgt = platform(incline, speed, turn, heading)
+    state = behind(tgt.at(t0), 3.0, 0.5)
+    state = avp.State(position=state.position, velocity=state.velocity, yaw=state.yaw, time=t0)
+    traj, pad = solve_fixed(state, tgt, T, body_offset=offset)
+    tf = traj.tf
+    assert tf == pytest.approx(t0 + T)
+    assert np.linalg.norm(traj(tf) - (pad.point + offset * pad.s3)) < 1e-9  # (43)
+    f = traj(tf, 2) + [0, 0, QP_CONFIG.g]
+    angle = math.atan2(np.linalg.norm(np.cross(f, pad.s3)), float(f @ pad.s3))
+    assert angle < 1e-9  # (48)-(49)
+    assert 5.6 - 1e-6 <= np.linalg.norm(f) <= 16.4 + 1e-6  # (50): thrust free inside the limits
+    rel = traj(tf, 1) - pad.velocity
+    assert float(rel @ pad.s3) == pytest.approx(-0.3, abs=1e-9)  # (45)-(46) normal push
+    assert abs(float(rel @ pad.s1)) <= 1.0 + 1e-7 and abs(float(rel @ pad.s2)) <= 1.0 + 1e-7  # slip bound
+    assert np.linalg.norm(traj(tf, 3)) < 1e-7  # zero jerk at contact
+    yaw = float(traj.yaw(tf))
+    assert math.cos(yaw - pad.heading) == pytest.approx(1.0, abs=1e-12)  # (44)
+
+
+def test_zero_slip_bound_synchronises_the_full_velocity():
+    tgt = platform(1.0, 2.0, 0.2)
+    traj, pad = solve_fixed(behind(tgt), tgt, 3.0, slip_max=0.0)
+    rel = traj(traj.tf, 1) - pad.velocity
+    assert np.allclose(rel, -0.3 * pad.s3, atol=1e-9)
+
+
+def test_slip_cost_pulls_the_slip_towards_zero():
+    """The homogenised slip cost is the seed's |nu|^2: raising its weight cannot raise |nu|."""
+    tgt = platform(0.5, 2.0, 0.2)
+    slips = []
+    for w in (0.0, 10.0, 1e4):
+        traj, pad = solve_fixed(behind(tgt), tgt, 2.8, slip_weight=w)
+        rel = traj(traj.tf, 1) - pad.velocity
+        slips.append(math.hypot(rel @ pad.s1, rel @ pad.s2))
+    assert slips[0] >= slips[1] - 1e-9 >= slips[2] - 2e-9
+    assert slips[2] < 0.1 * max(slips[0], 1e-3)
+
+
+@settings(max_examples=15)
+@given(v=st.tuples(st.floats(-5, 5), st.floats(-5, 5), st.floats(-1, 1)))
+def test_constant_velocity_platform_is_the_static_problem_in_its_frame(v):
+    """Galilean invariance, an oracle we did not write: with a constant-velocity platform the
+    optimum is the static plan in the platform frame plus ``v (t - t0)`` (snap, thrust and
+    attitude only see the acceleration)."""
+    heading = 0.4
+    speed = math.hypot(v[0], v[1])
+    heading = math.atan2(v[1], v[0]) if speed > 0 else heading
+    tgt = MovingTarget.on_platform([0, 0, 1], incline=0.7, heading=heading, speed=speed, vertical_speed=v[2],
+                                   model=MotionModel.CONSTANT_VELOCITY)
+    state = avp.State(position=[-2.5, 0.4, 1.3], velocity=np.array([0.5, 0.0, 0.2]) + tgt.velocity, yaw=heading)
+    T = 2.6
+    moving, _ = solve_fixed(state, tgt, T)
+    still = MovingTarget.from_pad(tgt.static(), heading=heading)
+    rel_state = avp.State(position=state.position, velocity=state.velocity - tgt.velocity, yaw=heading)
+    static, _ = solve_fixed(rel_state, still, T)
+    t = np.linspace(0, T, 57)
+    assert np.allclose(moving(t), static(t) + np.outer(t, tgt.velocity), atol=1e-7)
+    assert np.allclose(moving(t, 2), static(t, 2), atol=1e-6)
+
+
+def test_stationary_limit_equals_the_static_planner():
+    """A pad that does not move, asked for the static planner's contact conditions, gives the
+    static planner's trajectory (same QP): zero tangential velocity, no jerk row, yaw rule (13)."""
+    pad = avp.PerchTarget.from_incline([0.0, 0.0, 1.0], 0.6)
+    cfg = avp.PlannerConfig(limits=LIMITS, alpha=8.0, pre_impact=avp.PreImpactMode.OFF, fov=avp.FovConfig(enabled=False),
+                            contact_velocity=avp.ContactVelocity(normal=-0.3, slope=0.0, lateral=0.0),
+                            bounds=avp.BoundsPolicy(factors=(), relaxations=()))
+    state = avp.State.hover([-3.0, 0.0, 1.0])
+    static = avp.plan_detailed(state, pad, cfg, durations=[0.9, 0.9, 0.9])
+    mcfg = MovingConfig(slip_max=0.0, zero_jerk=False, yaw=TerminalYaw.PAD, contact_thrust_margin=None)
+    moving = plan_moving_detailed(state, MovingTarget.from_pad(pad), cfg, mcfg, duration=2.7)
+    assert static.ok and moving.ok
+    t = np.linspace(0.0, 2.7, 41)
+    assert np.allclose(moving.trajectory.derivatives(t), static.trajectory.derivatives(t), atol=1e-7)
+
+
+# -- moving-plane clearance ---------------------------------------------------------------
+
+@pytest.mark.parametrize("incline,speed,turn", [(0.5, 2.0, 0.0), (1.0, 1.0, 0.2), (0.0, 6.0, 0.0), (1.5, 2.0, 0.2)])
+def test_clearance_certificate_against_a_dense_grid(incline, speed, turn):
+    tgt = platform(incline, speed, turn)
+    state = behind(tgt, 3.0, 1.0 if incline < 0.3 else 0.0)
+    res = plan_moving_detailed(state, tgt, CONFIG)
+    assert res.ok and res.clearance is not None and res.clearance.certified
+    traj = res.trajectory
+    t = np.linspace(traj.t0, traj.tf, 20001)
+    h = clearance(traj, tgt, t)
+    assert h[:-1].min() > min(0.0, res.clearance.contact_residual_lower) - 1e-12
+    assert abs(h[-1]) < 1e-9
+    assert (res.clearance.taylor_order == 0) == (turn == 0.0)  # exact polynomial without a turn
+
+
+@settings(max_examples=20)
+@given(shift=st.floats(-0.05, 0.05), tilt=st.floats(-0.05, 0.05))
+def test_clearance_certificate_is_sound(shift, tilt):
+    """Against a pad displaced along its normal and tilted (so the plan may cross it), a
+    'certified' verdict never coexists with a grid point below the plane."""
+    tgt = platform(1.0, 2.0, 0.2)
+    traj, _ = solve_fixed(behind(tgt), tgt, 3.0)
+    R = tgt.R_WS @ np.array([[1, 0, 0], [0, math.cos(tilt), -math.sin(tilt)], [0, math.sin(tilt), math.cos(tilt)]])
+    other = MovingTarget(point=tgt.point + shift * tgt.s3, R_WS=R, heading=tgt.heading, speed=tgt.speed,
+                         turn_rate=tgt.turn_rate, time=tgt.time)
+    rep = certify_moving_clearance(traj, other)
+    h = clearance(traj, other, np.linspace(traj.t0, traj.tf, 4001))
+    if rep.certified:
+        assert h[:-1].min() > min(0.0, rep.contact_residual_lower) - 1e-12
+    if h.min() < -1e-9:
+        assert not rep.certified
+
+
+def test_clearance_failure_is_reported():
+    """A start below the moving roof cannot be certified: honest status, not a crash."""
+    tgt = platform(0.0, 4.0, model=MotionModel.CONSTANT_VELOCITY)
+    res = plan_moving_detailed(behind(tgt, 3.0, -0.5), tgt, CONFIG)
+    assert not res.ok and res.trajectory is None
+    assert res.clearance is not None and not res.clearance.certified
+
+
+# -- the search on the seed's grid --------------------------------------------------------
+
+@pytest.mark.parametrize("name,tgt,height", [
+    ("plane 1.0 rad at 2 m/s", platform(1.0, 2.0, model=MotionModel.CONSTANT_VELOCITY), 0.0),
+    ("roof at 8.3 m/s", platform(0.0, 8.3, model=MotionModel.CONSTANT_VELOCITY), 1.5),
+    ("CTRV 0.5 rad at 3 m/s", platform(0.5, 3.0, 0.2), 0.0),
+])
+def test_seed_grid_cases_are_certified_with_exact_contact(name, tgt, height):
+    res = plan_moving_detailed(behind(tgt, 3.0, height), tgt, CONFIG)
+    assert res.ok, res.log
+    assert res.bounds is not None and res.bounds.certified
+    err = contact_errors(res.trajectory, tgt, MovingConfig())
+    assert err.position < 1e-3 and err.attitude < math.radians(0.5) and abs(err.normal_velocity) < 1e-3
+    assert max(abs(x) for x in err.slip) <= 1.0 + 1e-6
+    t = res.trajectory.sample(1e-3)
+    f = res.trajectory.thrust(t)
+    assert 5.0 < f.min() and f.max() < 17.0
+    assert np.linalg.norm(res.trajectory.body_rates(t)[:, :2], axis=1).max() < 3.0
+
+
+# -- bad input ---------------------------------------------------------------------------
+
+def test_bad_input_is_a_config_error_naming_the_field():
+    with pytest.raises(avp.ConfigError, match="target.speed"):
+        platform(0.5, float("nan"))
+    with pytest.raises(avp.ConfigError, match="target.turn_rate"):
+        platform(0.5, 1.0, float("inf"))
+    with pytest.raises(avp.ConfigError, match="moving.normal_speed"):
+        MovingConfig(normal_speed=0.0)
+    with pytest.raises(avp.ConfigError, match="moving.slip_max"):
+        MovingConfig(slip_max=-1.0)
+    with pytest.raises(avp.ConfigError, match="target"):
+        plan_moving_detailed(avp.State.hover([0, 0, 1]), avp.PerchTarget.from_incline([1, 0, 1], 0.3), CONFIG)
+
+
+def test_negative_speed_is_a_reversing_platform():
+    tgt = platform(0.5, -1.0, model=MotionModel.CONSTANT_VELOCITY)
+    assert tgt.at(1.0).point[0] == pytest.approx(-1.0)
+    h = np.array([1.0, 0.0, 0.0])
+    res = plan_moving_detailed(avp.State(position=tgt.point - 3 * h, velocity=tgt.velocity), tgt, CONFIG)
+    assert res.ok
+
+
+def test_a_platform_outrunning_the_limits_is_an_honest_failure():
+    """108 km/h away from a hovering vehicle 3 m behind, contact within 3 s: the pad is 93 m away
+    by then, more than 0.5 * 13 m/s^2 * (3 s)^2 = 58 m of reach with the horizontal thrust."""
+    tgt = platform(0.5, 30.0, model=MotionModel.CONSTANT_VELOCITY)
+    state = avp.State.hover(tgt.point - [3.0, 0.0, 0.0])
+    mcfg = MovingConfig(max_duration=3.0)
+    res = plan_moving_detailed(state, tgt, CONFIG, mcfg)
+    assert res.status is avp.PlanStatus.BOUNDS_NOT_CERTIFIED and res.trajectory is None
+    assert all(c.duration <= 3.0 for c in res.candidates)
+    with pytest.raises(avp.BoundsNotCertifiedError):
+        plan_moving(state, tgt, CONFIG, mcfg)
+
+
+@pytest.mark.parametrize("slip_weight,slip_max", [(1000.0, 1.0), (0.0, 1.0), (0.0, 0.0)])
+def test_two_stage_elimination_matches_the_generic_one(slip_weight, slip_max):
+    """The builder's cached null space gives the same optimum as PerchingQp's own elimination."""
+    from dataclasses import replace
+    tgt = platform(1.0, 2.0, 0.2)
+    builder = MovingQpBuilder(behind(tgt), QP_CONFIG, 0.3, slip_max, slip_weight, True, TerminalYaw.HEADING, 0.0)
+    qp = builder.build(tgt.at(3.0), 3.0)
+    generic = replace(qp)
+    assert "elimination" in qp.__dict__ and "elimination" not in generic.__dict__
+    a, b = solve_perching_qp(qp, QP_CONFIG), solve_perching_qp(generic, QP_CONFIG)
+    assert a.ok and b.ok
+    assert np.allclose(a.c_hat, b.c_hat, atol=1e-7 * np.abs(b.c_hat).max())
+
+
+# -- replanning ----------------------------------------------------------------------------
+
+def test_replanner_follows_platform_estimates():
+    """Replanning at 30 Hz from the committed plan with platform-state estimates: when the
+    platform speeds up mid-flight (new estimate), the last committed plan meets the pad where the
+    new motion puts it at contact (exact odometry, so anticipation (6) is exact)."""
+    from avp.moving import MovingReplanner
+    first = platform(0.5, 2.0, model=MotionModel.CONSTANT_VELOCITY)
+    rp = MovingReplanner(first, CONFIG, avp.ReplanConfig(latency=0.02, freeze_horizon=0.25))
+    s0 = behind(first)
+    step = rp.step(0.0, s0, first)
+    assert step.action is avp.ReplanAction.INITIAL_PLAN
+    tf0 = step.trajectory.tf
+    faster = None
+    t = 1.0 / 30.0
+    while t < tf0:
+        traj = rp.trajectory
+        odo = avp.State(position=traj(t), velocity=traj(t, 1), acceleration=traj(t, 2), jerk=traj(t, 3),
+                        yaw=float(traj.yaw(t)), yaw_rate=float(traj.yaw(t, 1)), time=t)
+        if faster is None and t > 0.4 * tf0:  # the platform accelerates to 2.5 m/s: new estimate
+            now = first.at(t)
+            faster = MovingTarget(point=now.point, R_WS=now.R_WS, heading=now.heading, speed=2.5, time=t,
+                                  model=MotionModel.CONSTANT_VELOCITY)
+        rp.step(t, odo, faster.at(t) if faster is not None else first.at(t))
+        t += 1.0 / 30.0
+    actions = {s.action for s in rp.history}
+    assert avp.ReplanAction.REPLANNED in actions and avp.ReplanAction.FROZEN_NEAR_CONTACT in actions
+    final = rp.trajectory
+    assert final.tf == pytest.approx(tf0)  # replans keep the committed contact time
+    err = contact_errors(final, faster, MovingConfig())
+    assert err.position < 1e-3 and err.attitude < math.radians(0.5) and abs(err.normal_velocity) < 1e-3
+    assert np.linalg.norm(final(final.tf) - first.at(final.tf).point) > 0.1  # it did follow the change
+
+
+def test_static_workspace_regions_are_certified_on_moving_plans():
+    """The 1.5 rad perch swings about 1 m below the pad: a ground 0.5 m below the pad rejects it
+    (honest status, the report names the region); a ground far below certifies."""
+    from dataclasses import replace
+    tgt = platform(1.5, 2.0, 0.2)
+    low = replace(CONFIG, workspace=avp.Workspace(ground_z=0.5))
+    res = plan_moving_detailed(behind(tgt), tgt, low)
+    assert res.status is avp.PlanStatus.WORKSPACE_NOT_CERTIFIED and res.trajectory is None
+    assert res.safety is not None and not res.safety.certified
+    with pytest.raises(avp.WorkspaceNotCertifiedError):
+        plan_moving(behind(tgt), tgt, low)
+    ok = plan_moving_detailed(behind(tgt), tgt, replace(CONFIG, workspace=avp.Workspace(ground_z=-5.0)))
+    assert ok.ok and ok.safety is not None and ok.safety.certified
+    z = ok.trajectory(ok.trajectory.sample(1e-3))[:, 2]
+    assert z.min() > -5.0 and z.min() < 0.5  # the swing that the first ground rejects
+
+
+def test_the_static_planner_refuses_a_moving_pad():
+    """avp.plan would freeze the pad at its current pose: a typed error points to plan_moving."""
+    state = avp.State.hover([-3.0, 0.0, 1.0])
+    with pytest.raises(avp.ConfigError, match="plan_moving"):
+        avp.plan_detailed(state, platform(0.5, 2.0), CONFIG)
+    still = MovingTarget.from_pad(avp.PerchTarget.from_incline([0.0, 0.0, 1.0], 0.5))
+    assert avp.plan_detailed(state, still, CONFIG).ok  # a pad that does not move is a static pad
+
+
+@pytest.mark.parametrize("turn", [0.8, 1.5, -2.0])
+def test_fast_turns_cap_the_taylor_order_soundly(turn):
+    """A fast or long turn needs more than the kernel's degree 40: the order is capped and the
+    larger remainder keeps the verdict sound."""
+    from avp.moving_clearance import MAX_TAYLOR_ORDER
+    tgt = platform(0.5, 3.0, turn)
+    traj, _ = solve_fixed(behind(tgt), tgt, 4.0)
+    rep = certify_moving_clearance(traj, tgt)
+    assert rep.taylor_order <= MAX_TAYLOR_ORDER
+    h = clearance(traj, tgt, np.linspace(traj.t0, traj.tf, 20001))
+    if rep.certified:
+        assert h[:-1].min() > min(0.0, rep.contact_residual_lower) - 1e-12
+    if h.min() < -1e-9:
+        assert not rep.certified
