@@ -121,7 +121,7 @@ def yaw_from_b2(b2: npt.ArrayLike) -> float:
 
 
 MAX_CONTACT_ROLL = math.asin(math.sqrt(0.9375))
-"""Largest roll (rad, about 75.5 deg) of a contact attitude the planner accepts: the top roll
+"""Largest roll (rad, about 75.5 deg) of a contact attitude reached exactly: the top roll
 level ``sin^2 phi < 15/16`` of the body-rate certificate (docs/bounds.md). The construction (13)
 is singular at 90 deg; near it the yaw term of the body rate grows as ``1/cos phi``."""
 

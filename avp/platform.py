@@ -6,11 +6,11 @@ horizontal speed ``v_h``, vertical speed ``v_v`` and turn rate ``omega``. Two pr
 
 * :attr:`MotionModel.CONSTANT_VELOCITY`: ``rho(t) = rho_0 + v (t - t_0)``, heading fixed
   (``turn_rate`` is ignored);
-* :attr:`MotionModel.CTRV` (constant turn rate and velocity, the seed's model):
+* :attr:`MotionModel.CTRV` (constant turn rate and velocity, Gao et al.'s model):
   ``theta(t) = theta_0 + omega dt`` and ``d rho / dt = (v_h cos theta, v_h sin theta, v_v)``,
   integrated in closed form.
 
-The pad frame turns with the heading, as in the seed's ``z_s = R_z(theta) z_s_bar`` (its eq. (7)):
+The pad frame turns with the heading, as in Gao et al.'s ``z_s = R_z(theta) z_s_bar`` (its eq. (7)):
 ``R_WS(t) = R_z(theta(t) - theta_0) R_WS(t_0)``. A :class:`MovingTarget` *is* a
 :class:`~avp.types.PerchTarget` (its ``point`` and ``R_WS`` are the pose at ``time``);
 :meth:`MovingTarget.at` returns the target re-anchored at another time. Plan with

@@ -1,4 +1,4 @@
-"""Line perches: the three seeds' cases, with contact errors, certificates and planning times.
+"""Line perches: the three papers' cases, with contact errors, certificates and planning times.
 
     python benchmarks/bench_line.py            # all three
     python benchmarks/bench_line.py --case paneque --reps 30
@@ -20,7 +20,7 @@ not give are stated as assumptions below):
 
 Contact errors are measured on the planned spline (gripper = CoM - offset b3 against the grasp
 point on the line; b3 against the commanded normal; velocity against the request), not on a
-tracked flight: the seeds' RMSEs are tracking errors and are quoted only for context. Times are
+tracked flight: the papers' RMSEs are tracking errors and are quoted only for context. Times are
 wall-clock on this machine (and, for Paneque et al.'s case, process CPU time, less sensitive to other jobs on a
 shared machine), first call excluded; the in-run baseline is avp's plane perch
 (``avp.plan_detailed``) to the same contact point and normal.
@@ -91,7 +91,7 @@ def case_paneque(reps: int) -> None:
     lim, setups = paneque_setups()
     print("\n## Paneque et al.: 0.8 kg, T/W 4:1, perch + recovery")
     print("| pitch | line incl. | status | gripper err (mm) | b3 err (deg) | speed err (mm/s) | clearance slack (m^2) "
-          "| min height (m) | T perch / rec (s) | plan ms median / p95 (CPU ms median) | plane-perch ms (ratio) | seed tp+tr ms (TX2) |")
+          "| min height (m) | T perch / rec (s) | plan ms median / p95 (CPU ms median) | plane-perch ms (ratio) | paper tp+tr ms (TX2) |")
     print("|---|---|---|---|---|---|---|---|---|---|---|---|")
     for pitch, (line, start, ground) in setups.items():
         state = avp.State.hover(start)
@@ -159,7 +159,7 @@ def case_li(n: int, seed: int = 2) -> None:
         rows[kind].append((ok, dt, inside, heading, res))
     print("\n## Li et al.: landing on top of a wire, 100 random starts (20 on the line, 80 in the cube)")
     print("| starts | n | planned + certified | max angle in corridor (deg, limit 30) | max heading err at contact (deg) "
-          "| plan ms median / p95 / max | seed |")
+          "| plan ms median / p95 / max | paper |")
     print("|---|---|---|---|---|---|---|")
     for kind, r in rows.items():
         ok = sum(1 for x in r if x[0])

@@ -9,10 +9,10 @@ noisy odometry with the simulator's default standard deviations) flies it to ``t
 line contact model: a run **succeeds** when, at ``t_f``, the true gripper (CoM - r b3) is within
 ``--grip-tol`` of the line, ``b3`` within ``--angle-tol`` of the commanded normal and the speed
 below ``--speed-tol``, and the true CoM never came closer to the line than ``r - --clear-tol``
-before. The tolerances stand for a gripper's capture envelope (assumed; the seed does not give
+before. The tolerances stand for a gripper's capture envelope (assumed; the paper does not give
 one). Vehicle: 0.8 kg, thrust 0.5-31.4 N (T/W 4:1), inertia and moment limits of the simulator's
 default vehicle scaled by the mass ratio 1.6 (assumed). Tracking RMSE is printed next to the
-seed's own (Paneque et al., "Perception-Aware Perching on Powerlines with Multirotors", Table I:
+paper's own (Paneque et al., "Perception-Aware Perching on Powerlines with Multirotors", Table I:
 position RMSE 2.7-6.9 cm, pitch-roll RMSE 2.0-3.0 deg without perception awareness).
 """
 
@@ -62,7 +62,7 @@ def main() -> None:
                            moment_max=tuple(k * np.asarray(base.moment_max, dtype=float)))
     noise = OdometryNoise()
     print("| pitch | trials | planned | success | gripper err cm median / max | b3 err deg median / max "
-          "| speed at t_f m/s max | min CoM-line dist - r (cm) | pos RMSE cm | seed pos RMSE cm / pitch-roll RMSE deg |")
+          "| speed at t_f m/s max | min CoM-line dist - r (cm) | pos RMSE cm | paper pos RMSE cm / pitch-roll RMSE deg |")
     print("|---|---|---|---|---|---|---|---|---|---|")
     seed_rmse = {20: "2.7 / 2.1", 80: "3.1 / 2.0", 180: "6.9 / 3.0"}
     for pitch, (line, start, ground) in setups.items():

@@ -33,7 +33,7 @@ from avp.platform import MotionModel, MovingTarget
 
 LIMITS = avp.VehicleLimits(mass=1.0, thrust_min=5.0, thrust_max=17.0, tilt_rate_max=3.0)
 CONFIG = avp.PlannerConfig(limits=LIMITS, alpha=5.5, pre_impact=avp.PreImpactMode.OFF)
-"""The seed has no pre-impact band; its zero terminal jerk (MovingConfig.zero_jerk) takes that role."""
+"""Gao et al. have no pre-impact band; its zero terminal jerk (MovingConfig.zero_jerk) takes that role."""
 STATIC = avp.PlannerConfig(limits=LIMITS, alpha=5.5, fov=avp.FovConfig(enabled=False))
 SEED_MS = {"30 deg": 3.76, "60 deg": 4.31, "90 deg": 16.68}
 """Gao et al.'s own planner, static perches (their Table IV, i5-9400F desktop)."""

@@ -4,7 +4,7 @@ Quadrotor in Dynamic Scenarios", T-RO 2023): the grid of benchmarks/bench_moving
 :class:`avp.moving.MovingReplanner`, odometry noise, white noise on the platform-state estimates,
 the default vehicle: 0.5 kg, thrust up to 17 m/s^2 mass-normalised) for seeded trials.
 
-Prints per case the seed's Table VIII columns (target speed, drone max/mean speed, contact error
+Prints per case Gao et al.'s Table VIII columns (target speed, drone max/mean speed, contact error
 from the pad centre) and the success rate (contact on the 0.3 m pad, attitude error <= 15 deg,
 relative normal speed in [0.05, 1] m/s, relative tangential speed <= 3 m/s).
 

@@ -8,6 +8,7 @@ componentwise band (14), and plan_detailed median / p95 per variant in the same 
 
 from __future__ import annotations
 
+import argparse
 import collections
 import itertools
 import math
@@ -49,4 +50,5 @@ def main() -> None:
 
 
 if __name__ == "__main__":
+    argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter).parse_args()
     main()

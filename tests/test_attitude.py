@@ -222,7 +222,7 @@ def test_contact_yaw_reproduces_R_WS_or_says_why_not(normal, up, alpha) -> None:
 
 
 def test_a_vertical_s2_keeps_b3_on_the_normal_and_says_how_far_the_frame_is_off() -> None:
-    """The issue's pad (horizontal normal, vertical s2): no atan2(0, 0), no spin; b3 = s3 at
+    """A pad with a horizontal normal and a vertical s2: no atan2(0, 0), no spin; b3 = s3 at
     contact, the frame 90 deg off about s3, and the log says so."""
     target = avp.PerchTarget.from_normal([0.0, 3.5, 1.5], [0.0, -1.0, 0.0], up_slope=[1.0, 0.0, 0.0])
     result = avp.plan_detailed(avp.State.hover([0.0, 0.0, 1.5]), target)

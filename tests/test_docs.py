@@ -82,7 +82,9 @@ def _toml_value(v) -> str:
     return str(v)
 
 
-FORBIDDEN = re.compile(r"DESIGN\.md|\bseed 00\d|\bissue \d|/work/|/root/|\.\./shared", re.I)
+FORBIDDEN = re.compile(
+    r"DESIGN\.md|\bseed[ -]?00\d|\bissue \d|\bthe (seed|issue)'s\b|/work/|/root/|\.\./shared", re.I
+)
 
 
 @pytest.mark.parametrize("folder", ["avp", "docs", "examples", "benchmarks", "tests", "README.md"])

@@ -48,7 +48,7 @@ def sampled_distance(traj: Trajectory, line: LineTarget, n: int = 2000) -> np.nd
 
 def check_contact(res, line: LineTarget) -> None:
     """Gripper within 1 mm of the grasp point on the line, b3 within 0.5 deg of n, speed within
-    1 mm/s of the request (the issue's contact tolerances), from the spline itself."""
+    1 mm/s of the request (the contact tolerances of docs/lines.md), from the spline itself."""
     tr = res.perch
     R = tr.attitude(tr.tf)
     b3 = R[:, 2]

@@ -20,7 +20,7 @@ from avp.qp.moving import MovingQpBuilder, TerminalYaw
 from avp.solve import solve_perching_qp
 
 LIMITS = avp.VehicleLimits(mass=1.0, thrust_min=5.0, thrust_max=17.0, tilt_rate_max=3.0)
-"""The seed's limits (its Table III): mass-normalised thrust 5-17 m/s^2, rate 3 rad/s."""
+"""Gao et al.'s limits (their Table III): mass-normalised thrust 5-17 m/s^2, rate 3 rad/s."""
 CONFIG = avp.PlannerConfig(limits=LIMITS, alpha=5.5, pre_impact=avp.PreImpactMode.OFF)
 QP_CONFIG = avp.PlannerConfig(limits=LIMITS, alpha=5.5, pre_impact=avp.PreImpactMode.OFF,
                               fov=avp.FovConfig(enabled=False), alpha_range=(5.6, 16.4))
@@ -96,7 +96,7 @@ def solve_fixed(state, target, T, **kw):
 @given(incline=st.floats(0.0, 1.5), speed=speeds, turn=turn_rates, heading=angles, T=st.floats(1.5, 4.0),
        offset=st.floats(0.0, 0.1), t0=st.floats(-2.0, 2.0))
 def test_terminal_conditions_on_random_platforms(incline, speed, turn, heading, T, offset, t0):
-    """The seed's terminal map holds at the predicted pad whatever the platform does."""
+    """Gao et al.'s terminal map holds at the predicted pad whatever the platform does."""
     tgt = platform(incline, speed, turn, heading)
     state = behind(tgt.at(t0), 3.0, 0.5)
     state = avp.State(position=state.position, velocity=state.velocity, yaw=state.yaw, time=t0)
@@ -124,7 +124,7 @@ def test_zero_slip_bound_synchronises_the_full_velocity():
 
 
 def test_slip_cost_pulls_the_slip_towards_zero():
-    """The homogenised slip cost is the seed's |nu|^2: raising its weight cannot raise |nu|."""
+    """The homogenised slip cost is Gao et al.'s |nu|^2: raising its weight cannot raise |nu|."""
     tgt = platform(0.5, 2.0, 0.2)
     slips = []
     for w in (0.0, 10.0, 1e4):
@@ -215,7 +215,7 @@ def test_clearance_failure_is_reported():
     assert res.clearance is not None and not res.clearance.certified
 
 
-# -- the search on the seed's grid --------------------------------------------------------
+# -- the search on Gao et al.'s grid --------------------------------------------------------
 
 @pytest.mark.parametrize("name,tgt,height", [
     ("plane 1.0 rad at 2 m/s", platform(1.0, 2.0, model=MotionModel.CONSTANT_VELOCITY), 0.0),

@@ -25,8 +25,8 @@ def terminal_acceleration(target: PerchTarget, alpha: float, g: float) -> Array:
 
 def terminal_yaw(target: PerchTarget, near: float) -> float:
     """Yaw (13) whose attitude with ``b3 = s3`` is exactly ``R_WS`` (:func:`avp.frames.contact_yaw`),
-    unwrapped to within pi of ``near``. Raises ConfigError for a contact attitude the
-    construction cannot represent."""
+    unwrapped to within pi of ``near``. For a contact attitude the construction cannot represent,
+    the yaw of the closest one with ``b3 = s3``."""
     psi, _ = contact_yaw(target.R_WS)
     return psi + 2.0 * math.pi * round((near - psi) / (2.0 * math.pi))
 

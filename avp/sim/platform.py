@@ -8,7 +8,7 @@ committed plan at 500 Hz (:func:`~avp.sim.flight.fly`).
 Effects modelled: odometry noise (:class:`~avp.sim.odometry.OdometryNoise`, on the controller and
 the planner), white noise on every 30 Hz platform-state measurement (:class:`PlatformNoise`:
 position, velocity, heading, turn rate) fused by a fixed-gain filter (:class:`PlatformFilter`; a
-stand-in for the seed's GPS/vision EKF, not a camera model), actuator limits of
+stand-in for Gao et al.'s GPS/vision EKF, not a camera model), actuator limits of
 :class:`~avp.sim.vehicle.VehicleParams`. Not modelled: the camera and its
 field of view (the static simulator's :mod:`~avp.sim.camera`), platform accelerations the model
 does not predict, wind.
@@ -77,7 +77,7 @@ def noisy_platform(truth: MovingTarget, noise: PlatformNoise | None, rng: np.ran
 
 
 class PlatformFilter:
-    """Fixed-gain (alpha) filter of the platform estimates, a stand-in for the seed's EKF: each
+    """Fixed-gain (alpha) filter of the platform estimates, a stand-in for Gao et al.'s EKF: each
     new measurement ``m`` at ``t`` moves the model's prediction of the fused state toward it,
     ``x <- x_pred + gain (m - x_pred)`` for the position, heading (wrapped), speed and turn rate;
     the pad frame turns with the heading correction. ``gain = 1`` passes measurements through."""
@@ -154,7 +154,7 @@ class MovingSimResult:
     ``outcome``: ``"success"``, ``"failed: <criteria>"``, ``"miss: no contact"`` or
     ``"no plan: <reason>"``. ``contact`` is relative to the pad (point in S, relative speeds).
     ``error``: contact point's distance from the pad centre (m). ``speed_max``, ``speed_mean``:
-    the vehicle's ground speed from the first plan to contact (the seed's Table VIII columns).
+    the vehicle's ground speed from the first plan to contact (Gao et al.'s Table VIII columns).
     """
 
     outcome: str
