@@ -36,9 +36,10 @@ import numpy as np
 
 from ..errors import ConfigError
 from ..frames import Array, project_so3
+from ..platform import MotionModel, MovingTarget, rot_z
 from .camera import CameraMeasurement
 
-__all__ = ["TargetEstimate", "TargetEstimator"]
+__all__ = ["PlatformEstimator", "TargetEstimate", "TargetEstimator"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -132,3 +133,87 @@ class TargetEstimator:
         H[3, 3] += 1.0 / self.scale_error**2
         x = np.linalg.solve(H, r)
         return x[:3] / (1.0 + x[3])
+
+
+class PlatformEstimator:
+    """Fuses detections of a pad on a *moving* platform into a platform-state estimate.
+
+    What a user would put between the tag detector and :class:`~avp.moving.MovingReplanner`:
+    over the detections captured in the last ``window`` s, a weighted least-squares fit of the
+    constant-velocity model ``p_i = p + v (t_i - t_ref)`` (``t_ref`` the latest capture time,
+    weights ``1 / (sigma_i^2 + (scale_error d_i)^2)`` as :class:`TargetEstimator`) and, for
+    ``turn_rate=True`` (the CTRV model), a straight-line fit of the pad's yaw (the direction of
+    ``s2 = e3 x h``) against time. The rotation is the chordal mean of the detections turned back
+    to ``t_ref`` by that rate. :meth:`target` returns an :class:`avp.platform.MovingTarget` at
+    ``t_ref`` (heading along the fitted horizontal velocity), which the replanner predicts to
+    the contact time; fewer than two detections in the window give zero velocity.
+    """
+
+    def __init__(self, window: float = 1.0, scale_error: float = 0.0, turn_rate: bool = False) -> None:
+        if not (np.isfinite(window) and window > 0):
+            raise ConfigError("estimator.window", f"must be a positive time (s), got {window}")
+        if not (np.isfinite(scale_error) and scale_error >= 0):
+            raise ConfigError("estimator.scale_error", f"must be a fraction >= 0, got {scale_error}")
+        self.window = float(window)
+        self.scale_error = float(scale_error)
+        self.turn_rate = bool(turn_rate)
+        self._meas: list[CameraMeasurement] = []
+        self._n = 0
+
+    @property
+    def n_measurements(self) -> int:
+        """Number of detections received."""
+        return self._n
+
+    def update(self, meas: CameraMeasurement) -> None:
+        """Add one detection (older ones than ``window`` before the newest are dropped)."""
+        self._meas.append(meas)
+        self._n += 1
+        t_new = max(m.t for m in self._meas)
+        self._meas = [m for m in self._meas if m.t >= t_new - self.window - 1e-9]
+
+    def _fit(self) -> tuple[Array, Array, Array, float, float, np.ndarray] | None:
+        if not self._meas:
+            return None
+        ms = self._meas
+        t_ref = max(m.t for m in ms)
+        dt = np.array([m.t - t_ref for m in ms])
+        w = np.array([1.0 / (max(m.sigma_pos, 1e-9) ** 2 + (self.scale_error * m.distance) ** 2) for m in ms])
+        P = np.array([m.p_W for m in ms], dtype=float)
+        if len(ms) >= 2 and np.ptp(dt) > 1e-6:
+            A = np.column_stack([np.ones_like(dt), dt])
+            H = A.T @ (w[:, None] * A)
+            X = np.linalg.solve(H, A.T @ (w[:, None] * P))  # rows: p at t_ref, v
+            p, vel = X[0], X[1]
+        else:
+            p, vel = (w @ P) / w.sum(), np.zeros(3)
+        Rs = np.array([m.R_WS for m in ms], dtype=float)
+        u = np.array([1.0 / max(m.sigma_ang, 1e-9) ** 2 for m in ms])
+        omega = 0.0
+        if self.turn_rate and len(ms) >= 2 and np.ptp(dt) > 1e-6:
+            yaw = np.unwrap(np.arctan2(-Rs[:, 0, 1], Rs[:, 1, 1]))  # direction of s2 = e3 x h, minus pi/2
+            A = np.column_stack([np.ones_like(dt), dt])
+            omega = float(np.linalg.solve(A.T @ (u[:, None] * A), A.T @ (u * yaw))[1])
+        turned = np.array([rot_z(-omega * d) @ Ri for d, Ri in zip(dt, Rs, strict=True)])  # each at t_ref
+        R = project_so3(np.einsum("i,ijk->jk", u, turned) / u.sum())
+        return p, vel, R, float(t_ref), omega, w
+
+    def estimate(self) -> TargetEstimate | None:
+        """The pad pose at the latest capture time (as :meth:`TargetEstimator.estimate`)."""
+        fit = self._fit()
+        if fit is None:
+            return None
+        p, _, R, t_ref, _, w = fit
+        return TargetEstimate(p_W=p, R_WS=R, sigma_pos=float(w.sum() ** -0.5), sigma_ang=float("nan"),
+                              n_measurements=self._n, t_last=t_ref)
+
+    def target(self, model: MotionModel) -> MovingTarget | None:
+        """The fused platform as an :class:`avp.platform.MovingTarget` with ``model``, or None."""
+        fit = self._fit()
+        if fit is None:
+            return None
+        p, vel, R, t_ref, omega, _ = fit
+        return MovingTarget(point=p, R_WS=R, heading=float(np.arctan2(vel[1], vel[0])),
+                            speed=float(np.hypot(vel[0], vel[1])), turn_rate=omega,
+                            vertical_speed=float(vel[2]), time=t_ref, model=model)
+

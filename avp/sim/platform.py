@@ -34,11 +34,11 @@ from ..moving import MovingConfig, MovingReplanner
 from ..platform import MovingTarget, rot_z
 from ..replan import ReplanConfig
 from ..trajectory import Trajectory
-from .contact import Contact, PerchPad, SuccessCriteria, detect_contact
+from .contact import Contact, SuccessCriteria
 from .controller import ControllerGains, FlatReference
-from .flight import DT_CONTROL, fly
+from .flight import DT_CONTROL
 from .odometry import OdometryNoise, noisy_odometry
-from .run import _hold, _odometry_state
+from .run import _hold, _odometry_state, closed_loop, pad_contact
 from .vehicle import RigidBodyState, VehicleParams
 
 __all__ = ["MovingSimResult", "MovingSimScenario", "PlatformFilter", "PlatformNoise", "noisy_platform", "simulate_moving"]
@@ -219,38 +219,20 @@ def simulate_moving(
 
     def hook(prev: RigidBodyState, new: RigidBodyState, t_prev: float, t_new: float) -> Contact | None:
         speeds.append(float(np.linalg.norm(new.v_W)))
-        pad_prev, pad_new = truth.at(t_prev), truth.at(t_new)
-        if float((new.p_W - pad_new.point) @ pad_new.s3) > 0.5:  # far from the plane: skip the work
-            return None
-        # States relative to the pad at t_new (the pad turns by omega dt < 1e-3 rad in a step).
-        shift = pad_new.point - pad_prev.point
-        prev_rel = RigidBodyState(prev.p_W + shift, prev.v_W - pad_prev.velocity, prev.R_WB, prev.omega_B)
-        new_rel = RigidBodyState(new.p_W, new.v_W - pad_new.velocity, new.R_WB, new.omega_B)
-        pad = PerchPad(pad_new.point, pad_new.R_WS, half_size=sc.pad_half_size)
-        return detect_contact(prev_rel, new_rel, pad, t_prev, t_new, sc.criteria)
+        return pad_contact(prev, new, t_prev, t_new, truth, sc.pad_half_size, sc.criteria)
+
+    def tick(t: float, state: RigidBodyState) -> None:
+        b = state if odo is None else noisy_odometry(state, odo, rng_plan)
+        est = filt.update(noisy_platform(truth.at(t), sc.platform_noise, rng_est))
+        rp.step(t, _odometry_state(b, t, reference(t)), est)
+
+    def t_end() -> float:
+        assert rp.trajectory is not None
+        return rp.trajectory.tf + sc.timeout
 
     idle = sc.vehicle.thrust_min / sc.vehicle.mass if sc.idle_after_plan else None
-    period = 1.0 / sc.replan_rate_hz
-    k = n = 0
-    contact: Contact | None = None
-    while True:
-        t = k * dt
-        committed = rp.trajectory
-        assert committed is not None
-        if t > committed.tf + sc.timeout or t > max_time:
-            break
-        if n > 0:
-            b = state if odo is None else noisy_odometry(state, odo, rng_plan)
-            est = filt.update(noisy_platform(truth.at(t), sc.platform_noise, rng_est))
-            rp.step(t, _odometry_state(b, t, reference(t)), est)
-        n += 1
-        k_next = max(int(round(n * period / dt)), k + 1)
-        res = fly(state, reference, t, (k_next - k) * dt, sc.vehicle, sc.gains, dt=dt,
-                  odometry=odo, rng=rng_ctrl if odo is not None else None, stop=hook)
-        state, k = res.state, k_next
-        if res.event is not None:
-            contact = res.event
-            break
+    state, contact = closed_loop(state, reference, 0.0, t_end, max_time, 1.0 / sc.replan_rate_hz, dt, sc.vehicle,
+                                 sc.gains, tick, hook, odo, rng_ctrl if odo is not None else None)
     if contact is None:
         return finish("miss: no contact", None, rp, first)
     return finish("success" if contact.success else "failed: " + ", ".join(contact.failures), contact, rp, first)

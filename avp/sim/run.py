@@ -42,6 +42,7 @@ import math
 import time
 from dataclasses import dataclass, field
 from enum import Enum
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -50,7 +51,10 @@ from ..camera import Camera
 from ..config import PlannerConfig, VehicleLimits
 from ..errors import AvpError, ConfigError
 from ..frames import Array, yaw_from_b2
+from ..moving import MovingConfig, MovingReplanner, plan_moving_detailed
 from ..planner import PlanResult, plan_detailed
+from ..platform import MotionModel, MovingTarget
+from ..qp.moving import TerminalYaw
 from ..replan import ReplanAction, ReplanConfig, Replanner, ReplanStep
 from ..trajectory import Trajectory
 from ..types import PerchTarget, State
@@ -65,12 +69,12 @@ from .contact import (
     judge_perch,
 )
 from .controller import ControllerGains, FlatReference
-from .estimator import TargetEstimator
+from .estimator import PlatformEstimator, TargetEstimator
 from .flight import DT_CONTROL, fly
 from .odometry import Odometry, OdometryNoise
 from .vehicle import RigidBodyState, VehicleParams
 
-__all__ = ["AfterPlan", "Mode", "SimResult", "SimScenario", "sim_config", "simulate"]
+__all__ = ["AfterPlan", "Mode", "PlatformMotion", "SimResult", "SimScenario", "sim_config", "simulate"]
 
 
 def sim_config(
@@ -118,6 +122,55 @@ class AfterPlan(Enum):
 
     HOLD_ACCELERATION = "hold: the final flat state continued at constant acceleration"
     IDLE_THRUST = "idle: the final attitude kept and the thrust cut to the vehicle's minimum"
+
+
+@dataclass(frozen=True)
+class PlatformMotion:
+    """The pad carried by a moving platform (Gao et al., "Adaptive Tracking and Perching for
+    Quadrotor in Dynamic Scenarios"): :class:`avp.platform.MovingTarget`'s state at ``t = 0``.
+
+    With a platform, :func:`simulate` first flies ``tracking_time`` s behind the pad at the
+    pad's velocity (the SE(3) controller on odometry, camera detecting), fuses the detections
+    with the user-side :class:`~avp.sim.estimator.PlatformEstimator` and plans with
+    :class:`~avp.moving.MovingReplanner` (AVP) or :func:`~avp.moving.plan_moving_detailed`
+    (one-shot) against the estimated platform, which the model predicts to contact.
+
+    Parameters
+    ----------
+    speed:
+        Horizontal speed ``v_h`` (m/s) of the platform.
+    heading:
+        Direction of travel (rad) from +x towards +y; 0: away from the vehicle's start, Gao et
+        al.'s chase.
+    turn_rate:
+        ``omega`` (rad/s) of the CTRV model (0: straight).
+    vertical_speed:
+        ``v_v`` (m/s).
+    tracking_time:
+        Time (s) spent tracking and detecting before the first plan.
+    window:
+        Detections of the last ``window`` s are fitted by the platform filter.
+    """
+
+    speed: float = 0.0
+    heading: float = 0.0
+    turn_rate: float = 0.0
+    vertical_speed: float = 0.0
+    tracking_time: float = 1.0
+    window: float = 1.0
+
+    def __post_init__(self) -> None:
+        for name in ("speed", "heading", "turn_rate", "vertical_speed", "tracking_time", "window"):
+            if not math.isfinite(getattr(self, name)):
+                raise ConfigError(f"scenario.platform.{name}", f"must be finite, got {getattr(self, name)}")
+        for name in ("tracking_time", "window"):
+            if getattr(self, name) <= 0.0:
+                raise ConfigError(f"scenario.platform.{name}", f"must be a positive time (s), got {getattr(self, name)}")
+
+    @property
+    def model(self) -> MotionModel:
+        """CTRV when turning, else constant velocity."""
+        return MotionModel.CTRV if self.turn_rate != 0.0 else MotionModel.CONSTANT_VELOCITY
 
 
 @dataclass(frozen=True, eq=False)
@@ -168,6 +221,9 @@ class SimScenario:
         plane turns back after ``v_n^2 / (2 alpha)`` (1.1 cm at 0.3 m/s and 4 m/s^2) and misses.
         ``IDLE_THRUST`` keeps ``b3`` and drops the thrust to ``vehicle.thrust_min`` (the motors at
         idle), so the vehicle coasts on into the pad.
+    platform:
+        :class:`PlatformMotion`: the pad moves with a platform (constant velocity or CTRV);
+        ``None``: a static pad.
     """
 
     incline: float = math.pi / 2
@@ -189,6 +245,7 @@ class SimScenario:
     replan_rate_hz: float = 30.0
     timeout: float = 0.5
     after_plan: AfterPlan = AfterPlan.HOLD_ACCELERATION
+    platform: PlatformMotion | None = None
 
     def __post_init__(self) -> None:
         if not 0.0 <= self.incline <= math.pi:
@@ -218,9 +275,17 @@ class SimScenario:
         return PerchTarget.from_incline([self.distance, 0.0, self.pad_height], self.incline, heading=0.0)
 
     def pad(self) -> PerchPad:
-        """The true pad as a :class:`~avp.sim.contact.PerchPad`."""
+        """The true pad (at ``t = 0``) as a :class:`~avp.sim.contact.PerchPad`."""
         t = self.target()
         return PerchPad(t.point, t.R_WS, half_size=self.pad_half_size)
+
+    def moving_target(self) -> MovingTarget | None:
+        """The true pad on its platform at ``t = 0`` (None without :attr:`platform`)."""
+        m = self.platform
+        if m is None:
+            return None
+        return MovingTarget.from_pad(self.target(), heading=m.heading, speed=m.speed, turn_rate=m.turn_rate,
+                                     vertical_speed=m.vertical_speed, time=0.0, model=m.model)
 
     def start(self) -> Array:
         """Hover position (m) at the start."""
@@ -364,6 +429,80 @@ def _shared(sc: SimScenario, config: PlannerConfig | None) -> tuple[SimScenario,
     return dataclasses.replace(sc, vehicle=vehicle, camera=camera), config
 
 
+def pad_contact(prev: RigidBodyState, new: RigidBodyState, t_prev: float, t_new: float, platform: MovingTarget,
+                half_size: float, criteria: SuccessCriteria) -> Contact | None:
+    """:func:`~avp.sim.contact.detect_contact` against a pad on a moving ``platform``: both
+    states taken relative to the pad at ``t_new`` (position shifted by the pad's displacement,
+    velocity minus the pad's; the pad turns by ``omega dt < 1e-3`` rad in a step), so the
+    contact reports the point on the pad, the attitude error against its normal and the
+    *relative* normal and tangential speeds."""
+    pad_new = platform.at(t_new)
+    if float((new.p_W - pad_new.point) @ pad_new.s3) > 0.5:  # far from the plane: skip the work
+        return None
+    pad_prev = platform.at(t_prev)
+    shift = pad_new.point - pad_prev.point
+    prev_rel = RigidBodyState(prev.p_W + shift, prev.v_W - pad_prev.velocity, prev.R_WB, prev.omega_B)
+    new_rel = RigidBodyState(new.p_W, new.v_W - pad_new.velocity, new.R_WB, new.omega_B)
+    pad = PerchPad(pad_new.point, pad_new.R_WS, half_size=half_size)
+    return detect_contact(prev_rel, new_rel, pad, t_prev, t_new, criteria)
+
+
+def closed_loop(
+    state: RigidBodyState,
+    reference: Callable[[float], Any],
+    t0: float,
+    t_end: Callable[[], float],
+    max_time: float,
+    period: float,
+    dt: float,
+    vehicle: VehicleParams,
+    gains: ControllerGains,
+    tick: Callable[[float, RigidBodyState], None] | None,
+    hook: Callable[[RigidBodyState, RigidBodyState, float, float], Any],
+    odometry: Odometry | OdometryNoise | None,
+    rng: np.random.Generator | None = None,
+) -> tuple[RigidBodyState, Any]:
+    """The replanning loop shared by the simulators: every ``period`` s (from ``t0``) call
+    ``tick(t, state)`` (not at ``t0``: the first plan is made before), then fly the reference
+    for one period at ``1 / dt`` Hz (:func:`~avp.sim.flight.fly` with ``hook``), until the hook
+    reports an event, ``t > t_end()`` or ``t - t0 > max_time``. Returns the final true state and
+    the event (None without one)."""
+    k = n = 0  # control steps flown since t0, replanning ticks
+    while True:
+        t = t0 + k * dt
+        if t > t_end() or t - t0 > max_time:
+            return state, None
+        if tick is not None and n > 0:
+            tick(t, state)
+        n += 1
+        k_next = max(int(round(n * period / dt)), k + 1)
+        res = fly(state, reference, t, (k_next - k) * dt, vehicle, gains, dt=dt, odometry=odometry, rng=rng, stop=hook)
+        state, k = res.state, k_next
+        if res.event is not None:
+            return state, res.event
+
+
+def _track(state: RigidBodyState, platform: MovingTarget, sc: SimScenario, detect: Callable[[float, RigidBodyState], None],
+           odo: Odometry | None, dt: float) -> tuple[RigidBodyState, float]:
+    """Fly ``sc.platform.tracking_time`` s from ``state`` (given the pad's velocity) keeping the
+    start's offset from the moving pad, detecting at every control step."""
+    assert sc.platform is not None
+    offset = state.p_W - platform.point
+    z = np.zeros(3)
+
+    def track(tt: float) -> FlatReference:
+        p = platform.at(tt)
+        return FlatReference(p.point + offset, p.velocity, p.acceleration, z, z)
+
+    def hook(prev: RigidBodyState, new: RigidBodyState, t_prev: float, t_new: float) -> None:
+        detect(t_new, new)
+
+    start = RigidBodyState(state.p_W, platform.velocity, state.R_WB)
+    detect(0.0, start)
+    res = fly(start, track, 0.0, sc.platform.tracking_time, sc.vehicle, sc.gains, dt=dt, odometry=odo, stop=hook)
+    return res.state, res.t
+
+
 def simulate(
     scenario: SimScenario | None = None,
     mode: Mode | str = Mode.AVP,
@@ -373,6 +512,7 @@ def simulate(
     replan: ReplanConfig | None = None,
     dt: float = DT_CONTROL,
     max_time: float = 20.0,
+    moving: MovingConfig | None = None,
 ) -> SimResult:
     """Fly one perch of ``scenario`` in ``mode`` (module docstring) and record it.
 
@@ -393,6 +533,10 @@ def simulate(
         Control and integration step (s), at most 2 ms.
     max_time:
         Hard cap on simulated time (s) after the first plan.
+    moving:
+        Terminal map and arrival-time search on a moving pad (``scenario.platform``; default
+        ``MovingConfig(yaw=TerminalYaw.PAD)``: the yaw at contact follows the detected pad, not
+        the noisy heading of the fitted velocity).
     """
     sc, cfg = _shared(scenario if scenario is not None else SimScenario(), config)
     mode = Mode.parse(mode)
@@ -401,9 +545,19 @@ def simulate(
     rng_odo, rng_cam, rng_bias, _ = (np.random.default_rng(s) for s in streams)
 
     truth, pad = sc.target(), sc.pad()
+    platform = sc.moving_target()
+    mcfg = moving if moving is not None else MovingConfig(yaw=TerminalYaw.PAD)
+
+    def truth_at(tt: float) -> PerchTarget:
+        return truth if platform is None else platform.at(tt)
+
     idle = sc.vehicle.thrust_min / sc.vehicle.mass if sc.after_plan is AfterPlan.IDLE_THRUST else None
     camera = CameraSensor(sc.camera, rng_bias)
-    estimator = TargetEstimator(sc.filter_scale_error, sc.filter_range_ratio, sc.filter_estimate_scale)
+    estimator: TargetEstimator | PlatformEstimator
+    if sc.platform is None:
+        estimator = TargetEstimator(sc.filter_scale_error, sc.filter_range_ratio, sc.filter_estimate_scale)
+    else:
+        estimator = PlatformEstimator(sc.platform.window, sc.filter_scale_error, sc.platform.turn_rate != 0.0)
     odo = None if sc.odometry is None else Odometry(sc.odometry, rng_odo)
     state = RigidBodyState(sc.start())
     detections: list[tuple[float, float, float, float]] = []
@@ -412,29 +566,39 @@ def simulate(
         return s if odo is None else odo.sample(t, s)
 
     def detect(t: float, s: RigidBodyState) -> None:
-        for m in camera.poll(t, s, truth.point, truth.R_WS, rng_cam, believed(t, s)):
+        pad_t = truth_at(t)
+        for m in camera.poll(t, s, pad_t.point, pad_t.R_WS, rng_cam, believed(t, s)):
             _fuse(m, t)
 
     def _fuse(m: CameraMeasurement, t: float) -> None:
         estimator.update(m)
         e = estimator.estimate()
         assert e is not None
-        detections.append((t, m.distance, float(np.linalg.norm(m.p_W - truth.point)),
-                           float(np.linalg.norm(e.p_W - truth.point))))
+        detections.append((t, m.distance, float(np.linalg.norm(m.p_W - truth_at(m.t).point)),
+                           float(np.linalg.norm(e.p_W - truth_at(e.t_last).point))))
 
-    # 1. hover and detect (until the initial frames have been delivered)
+    def estimate_target() -> PerchTarget | None:
+        if isinstance(estimator, PlatformEstimator):
+            return estimator.target(platform.model if platform is not None else MotionModel.CTRV)
+        return _estimate_target(estimator)
+
+    # 1. hover and detect (until the initial frames have been delivered); on a platform, track it
     t = 0.0
-    period_cam = 1.0 / sc.camera.rate_hz
-    k = 0
-    while estimator.n_measurements < sc.initial_frames and k < sc.initial_frames + 10:
-        t = k * period_cam + sc.camera.phase
-        detect(t, state)
-        if sc.camera.latency > 0:
-            t = t + sc.camera.latency
+    if platform is None:
+        period_cam = 1.0 / sc.camera.rate_hz
+        k = 0
+        while estimator.n_measurements < sc.initial_frames and k < sc.initial_frames + 10:
+            t = k * period_cam + sc.camera.phase
             detect(t, state)
-        k += 1
+            if sc.camera.latency > 0:
+                t = t + sc.camera.latency
+                detect(t, state)
+            k += 1
+    else:
+        assert sc.platform is not None
+        state, t = _track(state, platform, sc, detect, odo, dt)
     t_plan = t
-    initial = _estimate_target(estimator)
+    initial = estimate_target()
     empty = np.zeros((0, 3))
 
     def finish(outcome: str, contact: Contact | None = None, **kw: Any) -> SimResult:
@@ -442,7 +606,7 @@ def simulate(
             scenario=sc, mode=mode, seed=int(seed), outcome=outcome, contact=contact,
             interception=None if contact is None else contact.p_S[:2].copy(),
             initial_target=initial,
-            initial_estimate_error=None if initial is None else initial.point - truth.point,
+            initial_estimate_error=None if initial is None else initial.point - truth_at(t_plan).point,
             first_plan=None, final_plan=None, steps=(), anticipation_error=empty,
             anticipation_t=np.zeros(0), solve_times=np.zeros(0), path_t=np.zeros(0),
             path_p=empty, visible=np.zeros(0, dtype=bool),
@@ -452,7 +616,7 @@ def simulate(
         base.update(kw)
         return SimResult(**base)
 
-    if initial is None:
+    if initial is None or (platform is not None and estimator.n_measurements < 2):
         return finish("no initial detection")
 
     # 2. first plan (both modes from the same odometry sample)
@@ -461,7 +625,7 @@ def simulate(
     solve_times: list[float] = []
     replanner: Replanner | None = None
     if mode is Mode.AVP:
-        replanner = Replanner(initial, cfg, rcfg)
+        replanner = Replanner(initial, cfg, rcfg) if platform is None else MovingReplanner(initial, cfg, rcfg, mcfg)  # type: ignore[arg-type]
         first = replanner.step(t_plan, start, initial)
         solve_times.append(first.solve_time)
         if replanner.trajectory is None:
@@ -471,12 +635,13 @@ def simulate(
     else:
         w0 = time.perf_counter()
         try:
-            result: PlanResult | None = plan_detailed(start, initial, cfg)
+            result: Any = (plan_detailed(start, initial, cfg) if platform is None
+                           else plan_moving_detailed(start, initial, cfg, mcfg))  # type: ignore[arg-type]
             reason = "" if result is not None and result.ok else (result.status.value if result else "")
         except AvpError as exc:
             result, reason = None, f"{type(exc).__name__}: {exc}"
         solve_times.append(time.perf_counter() - w0)
-        if result is not None and result.ok and result.relaxations and not rcfg.allow_relaxed:
+        if result is not None and result.ok and getattr(result, "relaxations", ()) and not rcfg.allow_relaxed:
             reason = "relaxed plan (allow_relaxed is off)"  # as avp.plan(...) refuses it by default
             result = None
         if result is None or not result.ok or result.trajectory is None:
@@ -507,46 +672,42 @@ def simulate(
         path_t.append(t_new)
         path_p.append(new.p_W)
         path_R.append(new.R_WB)
-        visible.append(camera.visible(new, truth.point, truth.R_WS))
+        pad_t = truth_at(t_new)
+        visible.append(camera.visible(new, pad_t.point, pad_t.R_WS))
         while pending and pending[0][0] <= t_new + 1e-9:
             t_ex, p_ant = pending.pop(0)
             lam = min(max((t_ex - t_prev) / (t_new - t_prev), 0.0), 1.0)
             antic_err.append(p_ant - (prev.p_W + lam * (new.p_W - prev.p_W)))
             antic_t.append(t_ex)
         detect(t_new, new)
-        return detect_contact(prev, new, pad, t_prev, t_new, sc.criteria)
+        if platform is None:
+            return detect_contact(prev, new, pad, t_prev, t_new, sc.criteria)
+        return pad_contact(prev, new, t_prev, t_new, platform, sc.pad_half_size, sc.criteria)
 
     path_t.append(t_plan)
     path_p.append(state.p_W)
     path_R.append(state.R_WB)
-    visible.append(camera.visible(state, truth.point, truth.R_WS))
-    period = 1.0 / sc.replan_rate_hz
-    k = 0  # control steps flown since t_plan
-    n = 0  # replanning ticks
-    contact: Contact | None = None
-    while True:
-        t = t_plan + k * dt
-        if t > committed().tf + sc.timeout or t - t_plan > max_time:
-            break
-        if replanner is not None and n > 0:
-            est = _estimate_target(estimator)
-            s = replanner.step(t, _odometry_state(believed(t, state), t, reference(t)), est)
-            if s.solved:
-                solve_times.append(s.solve_time)
-            if s.action in (ReplanAction.REPLANNED, ReplanAction.PARTIAL) and s.anticipated is not None:
-                pending.append((s.t_ex, s.anticipated.position.copy()))
-        n += 1
-        k_next = max(int(round(n * period / dt)), k + 1)
-        res = fly(state, reference, t, (k_next - k) * dt, sc.vehicle, sc.gains, dt=dt,
-                  odometry=odo, stop=hook)
-        state, k = res.state, k_next
-        if res.event is not None:
-            contact = res.event
-            break
+    pad0 = truth_at(t_plan)
+    visible.append(camera.visible(state, pad0.point, pad0.R_WS))
+
+    def tick(t: float, state: RigidBodyState) -> None:
+        assert replanner is not None
+        s = replanner.step(t, _odometry_state(believed(t, state), t, reference(t)), estimate_target())
+        if s.solved:
+            solve_times.append(s.solve_time)
+        if s.action in (ReplanAction.REPLANNED, ReplanAction.PARTIAL) and s.anticipated is not None:
+            pending.append((s.t_ex, s.anticipated.position.copy()))
+
+    state, contact = closed_loop(
+        state, reference, t_plan, lambda: committed().tf + sc.timeout, max_time, 1.0 / sc.replan_rate_hz, dt,
+        sc.vehicle, sc.gains, tick if replanner is not None else None, hook, odo)
 
     final = committed()
     pt, pp, pR = np.array(path_t), np.array(path_p).reshape(-1, 3), np.array(path_R).reshape(-1, 3, 3)
     t_eval = min(final.tf, contact.t) if contact is not None else final.tf
+    if platform is not None:
+        pad_eval = platform.at(contact.t if contact is not None and contact.t <= final.tf else t_eval)
+        pad = PerchPad(pad_eval.point, pad_eval.R_WS, half_size=sc.pad_half_size)
     if contact is not None and contact.t <= final.tf:
         perch = judge_perch(contact.t, contact.p_W, contact.R_WB, pad, sc.perch_criteria)
     elif t_eval <= pt[-1]:
