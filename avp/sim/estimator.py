@@ -146,10 +146,14 @@ class PlatformEstimator:
     ``s2 = e3 x h``) against time. The rotation is the chordal mean of the detections turned back
     to ``t_ref`` by that rate. :meth:`target` returns an :class:`avp.platform.MovingTarget` at
     ``t_ref`` (heading along the fitted horizontal velocity), which the replanner predicts to
-    the contact time; fewer than two detections in the window give zero velocity.
+    the contact time; fewer than two detections in the window give zero velocity. With
+    ``estimate_scale`` the detector's scale error ``b`` is fitted too, as in
+    :class:`TargetEstimator` (``p_i = (1 + b) p(t_i) - b c_i``, linear in ``((1 + b) p,
+    (1 + b) v, b)``, prior ``b ~ N(0, scale_error^2)``; observable once the range changes).
     """
 
-    def __init__(self, window: float = 1.0, scale_error: float = 0.0, turn_rate: bool = False) -> None:
+    def __init__(self, window: float = 1.0, scale_error: float = 0.0, turn_rate: bool = False,
+                 estimate_scale: bool = False) -> None:
         if not (np.isfinite(window) and window > 0):
             raise ConfigError("estimator.window", f"must be a positive time (s), got {window}")
         if not (np.isfinite(scale_error) and scale_error >= 0):
@@ -157,6 +161,7 @@ class PlatformEstimator:
         self.window = float(window)
         self.scale_error = float(scale_error)
         self.turn_rate = bool(turn_rate)
+        self.estimate_scale = bool(estimate_scale) and self.scale_error > 0
         self._meas: list[CameraMeasurement] = []
         self._n = 0
 
@@ -180,20 +185,36 @@ class PlatformEstimator:
         dt = np.array([m.t - t_ref for m in ms])
         w = np.array([1.0 / (max(m.sigma_pos, 1e-9) ** 2 + (self.scale_error * m.distance) ** 2) for m in ms])
         P = np.array([m.p_W for m in ms], dtype=float)
-        if len(ms) >= 2 and np.ptp(dt) > 1e-6:
-            A = np.column_stack([np.ones_like(dt), dt])
-            H = A.T @ (w[:, None] * A)
-            X = np.linalg.solve(H, A.T @ (w[:, None] * P))  # rows: p at t_ref, v
-            p, vel = X[0], X[1]
-        else:
-            p, vel = (w @ P) / w.sum(), np.zeros(3)
         Rs = np.array([m.R_WS for m in ms], dtype=float)
         u = np.array([1.0 / max(m.sigma_ang, 1e-9) ** 2 for m in ms])
+        spread = len(ms) >= 2 and np.ptp(dt) > 1e-6
         omega = 0.0
-        if self.turn_rate and len(ms) >= 2 and np.ptp(dt) > 1e-6:
+        if self.turn_rate and spread:
             yaw = np.unwrap(np.arctan2(-Rs[:, 0, 1], Rs[:, 1, 1]))  # direction of s2 = e3 x h, minus pi/2
             A = np.column_stack([np.ones_like(dt), dt])
             omega = float(np.linalg.solve(A.T @ (u[:, None] * A), A.T @ (u * yaw))[1])
+        if spread:
+            # p_i = p + M(dt_i) v: the CTRV displacement, linear in (p, v) for the fitted omega
+            # (M = dt I for omega = 0); v is the velocity at t_ref.
+            # With estimate_scale, as TargetEstimator: p_i = (1 + b) p(t_i) - b c_i, linear in
+            # (q, u, b) = ((1 + b) p, (1 + b) v, b) with the prior b ~ N(0, scale_error^2).
+            scale = self.estimate_scale and all(m.p_cam_W is not None for m in ms)
+            A = np.zeros((len(ms), 3, 7 if scale else 6))
+            A[:, :, :3] = np.eye(3)
+            x = omega * dt
+            s_ = np.where(abs(omega) > 1e-9, np.sin(x) / (omega if omega else 1.0), dt)
+            c_ = np.where(abs(omega) > 1e-9, (1.0 - np.cos(x)) / (omega if omega else 1.0), 0.0)
+            A[:, 0, 3], A[:, 0, 4], A[:, 1, 3], A[:, 1, 4], A[:, 2, 5] = s_, -c_, c_, s_, dt
+            if scale:
+                A[:, :, 6] = -np.array([m.p_cam_W for m in ms], dtype=float)
+            H = np.einsum("i,ija,ijb->ab", w, A, A)
+            if scale:
+                H[6, 6] += 1.0 / self.scale_error**2
+            X = np.linalg.solve(H, np.einsum("i,ija,ij->a", w, A, P))
+            k = 1.0 / (1.0 + X[6]) if scale else 1.0
+            p, vel = k * X[:3], k * X[3:6]
+        else:
+            p, vel = (w @ P) / w.sum(), np.zeros(3)
         turned = np.array([rot_z(-omega * d) @ Ri for d, Ri in zip(dt, Rs, strict=True)])  # each at t_ref
         R = project_so3(np.einsum("i,ijk->jk", u, turned) / u.sum())
         return p, vel, R, float(t_ref), omega, w

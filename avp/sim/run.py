@@ -53,7 +53,7 @@ from ..errors import AvpError, ConfigError
 from ..frames import Array, yaw_from_b2
 from ..moving import MovingConfig, MovingReplanner, plan_moving_detailed
 from ..planner import PlanResult, plan_detailed
-from ..platform import MotionModel, MovingTarget
+from ..platform import MotionModel, MovingTarget, rot_z
 from ..qp.moving import TerminalYaw
 from ..replan import ReplanAction, ReplanConfig, Replanner, ReplanStep
 from ..trajectory import Trajectory
@@ -156,8 +156,8 @@ class PlatformMotion:
     heading: float = 0.0
     turn_rate: float = 0.0
     vertical_speed: float = 0.0
-    tracking_time: float = 1.0
-    window: float = 1.0
+    tracking_time: float = 2.0
+    window: float = 2.0
 
     def __post_init__(self) -> None:
         for name in ("speed", "heading", "turn_rate", "vertical_speed", "tracking_time", "window"):
@@ -485,19 +485,25 @@ def closed_loop(
 def _track(state: RigidBodyState, platform: MovingTarget, sc: SimScenario, detect: Callable[[float, RigidBodyState], None],
            odo: Odometry | None, dt: float) -> tuple[RigidBodyState, float]:
     """Fly ``sc.platform.tracking_time`` s from ``state`` (given the pad's velocity) keeping the
-    start's offset from the moving pad, detecting at every control step."""
+    start's offset from the moving pad in the platform's frame (turning with it, yaw too),
+    detecting at every control step."""
     assert sc.platform is not None
     offset = state.p_W - platform.point
     z = np.zeros(3)
+    w = platform.omega
+    yaw0 = yaw_from_b2(state.R_WB[:, 1])
 
     def track(tt: float) -> FlatReference:
         p = platform.at(tt)
-        return FlatReference(p.point + offset, p.velocity, p.acceleration, z, z)
+        r = rot_z(w * tt) @ offset
+        wr = np.array([-w * r[1], w * r[0], 0.0])  # omega e3 x r
+        return FlatReference(p.point + r, p.velocity + wr, p.acceleration - w * w * np.array([r[0], r[1], 0.0]),
+                             z, z, yaw0 + w * tt, w, 0.0)
 
     def hook(prev: RigidBodyState, new: RigidBodyState, t_prev: float, t_new: float) -> None:
         detect(t_new, new)
 
-    start = RigidBodyState(state.p_W, platform.velocity, state.R_WB)
+    start = RigidBodyState(state.p_W, track(0.0).velocity, state.R_WB)
     detect(0.0, start)
     res = fly(start, track, 0.0, sc.platform.tracking_time, sc.vehicle, sc.gains, dt=dt, odometry=odo, stop=hook)
     return res.state, res.t
@@ -557,7 +563,8 @@ def simulate(
     if sc.platform is None:
         estimator = TargetEstimator(sc.filter_scale_error, sc.filter_range_ratio, sc.filter_estimate_scale)
     else:
-        estimator = PlatformEstimator(sc.platform.window, sc.filter_scale_error, sc.platform.turn_rate != 0.0)
+        estimator = PlatformEstimator(sc.platform.window, sc.filter_scale_error, sc.platform.turn_rate != 0.0,
+                                      sc.filter_estimate_scale)
     odo = None if sc.odometry is None else Odometry(sc.odometry, rng_odo)
     state = RigidBodyState(sc.start())
     detections: list[tuple[float, float, float, float]] = []
