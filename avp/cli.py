@@ -27,7 +27,7 @@ from typing import Any
 
 import numpy as np
 
-from .configfile import Settings, load_settings, to_mapping
+from .configfile import Settings, load_settings, merge, to_mapping
 from .errors import AvpError, ConfigError
 from .export import trajectory_to_dict
 
@@ -441,6 +441,19 @@ def _simulate_parser(sub: Any, common: argparse.ArgumentParser) -> None:
     p.add_argument("--output-dir", default="avp_simulation", help="directory for the plots")
     p.add_argument("--no-plot", action="store_true", help="skip the plots")
     p.add_argument("--gif", metavar="FILE.gif", help="animate the first AVP trial of the first condition")
+    m = p.add_argument_group("moving platform (the pad rides a platform; [scenario.platform] in --config)")
+    m.add_argument("--platform-speed", type=float, metavar="M/S", help="platform speed, m/s (default: a static pad)")
+    m.add_argument("--platform-heading-deg", type=float, metavar="DEG",
+                   help="direction of travel from +x, deg; 0: away from the start (default 0)")
+    m.add_argument("--platform-turn-rate", type=float, metavar="RAD/S", help="CTRV turn rate, rad/s (default 0)")
+
+
+def _platform_overrides(args: argparse.Namespace) -> dict[str, Any]:
+    """The ``--platform-*`` flags as ``{"scenario": {"platform": {...}}}`` (empty without any)."""
+    heading = None if args.platform_heading_deg is None else math.radians(args.platform_heading_deg)
+    table = {k: float(v) for k, v in (("speed", args.platform_speed), ("heading", heading),
+                                      ("turn_rate", args.platform_turn_rate)) if v is not None}
+    return {"scenario": {"platform": table}} if table else {}
 
 
 PAPER_NOTE = re.compile(r"\s*\((?:cf\. )?paper Table [^()]*\)|;\s*paper: [^\n]*")
@@ -458,7 +471,7 @@ def simulate(args: argparse.Namespace) -> int:
 
     if args.trials < 1:
         raise ConfigError("--trials", f"must be >= 1, got {args.trials}")
-    settings = _settings(args)
+    settings = load_settings(args.config, merge(_flag_overrides(args), _platform_overrides(args)))
     trials = campaign.grid(args.incline_deg, args.distance, args.lateral, _heights(args.height),
                            ("one_shot", "avp"), range(args.seed, args.seed + args.trials))
     runner = campaign.Runner(settings.data, keep_result=True)
@@ -477,7 +490,8 @@ def simulate(args: argparse.Namespace) -> int:
     comp.conditions.sort(key=order.__getitem__)
     for runs in comp.results.values():
         runs.sort(key=lambda r: r.seed)
-    paper = all(abs(c.incline - math.pi / 2) < 1e-9 and c.lateral == 0 and c.height is None for c in comp.conditions)
+    paper = "platform" not in settings.data.get("scenario", {}) and all(
+        abs(c.incline - math.pi / 2) < 1e-9 and c.lateral == 0 and c.height is None for c in comp.conditions)
     report = comp.report() if paper else without_paper_notes(comp.report())
     if args.json:
         _emit_json({"command": "simulate", "rows": sorted(rows, key=lambda r: r["trial_id"]),

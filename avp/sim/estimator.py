@@ -149,7 +149,8 @@ class PlatformEstimator:
     the contact time; fewer than two detections in the window give zero velocity. With
     ``estimate_scale`` the detector's scale error ``b`` is fitted too, as in
     :class:`TargetEstimator` (``p_i = (1 + b) p(t_i) - b c_i``, linear in ``((1 + b) p,
-    (1 + b) v, b)``, prior ``b ~ N(0, scale_error^2)``; observable once the range changes).
+    (1 + b) v, b)``, prior ``b ~ N(0, scale_error^2)``, weights without the ``scale_error``
+    term; observable once the range changes other than linearly in time, as when braking).
     """
 
     def __init__(self, window: float = 1.0, scale_error: float = 0.0, turn_rate: bool = False,
@@ -183,7 +184,9 @@ class PlatformEstimator:
         ms = self._meas
         t_ref = max(m.t for m in ms)
         dt = np.array([m.t - t_ref for m in ms])
-        w = np.array([1.0 / (max(m.sigma_pos, 1e-9) ** 2 + (self.scale_error * m.distance) ** 2) for m in ms])
+        scale = self.estimate_scale and all(m.p_cam_W is not None for m in ms)
+        inflate = 0.0 if scale else self.scale_error  # a fitted scale error is modelled, not noise
+        w = np.array([1.0 / (max(m.sigma_pos, 1e-9) ** 2 + (inflate * m.distance) ** 2) for m in ms])
         P = np.array([m.p_W for m in ms], dtype=float)
         Rs = np.array([m.R_WS for m in ms], dtype=float)
         u = np.array([1.0 / max(m.sigma_ang, 1e-9) ** 2 for m in ms])
@@ -198,7 +201,6 @@ class PlatformEstimator:
             # (M = dt I for omega = 0); v is the velocity at t_ref.
             # With estimate_scale, as TargetEstimator: p_i = (1 + b) p(t_i) - b c_i, linear in
             # (q, u, b) = ((1 + b) p, (1 + b) v, b) with the prior b ~ N(0, scale_error^2).
-            scale = self.estimate_scale and all(m.p_cam_W is not None for m in ms)
             A = np.zeros((len(ms), 3, 7 if scale else 6))
             A[:, :, :3] = np.eye(3)
             x = omega * dt

@@ -222,8 +222,10 @@ class SimScenario:
         ``IDLE_THRUST`` keeps ``b3`` and drops the thrust to ``vehicle.thrust_min`` (the motors at
         idle), so the vehicle coasts on into the pad.
     platform:
-        :class:`PlatformMotion`: the pad moves with a platform (constant velocity or CTRV);
-        ``None``: a static pad.
+        :class:`PlatformMotion`: the pad rides a platform (constant velocity, or CTRV with a turn
+        rate); in a file the table ``[scenario.platform]`` with its fields ``speed`` (m/s),
+        ``heading`` (rad), ``turn_rate`` (rad/s), ``vertical_speed`` (m/s), ``tracking_time``
+        and ``window`` (s); ``None``: a static pad.
     """
 
     incline: float = math.pi / 2
