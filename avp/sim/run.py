@@ -715,7 +715,10 @@ def simulate(
     pt, pp, pR = np.array(path_t), np.array(path_p).reshape(-1, 3), np.array(path_R).reshape(-1, 3, 3)
     t_eval = min(final.tf, contact.t) if contact is not None else final.tf
     if platform is not None:
-        pad_eval = platform.at(contact.t if contact is not None and contact.t <= final.tf else t_eval)
+        # the pad at the time of the judged pose; a contact's pose is relative to the pad at the
+        # end of its control step (pad_contact), the last recorded time
+        judged = pt[-1] if (contact is not None and contact.t <= final.tf) or t_eval > pt[-1] else t_eval
+        pad_eval = platform.at(float(judged))
         pad = PerchPad(pad_eval.point, pad_eval.R_WS, half_size=sc.pad_half_size)
     if contact is not None and contact.t <= final.tf:
         perch = judge_perch(contact.t, contact.p_W, contact.R_WB, pad, sc.perch_criteria)
