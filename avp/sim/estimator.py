@@ -135,15 +135,15 @@ class TargetEstimator:
         return x[:3] / (1.0 + x[3])
 
 
-class PlatformEstimator:
+class PlatformEstimator(TargetEstimator):
     """Fuses detections of a pad on a *moving* platform into a platform-state estimate.
 
     What a user would put between the tag detector and :class:`~avp.moving.MovingReplanner`:
-    over the detections captured in the last ``window`` s, a weighted least-squares fit of the
-    constant-velocity model ``p_i = p + v (t_i - t_ref)`` (``t_ref`` the latest capture time,
-    weights ``1 / (sigma_i^2 + (scale_error d_i)^2)`` as :class:`TargetEstimator`) and, for
-    ``turn_rate=True`` (the CTRV model), a straight-line fit of the pad's yaw (the direction of
-    ``s2 = e3 x h``) against time. The rotation is the chordal mean of the detections turned back
+    over the detections captured in the last ``window`` s, for ``turn_rate=True`` (the CTRV
+    model) a straight-line fit of the pad's yaw (the direction of ``s2 = e3 x h``) against time
+    giving ``omega``, then a weighted least-squares fit of ``p_i = p + M(t_i - t_ref) v``, the
+    CTRV displacement for that ``omega`` (``M = dt I`` for a straight line; ``t_ref`` the latest
+    capture time, weights ``1 / (sigma_i^2 + (scale_error d_i)^2)`` as :class:`TargetEstimator`). The rotation is the chordal mean of the detections turned back
     to ``t_ref`` by that rate. :meth:`target` returns an :class:`avp.platform.MovingTarget` at
     ``t_ref`` (heading along the fitted horizontal velocity), which the replanner predicts to
     the contact time; fewer than two detections in the window give zero velocity. With
@@ -157,24 +157,13 @@ class PlatformEstimator:
                  estimate_scale: bool = False) -> None:
         if not (np.isfinite(window) and window > 0):
             raise ConfigError("estimator.window", f"must be a positive time (s), got {window}")
-        if not (np.isfinite(scale_error) and scale_error >= 0):
-            raise ConfigError("estimator.scale_error", f"must be a fraction >= 0, got {scale_error}")
+        super().__init__(scale_error, None, estimate_scale)
         self.window = float(window)
-        self.scale_error = float(scale_error)
         self.turn_rate = bool(turn_rate)
-        self.estimate_scale = bool(estimate_scale) and self.scale_error > 0
-        self._meas: list[CameraMeasurement] = []
-        self._n = 0
-
-    @property
-    def n_measurements(self) -> int:
-        """Number of detections received."""
-        return self._n
 
     def update(self, meas: CameraMeasurement) -> None:
         """Add one detection (older ones than ``window`` before the newest are dropped)."""
-        self._meas.append(meas)
-        self._n += 1
+        super().update(meas)
         t_new = max(m.t for m in self._meas)
         self._meas = [m for m in self._meas if m.t >= t_new - self.window - 1e-9]
 

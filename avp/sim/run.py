@@ -40,9 +40,9 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from enum import Enum
-from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -52,7 +52,7 @@ from ..config import PlannerConfig, VehicleLimits
 from ..errors import AvpError, ConfigError
 from ..frames import Array, yaw_from_b2
 from ..moving import MovingConfig, MovingReplanner, plan_moving_detailed
-from ..planner import PlanResult, plan_detailed
+from ..planner import plan_detailed
 from ..platform import MotionModel, MovingTarget, rot_z
 from ..qp.moving import TerminalYaw
 from ..replan import ReplanAction, ReplanConfig, Replanner, ReplanStep
@@ -495,7 +495,7 @@ def _track(state: RigidBodyState, platform: MovingTarget, sc: SimScenario, detec
     w = platform.omega
     yaw0 = yaw_from_b2(state.R_WB[:, 1])
 
-    def track(tt: float) -> FlatReference:
+    def track(tt: float) -> Any:
         p = platform.at(tt)
         r = rot_z(w * tt) @ offset
         wr = np.array([-w * r[1], w * r[0], 0.0])  # omega e3 x r
