@@ -20,9 +20,9 @@ from enum import Enum
 from typing import Any
 
 import numpy as np
-import numpy.typing as npt
 
 from . import _validate as v
+from ._typing import Array
 from .bounds import BoundReport, Certificate, certify_spline
 from .config import ContactVelocity, PlannerConfig, Workspace
 from .errors import ConfigError, InfeasibleError
@@ -55,7 +55,6 @@ from .types import PerchTarget, State
 
 __all__ = ["LineOptions", "LinePlanResult", "LineStatus", "perch_equivalent", "plan_line"]
 
-Array = npt.NDArray[np.float64]
 
 ON_LINE_TOL = 1e-6
 """A start whose CoM is within this (m) of the clearance radius counts as perched on the line."""
@@ -145,7 +144,7 @@ class LineStatus(Enum):
         return self is not LineStatus.INFEASIBLE
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class LinePlanResult:
     """A line perch: the perch and recovery trajectories with their certificates.
 
@@ -504,8 +503,7 @@ def plan_line(
         lambda T: _perch_qp(state, line, contact, cfg, opts, T, on_normal), certify_perch, factors, T0, cfg, log, "perch")
     t_perch = time.perf_counter() - t_start
     if perch is None:
-        return LinePlanResult(LineStatus.INFEASIBLE, None, None, contact, math.nan, log=tuple(log),
-                              timings={"perch": t_perch, "recovery": 0.0, "total": t_perch})
+        return LinePlanResult(status=LineStatus.INFEASIBLE, perch=None, recovery=None, contact=contact, grasp=math.nan, log=tuple(log), timings={"perch": t_perch, "recovery": 0.0, "total": t_perch})
     grasp = contact.grasp_fraction(perch(perch.tf) - r * contact.n)
     recovery = None
     rec_report = None
@@ -552,8 +550,7 @@ def plan_line(
             log.append("recovery: no QP solution for any duration")
     t_rec = time.perf_counter() - t_rec0
     status = LineStatus.SOLVED if ok and rec_ok else LineStatus.NOT_CERTIFIED
-    return LinePlanResult(status, perch, recovery, contact, grasp, tuple(certs), report, rec_report, tuple(log),
-                          {"perch": t_perch, "recovery": t_rec, "total": time.perf_counter() - t_start})
+    return LinePlanResult(status=status, perch=perch, recovery=recovery, contact=contact, grasp=grasp, certificates=tuple(certs), bounds=report, recovery_bounds=rec_report, log=tuple(log), timings={"perch": t_perch, "recovery": t_rec, "total": time.perf_counter() - t_start})
 
 
 def perch_equivalent(

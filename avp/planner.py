@@ -10,8 +10,8 @@ from enum import Enum
 from typing import Any
 
 import numpy as np
-import numpy.typing as npt
 
+from ._typing import Array
 from .bounds import BoundReport, certify_spline
 from .config import PlannerConfig, PreImpactMode, Relaxation
 from .errors import (
@@ -42,7 +42,6 @@ from .types import PerchTarget, State
 
 __all__ = ["PlanResult", "PlanStatus", "PlanTimings", "plan", "plan_detailed"]
 
-Array = npt.NDArray[np.float64]
 
 STILL_SPEED = 0.1
 """A start closer than ``config.min_distance`` to the target is rejected only when slower than
@@ -67,7 +66,7 @@ class PlanStatus(Enum):
         return self in (PlanStatus.SOLVED, PlanStatus.SOLVED_WITHOUT_FOV, PlanStatus.SOLVED_RELAXED)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class PlanTimings:
     """Wall-clock seconds spent in each stage (summed over re-solves)."""
 
@@ -77,7 +76,7 @@ class PlanTimings:
     total: float = 0.0
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class PlanResult:
     """Everything a plan produced.
 
@@ -340,11 +339,12 @@ def plan_detailed(
                 fov_dropped=bool(attempt and attempt.fov_dropped),
             )
         return PlanResult(
-            status, traj, T, attempt.outcome if attempt else None,
-            tuple(log), PlanTimings(build, solve, certify, time.perf_counter() - t_start),
-            bool(attempt and attempt.fov_dropped), max(attempts - 1, 0),
-            report, attempt.relaxations if attempt else (),
-            attempt.safety if attempt else None,
+            status=status, trajectory=traj, durations=T, qp=attempt.outcome if attempt else None,
+            log=tuple(log),
+            timings=PlanTimings(build=build, solve=solve, certify=certify, total=time.perf_counter() - t_start),
+            fov_dropped=bool(attempt and attempt.fov_dropped), duration_scale_steps=max(attempts - 1, 0),
+            bounds=report, relaxations=attempt.relaxations if attempt else (),
+            safety=attempt.safety if attempt else None,
         )
 
     def solved(attempt: _Attempt) -> PlanStatus:
