@@ -34,6 +34,7 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass, replace
 from enum import Enum
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -306,8 +307,8 @@ class Replanner:
         replan: ReplanConfig | None = None,
         trajectory: Trajectory | None = None,
     ) -> None:
-        if not isinstance(target, PerchTarget):
-            raise ConfigError("target", f"expected avp.PerchTarget, got {type(target).__name__}")
+        if not isinstance(target, self._target_type):
+            raise ConfigError("target", f"expected avp.{self._target_type.__name__}, got {type(target).__name__}")
         self.config = config if config is not None else PlannerConfig()
         self.replan = replan if replan is not None else ReplanConfig()
         self._replan_config = self.config
@@ -357,8 +358,9 @@ class Replanner:
         if not isinstance(odometry, State):
             raise ConfigError("odometry", f"expected avp.State, got {type(odometry).__name__}")
         if target_estimate is not None:
-            if not isinstance(target_estimate, PerchTarget):
-                raise ConfigError("target_estimate", f"expected avp.PerchTarget, got {type(target_estimate).__name__}")
+            if not isinstance(target_estimate, self._target_type):
+                raise ConfigError("target_estimate",
+                                  f"expected avp.{self._target_type.__name__}, got {type(target_estimate).__name__}")
             self.target = target_estimate
         step = self._initial(t, odometry) if self.trajectory is None else self._replan(t, odometry)
         self.history.append(step)
@@ -407,11 +409,11 @@ class Replanner:
         rc = self.replan
         t_ex = t + self.latency
         remaining = committed.tf - t_ex
-        shift, turn = _target_change(self.committed_target, self.target)
+        shift, turn = self._change(self.committed_target, self.target)
         budget = 0.5 * rc.reach_acceleration * max(remaining, 0.0) ** 2
 
         def record(action: ReplanAction, reason: str, **kw: object) -> ReplanStep:
-            err, _ = _target_change(self.committed_target, self.target)
+            err, _ = self._change(self.committed_target, self.target)
             if action in (ReplanAction.KEPT_PREVIOUS, ReplanAction.FROZEN_NEAR_CONTACT, ReplanAction.PARTIAL) \
                     and err > rc.reach_tolerance and self._static_pad:
                 reason = (f"{action.name.lower()}: committed contact point {err:.3f} m from the estimate "
@@ -430,7 +432,7 @@ class Replanner:
         e_p = float(np.linalg.norm(odometry.position - ref[0, :3]))
         e_v = float(np.linalg.norm(odometry.velocity - ref[1, :3]))
         anchored = e_p <= rc.anchor_position and e_v <= rc.anchor_velocity
-        if anchored and shift <= rc.target_tolerance and turn <= rc.target_tolerance and self._static_pad:
+        if anchored and shift <= rc.target_tolerance and turn <= rc.target_tolerance and self._can_hold:
             return record(ReplanAction.HELD, f"tracking {e_p:.3f} m / {e_v:.3f} m/s, estimate moved {shift:.4f} m",
                           anchored=True)
         try:
@@ -472,7 +474,7 @@ class Replanner:
     def _retimed(self, remaining: float, goal: PerchTarget) -> float:
         """Time left after moving the contact time with the normal part of the correction."""
         v_n = self.config.contact_velocity.normal
-        if not self.replan.retime_normal or v_n is None or abs(v_n) < 1e-6:
+        if not self._static_pad or not self.replan.retime_normal or v_n is None or abs(v_n) < 1e-6:
             return remaining
         dn = float((goal.point - self.committed_target.point) @ self.committed_target.s3)
         cap = self.replan.retime_fraction * remaining
@@ -507,6 +509,18 @@ class Replanner:
             state, target if target is not None else self.target, config, durations=durations,
             previous=previous, warm_start=previous if self.replan.warm_start else None,
         )
+
+    _target_type: type = PerchTarget
+    """The target class :meth:`step` accepts (a subclass for another target model sets its own)."""
+
+    def _change(self, a: Any, b: Any) -> tuple[float, float]:
+        """Distance (m) and angle (rad) between two target estimates (the hold and reach tests)."""
+        return _target_change(a, b)
+
+    @property
+    def _can_hold(self) -> bool:
+        """Whether an unchanged estimate with good tracking keeps the plan without a solve."""
+        return self._static_pad
 
     @property
     def _static_pad(self) -> bool:
