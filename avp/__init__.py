@@ -59,6 +59,7 @@ from .config import (
 )
 from .line import LineTarget, LineYaw
 from .line_planner import LineOptions, LinePlanResult, LineStatus, plan_line
+from .line_replan import LineReplanner
 from .metrics import Visibility, visibility
 from .moving import (
     MovingConfig,
@@ -122,5 +123,5 @@ __all__ += [
 ]
 
 # Line and powerline perches (docs/lines.md)
-__all__ += ["LineOptions", "LinePlanResult", "LineStatus", "LineTarget", "LineYaw", "plan_line"]
+__all__ += ["LineOptions", "LinePlanResult", "LineReplanner", "LineStatus", "LineTarget", "LineYaw", "plan_line"]
 
