@@ -1,5 +1,5 @@
 """Line perches in closed loop: :class:`avp.LineReplanner`, :func:`avp.sim.line_run.simulate_line`
-and ``avp demo`` / ``avp simulate`` with ``--line-pitch-deg`` (issue 13, item 6)."""
+and ``avp demo`` / ``avp simulate`` with ``--line-pitch-deg``."""
 
 from __future__ import annotations
 

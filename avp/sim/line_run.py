@@ -1,4 +1,4 @@
-"""Closed-loop line perches in the realistic simulator (issue 13): :func:`simulate_line`.
+"""Closed-loop line perches in the realistic simulator: :func:`simulate_line`.
 
 One run of a :class:`LineScenario`:
 
