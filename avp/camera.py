@@ -27,11 +27,11 @@ import numpy as np
 import numpy.typing as npt
 
 from . import _validate as v
+from ._typing import Array
 from .errors import ConfigError
 
 __all__ = ["FRONT_CAMERA_R_BC", "Camera", "FovConfig", "FovPointPolicy"]
 
-Array = npt.NDArray[np.float64]
 
 FRONT_CAMERA_R_BC = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
 """Default mounting: optical axis ``c3 = b1`` (forward), ``c1 = -b2``, ``c2 = -b3``."""

@@ -26,8 +26,8 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
-import numpy.typing as npt
 
+from ._typing import Array
 from .errors import ConfigError
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -42,7 +42,6 @@ __all__ = [
     "trajectory_to_dict",
 ]
 
-Array = npt.NDArray[np.float64]
 
 FORMAT = "avp.trajectory"
 VERSION = 1

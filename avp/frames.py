@@ -14,6 +14,8 @@ import math
 import numpy as np
 import numpy.typing as npt
 
+from ._typing import Array
+
 __all__ = [
     "GRAVITY",
     "MAX_CONTACT_ROLL",
@@ -36,7 +38,6 @@ GRAVITY = 9.81
 
 E3 = np.array([0.0, 0.0, 1.0])
 
-Array = npt.NDArray[np.float64]
 
 
 def thrust_vector(acc: npt.ArrayLike, g: float = GRAVITY) -> Array:

@@ -26,16 +26,15 @@ from enum import Enum
 from typing import Any
 
 import numpy as np
-import numpy.typing as npt
 import scipy.optimize
 
 from . import _validate as v
+from ._typing import Array
 from .errors import ConfigError
 from .frames import yaw_from_b2
 
 __all__ = ["LineContact", "LineTarget", "LineYaw"]
 
-Array = npt.NDArray[np.float64]
 E3 = np.array([0.0, 0.0, 1.0])
 
 MAX_INCLINE = math.radians(80.0)

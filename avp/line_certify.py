@@ -32,15 +32,14 @@ from dataclasses import dataclass
 from math import comb
 
 import numpy as np
-import numpy.typing as npt
 
 from . import _avp_rust
+from ._typing import Array
 from .bounds import Certificate
 from .trajectory import Trajectory
 
 __all__ = ["DyadicPoly", "LineCertificate", "PolyCheck", "run_checks"]
 
-Array = npt.NDArray[np.float64]
 _CODES = (Certificate.WITHIN, Certificate.VIOLATED, Certificate.UNKNOWN, Certificate.NOT_CHECKED)
 
 

@@ -20,9 +20,9 @@ from enum import Enum
 from typing import Any
 
 import numpy as np
-import numpy.typing as npt
 
 from . import _validate as v
+from ._typing import Array
 from .bounds import BoundReport, Certificate, certify_spline
 from .config import ContactVelocity, PlannerConfig, Workspace
 from .errors import ConfigError, InfeasibleError
@@ -55,7 +55,6 @@ from .types import PerchTarget, State
 
 __all__ = ["LineOptions", "LinePlanResult", "LineStatus", "perch_equivalent", "plan_line"]
 
-Array = npt.NDArray[np.float64]
 
 ON_LINE_TOL = 1e-6
 """A start whose CoM is within this (m) of the clearance radius counts as perched on the line."""

@@ -36,9 +36,9 @@ from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
-import numpy.typing as npt
 
 from . import _validate as v
+from ._typing import Array
 from .bounds import BoundReport, certify_spline
 from .camera import FovConfig
 from .config import PlannerConfig
@@ -61,7 +61,6 @@ __all__ = [
     "plan_moving_detailed",
 ]
 
-Array = npt.NDArray[np.float64]
 
 
 @dataclass(frozen=True)

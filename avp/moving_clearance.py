@@ -45,16 +45,15 @@ from dataclasses import dataclass
 from functools import lru_cache
 
 import numpy as np
-import numpy.typing as npt
 
 from . import _avp_rust
+from ._typing import Array
 from .platform import MovingTarget
 from .safety import RESIDUAL_TOL
 from .trajectory import Trajectory
 
 __all__ = ["ClearanceReport", "certify_moving_clearance", "clearance"]
 
-Array = npt.NDArray[np.float64]
 
 EPS = 2.0**-52
 TINY = 2.0**-1000

@@ -28,8 +28,8 @@ import warnings
 from dataclasses import dataclass, replace
 
 import numpy as np
-import numpy.typing as npt
 
+from ._typing import Array
 from .config import PlannerConfig
 from .errors import InfeasibleError, SolverError
 from .metrics import visibility_many
@@ -45,8 +45,6 @@ from .solve import (
 )
 from .trajectory import Trajectory
 from .types import PerchTarget, State
-
-Array = npt.NDArray[np.float64]
 
 __all__ = ["ITERATIVE_SOLVERS", "KKT_TOL", "FovSolve", "incompatibility", "linearise_on", "solve_with_fov"]
 

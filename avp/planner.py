@@ -10,8 +10,8 @@ from enum import Enum
 from typing import Any
 
 import numpy as np
-import numpy.typing as npt
 
+from ._typing import Array
 from .bounds import BoundReport, certify_spline
 from .config import PlannerConfig, PreImpactMode, Relaxation
 from .errors import (
@@ -42,7 +42,6 @@ from .types import PerchTarget, State
 
 __all__ = ["PlanResult", "PlanStatus", "PlanTimings", "plan", "plan_detailed"]
 
-Array = npt.NDArray[np.float64]
 
 STILL_SPEED = 0.1
 """A start closer than ``config.min_distance`` to the target is rejected only when slower than

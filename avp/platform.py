@@ -26,15 +26,14 @@ from enum import Enum
 from typing import Any
 
 import numpy as np
-import numpy.typing as npt
 
 from . import _validate as v
+from ._typing import Array
 from .errors import ConfigError
 from .types import PerchTarget
 
 __all__ = ["MotionModel", "MovingTarget", "rot_z"]
 
-Array = npt.NDArray[np.float64]
 
 
 class MotionModel(Enum):

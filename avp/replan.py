@@ -37,10 +37,10 @@ from enum import Enum
 from typing import Any
 
 import numpy as np
-import numpy.typing as npt
 
 from . import _avp_rust
 from . import _validate as v
+from ._typing import Array
 from .config import PlannerConfig
 from .errors import AvpError, ConfigError
 from .planner import PlanResult, PlanStatus, plan_detailed
@@ -50,7 +50,6 @@ from .types import PerchTarget, State
 
 __all__ = ["ReplanAction", "ReplanConfig", "ReplanStep", "Replanner", "anticipate"]
 
-Array = npt.NDArray[np.float64]
 
 
 
@@ -371,9 +370,7 @@ class Replanner:
         """Whether ``result`` may be committed, why not, and its snap certificate."""
         if result is None or not result.ok or result.trajectory is None:
             return False, result.status.value if result is not None else "planning failed", None
-        relaxed = getattr(PlanStatus, "SOLVED_RELAXED", None)
-        if not self.replan.allow_relaxed and (getattr(result, "relaxations", ()) or
-                                              (relaxed is not None and result.status is relaxed)):
+        if not self.replan.allow_relaxed and (result.relaxations or result.status is PlanStatus.SOLVED_RELAXED):
             return False, "relaxed plan (allow_relaxed is off)", None
         if self.config.bounds.certify and (result.bounds is None or not result.bounds.certified):
             return False, "actuator bounds not certified", None

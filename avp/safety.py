@@ -20,9 +20,9 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-import numpy.typing as npt
 
 from . import _avp_rust
+from ._typing import Array
 from .bounds import Certificate
 from .config import PlannerConfig, Workspace
 from .errors import ConfigError
@@ -45,7 +45,6 @@ __all__ = [
     "workspace_blocks",
 ]
 
-Array = npt.NDArray[np.float64]
 
 RESIDUAL_TOL = 1e-9
 """Largest certified contact residual (m) accepted on a touched plane: the position may be this

@@ -19,15 +19,13 @@ from types import MappingProxyType
 from typing import Any
 
 import numpy as np
-import numpy.typing as npt
 import qpsolvers
 import scipy.sparse
 
+from ._typing import Array
 from .config import PlannerConfig, QpForm
 from .errors import SolverError
 from .qp.assemble import PerchingQp
-
-Array = npt.NDArray[np.float64]
 
 __all__ = [
     "BACKENDS",

@@ -6,13 +6,11 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
-import numpy.typing as npt
 
+from ._typing import Array
 from .config import PlannerConfig
 from .errors import ConfigError
 from .types import PerchTarget, State
-
-Array = npt.NDArray[np.float64]
 
 
 def initial_durations(state: State, target: PerchTarget, config: PlannerConfig) -> Array:

@@ -14,11 +14,11 @@ import numpy as np
 import numpy.typing as npt
 
 from . import _avp_rust, frames
+from ._typing import Array
 from .errors import ConfigError
 
 __all__ = ["Derivative", "FlatOutput", "Provenance", "RotorpyTrajectory", "Trajectory"]
 
-Array = npt.NDArray[np.float64]
 
 TIME_TOL = 1e-9
 """Times this far outside ``[t0, tf]`` (s) are accepted and evaluated at the end points."""

@@ -11,14 +11,13 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-import numpy.typing as npt
 
 from . import _validate as v
+from ._typing import Array
 from .errors import ConfigError
 
 __all__ = ["PerchTarget", "State"]
 
-Array = npt.NDArray[np.float64]
 _ZERO3 = (0.0, 0.0, 0.0)
 
 

@@ -29,6 +29,7 @@ import numpy.typing as npt
 import scipy.linalg
 import scipy.linalg.lapack
 
+from .._typing import Array
 from ..config import PlannerConfig
 from ..errors import InfeasibleError
 from ..trajectory import Trajectory
@@ -37,8 +38,6 @@ from .boundary import continuity_rows, initial_state_rows
 from .cost import cost_matrix
 from .layout import DecisionLayout, layout_for
 from .perching import flip_rows, pre_impact_rows, terminal_rows, terminal_thrust_rows
-
-Array = npt.NDArray[np.float64]
 
 RANK_TOL = 1e-10
 """Relative tolerance on the QR diagonal below which equality rows count as dependent."""

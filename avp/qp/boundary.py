@@ -3,12 +3,10 @@
 from __future__ import annotations
 
 import numpy as np
-import numpy.typing as npt
 
+from .._typing import Array
 from ..types import State
 from .layout import N_AXES, YAW, DecisionLayout
-
-Array = npt.NDArray[np.float64]
 
 
 def initial_state_rows(

@@ -9,11 +9,9 @@ from __future__ import annotations
 from functools import lru_cache
 
 import numpy as np
-import numpy.typing as npt
 
+from .._typing import Array
 from .layout import N_AXES, YAW, DecisionLayout, layout_for
-
-Array = npt.NDArray[np.float64]
 
 
 @lru_cache(maxsize=64)

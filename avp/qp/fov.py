@@ -23,12 +23,11 @@ import numpy as np
 import numpy.typing as npt
 
 from .. import _avp_rust
+from .._typing import Array
 from ..camera import Camera, FovConfig, FovPointPolicy
 from ..frames import GRAVITY
 from .assemble import ConstraintBlock
 from .layout import YAW, DecisionLayout
-
-Array = npt.NDArray[np.float64]
 
 __all__ = [
     "FOV_PREFIX",

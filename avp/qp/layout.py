@@ -14,7 +14,7 @@ from functools import cached_property, lru_cache
 import numpy as np
 import numpy.typing as npt
 
-Array = npt.NDArray[np.float64]
+from .._typing import Array
 
 N_AXES = 4
 """x, y, z, yaw."""

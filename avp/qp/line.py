@@ -15,14 +15,13 @@ from __future__ import annotations
 import math
 
 import numpy as np
-import numpy.typing as npt
 
+from .._typing import Array
 from ..line import LineContact, LineTarget
 from .assemble import ConstraintBlock
 from .layout import YAW, DecisionLayout
 from .rows import derivative_rows, vector_rows
 
-Array = npt.NDArray[np.float64]
 E3 = np.array([0.0, 0.0, 1.0])
 
 

@@ -29,9 +29,9 @@ from enum import Enum
 from functools import lru_cache
 
 import numpy as np
-import numpy.typing as npt
 import scipy.linalg
 
+from .._typing import Array
 from ..config import PlannerConfig
 from ..errors import ConfigError, InfeasibleError
 from ..platform import MovingTarget
@@ -45,7 +45,6 @@ from .rows import derivative_rows, vector_rows
 
 __all__ = ["MovingQpBuilder", "TerminalYaw", "contact_point", "moving_perching_qp", "objective"]
 
-Array = npt.NDArray[np.float64]
 
 
 class TerminalYaw(Enum):

@@ -6,15 +6,14 @@ from __future__ import annotations
 import math
 
 import numpy as np
-import numpy.typing as npt
 
+from .._typing import Array
 from ..config import PlannerConfig, PreImpactMode
 from ..frames import contact_yaw
 from ..types import PerchTarget
 from .layout import YAW, DecisionLayout
 from .rows import derivative_rows, vector_rows
 
-Array = npt.NDArray[np.float64]
 E3 = np.array([0.0, 0.0, 1.0])
 
 

@@ -9,11 +9,9 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 import numpy as np
-import numpy.typing as npt
 
+from .._typing import Array
 from .layout import DecisionLayout
-
-Array = npt.NDArray[np.float64]
 
 
 def point_rows(

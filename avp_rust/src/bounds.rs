@@ -32,10 +32,11 @@ use crate::certify::{certify_enclosure, certify_unit_exact, to_time, Certificate
 use crate::descartes::Budget;
 use crate::error::{Error, Result};
 use crate::exact;
+use crate::interval::Iv;
 use crate::poly::falling_factorial;
 use crate::roll::{self, RollInput, RollVerdict};
 use crate::spline::SplineView;
-use crate::sturm::{Iv, MAX_DEGREE};
+use crate::sturm::MAX_DEGREE;
 
 /// The checked bounds, in the order of the batch output rows.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]

@@ -17,7 +17,8 @@
 use crate::descartes::Budget;
 use crate::error::Result;
 use crate::exact::{self, IntPoly, UnitExact};
-use crate::sturm::{self, next_up, Iv, MAX_DEGREE};
+use crate::interval::{next_up, Iv};
+use crate::sturm::{self, MAX_DEGREE};
 
 /// Verdict of a bound certificate `F(t) < 0 on [a, b]`.
 #[derive(Debug, Clone, Copy, PartialEq)]

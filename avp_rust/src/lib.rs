@@ -19,6 +19,7 @@ pub mod descartes;
 pub mod error;
 pub mod exact;
 pub mod fov;
+pub mod interval;
 pub mod poly;
 pub mod regions;
 pub mod roll;
@@ -27,9 +28,5 @@ pub mod sturm;
 
 #[cfg(feature = "python")]
 mod python;
-#[cfg(feature = "python")]
-mod python_bounds;
-#[cfg(feature = "python")]
-mod python_regions;
 
 pub use error::{Error, Result};

@@ -27,8 +27,9 @@ use crate::certify::{certify_enclosure, certify_unit_exact, Certificate, UnitVer
 use crate::descartes::Budget;
 use crate::error::{check_finite, Error, Result};
 use crate::exact;
+use crate::interval::Iv;
 use crate::spline::SplineView;
-use crate::sturm::{Iv, MAX_DEGREE};
+use crate::sturm::MAX_DEGREE;
 
 /// A workspace region the position (or velocity) must stay in.
 #[derive(Debug, Clone, Copy, PartialEq)]

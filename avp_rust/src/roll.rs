@@ -20,7 +20,7 @@
 //! [`MAX_DEPTH`]. A violation `sin² φ > S` is proven by evaluating `sin² φ` at a piece's
 //! midpoint in floating point with a relative margin of `1e-9` (far above its rounding error).
 use crate::certify::{bernstein_upper, certify_enclosure, unit_enclosure, UnitVerdict};
-use crate::sturm::{eval_iv, next_down, Iv};
+use crate::interval::{eval_iv, next_down, Iv};
 
 /// `sin²` of the roll levels tried, increasing: `1 − 2^-k`, i.e. 45°, 60°, 69.3°, 75.5°. Each is
 /// exact in binary, and so are the body-rate constants it gives (see [`body_rate_constants`]).

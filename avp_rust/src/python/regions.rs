@@ -5,8 +5,8 @@
 use numpy::{IntoPyArray, PyArray1, PyReadonlyArray1, PyReadonlyArray3};
 use pyo3::prelude::*;
 
+use super::common::{contiguous, kernel_err, spline_view, to_py_err};
 use crate::error::guarded;
-use crate::python::{contiguous, kernel_err, spline_view, to_py_err};
 use crate::regions::{self, Region, RegionVerdict};
 
 type Verdicts<'py> = (Bound<'py, PyArray1<i8>>, Bound<'py, PyArray1<f64>>, f64);

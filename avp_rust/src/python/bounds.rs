@@ -11,10 +11,10 @@ use pyo3::prelude::*;
 
 use crate::error::guarded;
 
+use super::common::{contiguous, kernel_err, spline_view, to_py_err};
 use crate::bounds::{self, BoundKind, Limits, ALL_BOUNDS};
 use crate::certify::{self, ExactMethod};
 use crate::descartes::Budget;
-use crate::python::{contiguous, kernel_err, spline_view, to_py_err};
 use crate::sturm;
 
 /// Exact number of distinct real roots of `sum coeffs[k] x^k` in the closed interval `[a, b]`.
