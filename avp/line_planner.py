@@ -175,6 +175,11 @@ class LinePlanResult:
         return self.perch
 
     @property
+    def relaxations(self) -> tuple[()]:
+        """None: a line plan is never relaxed (the name :class:`~avp.planner.PlanResult` uses)."""
+        return ()
+
+    @property
     def violations(self) -> list[LineCertificate]:
         return [c for c in self.certificates if not c.ok]
 

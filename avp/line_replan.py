@@ -18,8 +18,8 @@ import math
 from typing import Any
 
 import numpy as np
-import numpy.typing as npt
 
+from ._typing import Array
 from .config import PlannerConfig
 from .line import LineTarget
 from .line_planner import LineOptions, LinePlanResult, plan_line
@@ -28,8 +28,6 @@ from .trajectory import Trajectory
 from .types import State
 
 __all__ = ["LineReplanner", "line_change"]
-
-Array = npt.NDArray[np.float64]
 
 
 def line_change(a: LineTarget, b: LineTarget) -> tuple[float, float]:

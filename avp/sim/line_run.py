@@ -34,6 +34,7 @@ from typing import Any
 
 import numpy as np
 
+from .._typing import Array
 from ..config import PlannerConfig, Workspace
 from ..errors import AvpError, ConfigError
 from ..line import LineTarget
@@ -49,8 +50,6 @@ from .run import Mode, _odometry_state
 from .vehicle import RigidBodyState, VehicleParams
 
 __all__ = ["LineCriteria", "LineDetector", "LineScenario", "LineSimResult", "simulate_line"]
-
-Array = np.ndarray
 
 
 @dataclass(frozen=True)
