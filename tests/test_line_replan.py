@@ -67,7 +67,7 @@ def test_line_replanner_never_raises_and_commits_only_certified_plans() -> None:
     rng = np.random.default_rng(7)
     offsets = [rng.normal(0.0, 0.03, 3) for _ in range(8)] + [np.array([0.0, 0.0, 2.0]), np.array([-2.5, 0.0, -0.2])]
     t = 0.0
-    for k, off in enumerate(offsets):
+    for off in offsets:
         t += 1.0 / 30.0
         before = rp.trajectory
         ref = before.flat_output(t)

@@ -27,6 +27,7 @@ happens after ``t_f`` (the grasp) is not simulated.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from dataclasses import dataclass, field
@@ -42,8 +43,7 @@ from ..line_planner import LineOptions, plan_line
 from ..line_replan import LineReplanner
 from ..replan import ReplanConfig, ReplanStep
 from ..trajectory import Trajectory
-from ..types import State
-from .controller import ControllerGains
+from .controller import ControllerGains, FlatReference
 from .flight import DT_CONTROL, fly
 from .odometry import Odometry, OdometryNoise
 from .run import Mode, _odometry_state
@@ -157,7 +157,6 @@ class _Fusion:
 
 
 def _translated(line: LineTarget, offset: Array) -> LineTarget:
-    import dataclasses
     return dataclasses.replace(line, vertices=line.vertices + offset)
 
 
@@ -174,7 +173,6 @@ def simulate_line(
     """Fly one line perch of ``scenario`` (module docstring). ``config`` defaults to
     :class:`~avp.config.PlannerConfig` with the scenario vehicle's limits and ``ground_z``; the
     simulator flies ``config.limits``."""
-    import dataclasses
     if not isinstance(scenario, LineScenario):
         raise ConfigError("scenario", f"expected avp.sim.LineScenario, got {type(scenario).__name__}")
     mode = Mode.parse(mode)
@@ -204,7 +202,6 @@ def simulate_line(
     t_plan = (sc.initial_frames - 1) * period_det
     estimate = _translated(truth, fusion.offset())
     zero = np.zeros(3)
-    from .controller import FlatReference
     start = _odometry_state(believed(t_plan, state), t_plan, FlatReference(zero, zero, zero, zero, zero))
     solve_times: list[float] = []
     replanner: LineReplanner | None = None
