@@ -82,7 +82,7 @@ class Violation:
         return f"{self.bound.value} violated on segment {self.segment} near t = {self.t:.4g} s"
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class BoundReport:
     """Per bound and per segment verdicts of :func:`certify_spline`.
 

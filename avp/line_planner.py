@@ -144,7 +144,7 @@ class LineStatus(Enum):
         return self is not LineStatus.INFEASIBLE
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class LinePlanResult:
     """A line perch: the perch and recovery trajectories with their certificates.
 
@@ -516,8 +516,7 @@ def plan_line(
         factors if perch_search else (1.0,), T0, cfg, log, "perch")
     t_perch = time.perf_counter() - t_start
     if perch is None:
-        return LinePlanResult(LineStatus.INFEASIBLE, None, None, contact, math.nan, log=tuple(log),
-                              timings={"perch": t_perch, "recovery": 0.0, "total": t_perch})
+        return LinePlanResult(status=LineStatus.INFEASIBLE, perch=None, recovery=None, contact=contact, grasp=math.nan, log=tuple(log), timings={"perch": t_perch, "recovery": 0.0, "total": t_perch})
     grasp = contact.grasp_fraction(perch(perch.tf) - r * contact.n)
     recovery = None
     rec_report = None
@@ -564,8 +563,7 @@ def plan_line(
             log.append("recovery: no QP solution for any duration")
     t_rec = time.perf_counter() - t_rec0
     status = LineStatus.SOLVED if ok and rec_ok else LineStatus.NOT_CERTIFIED
-    return LinePlanResult(status, perch, recovery, contact, grasp, tuple(certs), report, rec_report, tuple(log),
-                          {"perch": t_perch, "recovery": t_rec, "total": time.perf_counter() - t_start})
+    return LinePlanResult(status=status, perch=perch, recovery=recovery, contact=contact, grasp=grasp, certificates=tuple(certs), bounds=report, recovery_bounds=rec_report, log=tuple(log), timings={"perch": t_perch, "recovery": t_rec, "total": time.perf_counter() - t_start})
 
 
 def perch_equivalent(

@@ -163,7 +163,7 @@ class ContactErrors:
     thrust: float
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class MovingPlanResult:
     """Outcome of :func:`plan_moving_detailed` (duck-compatible with ``PlanResult``: ``status``,
     ``ok``, ``trajectory``, ``log``)."""
@@ -347,11 +347,7 @@ def plan_moving_detailed(
     total = time.perf_counter() - t_start
     candidates = tuple(Candidate(e.T, e.score, e.objective, math.isfinite(e.score), e.note) for e in evals)
     if best is not None and best.traj is not None:
-        return MovingPlanResult(
-            PlanStatus.SOLVED, best.traj, best.pad, best.traj.durations, best.report, best.clearance,
-            best.score, candidates, tuple(log), solve_time, total,
-            contact_errors(best.traj, target, mcfg, cfg.workspace.body_offset), best.safety,
-        )
+        return MovingPlanResult(status=PlanStatus.SOLVED, trajectory=best.traj, pad=best.pad, durations=best.traj.durations, bounds=best.report, clearance=best.clearance, score=best.score, candidates=candidates, log=tuple(log), solve_time=solve_time, total_time=total, contact=contact_errors(best.traj, target, mcfg, cfg.workspace.body_offset), safety=best.safety)
     last = evals[-1]
     if any(e.clearance is not None or e.safety is not None for e in evals):
         status = PlanStatus.WORKSPACE_NOT_CERTIFIED
@@ -363,10 +359,7 @@ def plan_moving_detailed(
         speed = float(np.linalg.norm(target.velocity))
         log.append(f"no certified arrival time up to {max(e.T for e in evals):.2f} s (platform speed "
                    f"{speed:.2f} m/s); the limits may not allow catching this platform")
-    return MovingPlanResult(status, None, last.pad, np.full(cfg.n_segments, last.T / cfg.n_segments), last.report,
-                            next((e.clearance for e in reversed(evals) if e.clearance is not None), None),
-                            math.inf, candidates, tuple(log), solve_time, total, None,
-                            next((e.safety for e in reversed(evals) if e.safety is not None), None))
+    return MovingPlanResult(status=status, trajectory=None, pad=last.pad, durations=np.full(cfg.n_segments, last.T / cfg.n_segments), bounds=last.report, clearance=next((e.clearance for e in reversed(evals) if e.clearance is not None), None), score=math.inf, candidates=candidates, log=tuple(log), solve_time=solve_time, total_time=total, contact=None, safety=next((e.safety for e in reversed(evals) if e.safety is not None), None))
 
 
 def _search(run: Any, T1: float, mcfg: MovingConfig, log: list[str]) -> None:

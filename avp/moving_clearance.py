@@ -217,7 +217,7 @@ def _segments_in_sigma(coeffs: Array, D: float) -> list[_IPoly]:
     return [_IPoly(mid[a], rad[a]) for a in range(3)]
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class ClearanceReport:
     """Verdict of :func:`certify_moving_clearance`.
 
@@ -291,4 +291,4 @@ def certify_moving_clearance(
         if code != 0 and math.isnan(t_bad):
             t_bad = tf - float(t_sig)
     ok = all(verdicts) and r_lo >= -contact_tol
-    return ClearanceReport(ok, tuple(verdicts), t_bad, r_lo, r_hi, K)
+    return ClearanceReport(certified=ok, segments=tuple(verdicts), violation_time=t_bad, contact_residual_lower=r_lo, contact_residual_upper=r_hi, taylor_order=K)

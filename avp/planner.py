@@ -66,7 +66,7 @@ class PlanStatus(Enum):
         return self in (PlanStatus.SOLVED, PlanStatus.SOLVED_WITHOUT_FOV, PlanStatus.SOLVED_RELAXED)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class PlanTimings:
     """Wall-clock seconds spent in each stage (summed over re-solves)."""
 
@@ -76,7 +76,7 @@ class PlanTimings:
     total: float = 0.0
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class PlanResult:
     """Everything a plan produced.
 
@@ -339,11 +339,12 @@ def plan_detailed(
                 fov_dropped=bool(attempt and attempt.fov_dropped),
             )
         return PlanResult(
-            status, traj, T, attempt.outcome if attempt else None,
-            tuple(log), PlanTimings(build, solve, certify, time.perf_counter() - t_start),
-            bool(attempt and attempt.fov_dropped), max(attempts - 1, 0),
-            report, attempt.relaxations if attempt else (),
-            attempt.safety if attempt else None,
+            status=status, trajectory=traj, durations=T, qp=attempt.outcome if attempt else None,
+            log=tuple(log),
+            timings=PlanTimings(build=build, solve=solve, certify=certify, total=time.perf_counter() - t_start),
+            fov_dropped=bool(attempt and attempt.fov_dropped), duration_scale_steps=max(attempts - 1, 0),
+            bounds=report, relaxations=attempt.relaxations if attempt else (),
+            safety=attempt.safety if attempt else None,
         )
 
     def solved(attempt: _Attempt) -> PlanStatus:

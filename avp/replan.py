@@ -196,7 +196,7 @@ class ReplanConfig:
         object.__setattr__(self, "partial_fractions", fr)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class ReplanStep:
     """Record of one :meth:`Replanner.step`.
 
@@ -370,7 +370,8 @@ class Replanner:
         """Whether ``result`` may be committed, why not, and its snap certificate."""
         if result is None or not result.ok or result.trajectory is None:
             return False, result.status.value if result is not None else "planning failed", None
-        if not self.replan.allow_relaxed and (result.relaxations or result.status is PlanStatus.SOLVED_RELAXED):
+        relaxations = tuple(getattr(result, "relaxations", ()))  # a MovingPlanResult has none
+        if not self.replan.allow_relaxed and (relaxations or result.status is PlanStatus.SOLVED_RELAXED):
             return False, "relaxed plan (allow_relaxed is off)", None
         if self.config.bounds.certify and (result.bounds is None or not result.bounds.certified):
             return False, "actuator bounds not certified", None
@@ -391,14 +392,13 @@ class Replanner:
         result, elapsed, error = self._plan(state, self.target, None, None, self.config)
         ok, why, snap = self._certified(result, trackability=False)
         if not ok:
-            return ReplanStep(t, ReplanAction.NO_PLAN, None, error or why, t, state, result, elapsed, n_solves=1, snap=snap)
+            return ReplanStep(t=t, action=ReplanAction.NO_PLAN, trajectory=None, reason=error or why, t_ex=t, anticipated=state, result=result, solve_time=elapsed, n_solves=1, snap=snap)
         assert result is not None and result.trajectory is not None
         self.trajectory = result.trajectory
         self.committed_target = self.target
         s_peak, k_peak = trackability_peaks(self.trajectory)
         self.snap_limits = (max(self.replan.snap_max, 1.05 * s_peak), max(self.replan.snap_thrust_max, 1.05 * k_peak))
-        return ReplanStep(t, ReplanAction.INITIAL_PLAN, self.trajectory, "first plan", t, state, result,
-                          elapsed, fraction=1.0, n_solves=1, snap=snap)
+        return ReplanStep(t=t, action=ReplanAction.INITIAL_PLAN, trajectory=self.trajectory, reason="first plan", t_ex=t, anticipated=state, result=result, solve_time=elapsed, fraction=1.0, n_solves=1, snap=snap)
 
     def _replan(self, t: float, odometry: State) -> ReplanStep:
         committed = self.trajectory
@@ -417,8 +417,7 @@ class Replanner:
                           f"(tolerance {rc.reach_tolerance:.3f} m, budget {budget:.3f} m in "
                           f"{max(remaining, 0.0):.2f} s); {reason}")
                 action = ReplanAction.CANNOT_REACH
-            return ReplanStep(t, action, self.trajectory, reason, t_ex, target_error=err,
-                              reach_budget=budget, **kw)  # type: ignore[arg-type]
+            return ReplanStep(t=t, action=action, trajectory=self.trajectory, reason=reason, t_ex=t_ex, target_error=err, reach_budget=budget, **kw)  # type: ignore[arg-type]
 
         if remaining < max(rc.freeze_horizon, self.config.t_k):
             return record(ReplanAction.FROZEN_NEAR_CONTACT, f"{max(remaining, 0.0):.3f} s to contact")

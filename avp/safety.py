@@ -127,7 +127,7 @@ def check_endpoints(state: State, target: PerchTarget, config: PlannerConfig) ->
                 raise ConfigError(label, f"lies {where} the workspace limit '{r.name}' (margin {gap:.4g} m); {fix}")
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class RegionCheck:
     """Certificate of one :class:`Region` on every segment.
 
@@ -158,7 +158,7 @@ class RegionCheck:
         return f"{self.region.name}: {state} ({cells}{extra}){when}"
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class SafetyReport:
     """Per-region certificates of a trajectory (:func:`certify_workspace`)."""
 
@@ -203,9 +203,8 @@ def certify_workspace(traj: Trajectory, target: PerchTarget, workspace: Workspac
             codes, times, residual = _avp_rust.certify_sphere_outside(c, k, r.normal, r.offset)
         else:
             codes, times, residual = _avp_rust.certify_speed(c, k, r.offset)
-        checks.append(RegionCheck(r, tuple(_CODES[int(x)] for x in codes), tuple(float(x) for x in times),
-                                  float(residual), order))
-    return SafetyReport(tuple(checks))
+        checks.append(RegionCheck(region=r, verdicts=tuple(_CODES[int(x)] for x in codes), times=tuple(float(x) for x in times), residual=float(residual), touch_order=order))
+    return SafetyReport(checks=tuple(checks))
 
 
 def _sample_times(knots_rel: Array, per_segment: int) -> Array:

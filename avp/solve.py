@@ -117,7 +117,7 @@ class QpStatus(Enum):
     INACCURATE = "inaccurate: the returned point violates the constraints beyond tolerance"
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class QpOutcome:
     """What one QP solve produced."""
 
@@ -225,11 +225,11 @@ def solve_perching_qp(qp: PerchingQp, config: PlannerConfig, initvals: Array | N
     solve_time = time.perf_counter() - t_solve
     x = solution.x if solution.found else None
     if x is None or not np.all(np.isfinite(x)):
-        return QpOutcome(QpStatus.NO_SOLUTION, None, config.solver, build_time, solve_time, np.inf, solution)
+        return QpOutcome(status=QpStatus.NO_SOLUTION, c_hat=None, solver=config.solver, build_time=build_time, solve_time=solve_time, max_violation=np.inf, solution=solution)
     c_hat = red.lift(x) if red is not None else np.asarray(x, dtype=float)
     violation = _max_violation(qp, c_hat, G_full, lo_full, hi_full)
     status = QpStatus.SOLVED if violation <= FEASIBILITY_TOL else QpStatus.INACCURATE
-    return QpOutcome(status, c_hat, config.solver, build_time, solve_time, violation, solution)
+    return QpOutcome(status=status, c_hat=c_hat, solver=config.solver, build_time=build_time, solve_time=solve_time, max_violation=violation, solution=solution)
 
 
 def _max_violation(qp: PerchingQp, c_hat: Array, G: Array, lo: Array, hi: Array) -> float:

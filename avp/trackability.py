@@ -112,7 +112,7 @@ def snap_thrust_polynomial(coefficients: np.ndarray, duration: float | Fraction,
     return np.array([_round_up(Fraction(q)) for q in total], dtype=np.float64)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class SnapReport:
     """Per-segment verdicts of :func:`certify_snap`: ``|s| < snap_max`` (m/s^4) and
     ``|s| < snap_thrust_max |a + g e3|`` (1/s^2); a cell is WITHIN only if both are proven."""
@@ -152,7 +152,7 @@ def certify_snap(trajectory: Trajectory, snap_max: float, *, snap_thrust_max: fl
     kmax = _limit("snap_thrust_max", snap_thrust_max)
     n_seg = trajectory.n_segments
     if math.isinf(smax) and math.isinf(kmax):
-        return SnapReport(smax, (Certificate.NOT_CHECKED,) * n_seg, (math.nan,) * n_seg, kmax)
+        return SnapReport(snap_max=smax, verdicts=(Certificate.NOT_CHECKED,) * n_seg, times=(math.nan,) * n_seg, snap_thrust_max=kmax)
     knots = trajectory.knots
     rows = []
     for i in range(n_seg):
@@ -181,7 +181,7 @@ def certify_snap(trajectory: Trajectory, snap_max: float, *, snap_thrust_max: fl
             v, u = Certificate.WITHIN, math.nan
         verdicts.append(v)
         times.append(float(knots[i] + u * (knots[i + 1] - knots[i])) if np.isfinite(u) else math.nan)
-    return SnapReport(smax, tuple(verdicts), tuple(times), kmax)
+    return SnapReport(snap_max=smax, verdicts=tuple(verdicts), times=tuple(times), snap_thrust_max=kmax)
 
 
 def trackability_peaks(trajectory: Trajectory, samples: int = 400) -> tuple[float, float]:

@@ -176,7 +176,7 @@ class PerchCriteria:
     attitude_tolerance: float = float(np.deg2rad(10.0))
 
 
-@dataclass(frozen=True, eq=False)
+@dataclass(frozen=True, eq=False, kw_only=True)
 class PerchOutcome:
     """The vehicle at ``t`` judged against :class:`PerchCriteria`.
 
@@ -206,4 +206,4 @@ def judge_perch(t: float, p_W: Array, R_WB: Array, pad: PerchPad,
         failures.append("center")
     if att > criteria.attitude_tolerance:
         failures.append("attitude")
-    return PerchOutcome(float(t), e, att, tuple(failures))
+    return PerchOutcome(t=float(t), error_S=e, attitude_error=att, failures=tuple(failures))

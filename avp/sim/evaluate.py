@@ -451,7 +451,7 @@ class SweepPoint:
         return wilson_interval(self.successes, self.n)
 
 
-@dataclass
+@dataclass(kw_only=True)
 class SweepResult:
     """What :func:`sweep` measured: one :class:`SweepPoint` per (axis value, condition, mode),
     the replan step latencies (s) of every AVP solve, and the config."""
@@ -604,4 +604,4 @@ def sweep(
                     points.append(SweepPoint(axis, value, float(inc), float(dist), mode.name.lower(), k, c.n_trials,
                                              np.array(errs, dtype=float).reshape(-1, 3), np.array(atts), outs))
     latencies = np.concatenate(lat) if lat else np.zeros(0)
-    return SweepResult(cfg, points, latencies, time.perf_counter() - t0)
+    return SweepResult(config=cfg, points=points, latencies=latencies, wall_time=time.perf_counter() - t0)

@@ -44,7 +44,7 @@ class Trace:
     R_WB_des: Array
 
 
-@dataclass(frozen=True, eq=False)
+@dataclass(frozen=True, eq=False, kw_only=True)
 class FlightResult:
     """End of a stretch: true ``state`` at time ``t`` (s), the stop hook's ``event`` (or None)."""
 

@@ -147,7 +147,7 @@ class MovingSimScenario:
         return RigidBodyState(p, tgt.velocity, rot_z(tgt.heading))
 
 
-@dataclass(frozen=True, eq=False)
+@dataclass(frozen=True, eq=False, kw_only=True)
 class MovingSimResult:
     """One :func:`simulate_moving` run.
 
@@ -197,12 +197,7 @@ def simulate_moving(
         error = float(np.hypot(*contact.p_S[:2])) if contact is not None else math.nan
         sp = np.array(speeds) if speeds else np.array([math.nan])
         hist = rp.history if rp is not None else []
-        return MovingSimResult(
-            outcome, contact, error, float(np.max(sp)), float(np.mean(sp)), abs(truth.speed),
-            sum(1 for s in hist if s.action.name == "REPLANNED"),
-            np.array([s.solve_time for s in hist if s.solve_time > 0.0]), first,
-            rp.trajectory if rp is not None else None,
-        )
+        return MovingSimResult(outcome=outcome, contact=contact, error=error, speed_max=float(np.max(sp)), speed_mean=float(np.mean(sp)), target_speed=abs(truth.speed), replans=sum(1 for s in hist if s.action.name == "REPLANNED"), solve_times=np.array([s.solve_time for s in hist if s.solve_time > 0.0]), first_plan=first, final_plan=rp.trajectory if rp is not None else None)
 
     believed = state if odo is None else noisy_odometry(state, odo, rng_plan)
     filt = PlatformFilter(sc.filter_gain)

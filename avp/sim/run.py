@@ -237,7 +237,7 @@ class SimScenario:
         return dataclasses.replace(self.without_noise(), vehicle=vehicle)
 
 
-@dataclass(frozen=True, eq=False)
+@dataclass(frozen=True, eq=False, kw_only=True)
 class SimResult:
     """Everything one :func:`simulate` run recorded.
 
