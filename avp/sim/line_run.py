@@ -113,7 +113,7 @@ class LineScenario:
             raise ConfigError("scenario.replan_rate_hz", "must be positive and finite")
 
 
-@dataclass(frozen=True, eq=False)
+@dataclass(frozen=True, eq=False, kw_only=True)
 class LineSimResult:
     """One :func:`simulate_line` run: the outcome, the figures the criteria judge (gripper
     distance m, attitude error rad, speed m/s, clearance ``min dist - r`` m), the plans, the
@@ -210,7 +210,7 @@ def simulate_line(
         first = replanner.step(t_plan, start, estimate)
         solve_times.append(first.solve_time)
         if replanner.trajectory is None:
-            return LineSimResult(mode, int(seed), f"no plan: {first.reason}", steps=tuple(replanner.history),
+            return LineSimResult(mode=mode, seed=int(seed), outcome=f"no plan: {first.reason}", steps=tuple(replanner.history),
                                  solve_times=np.array(solve_times))
         plan0: Trajectory = replanner.trajectory
         recovery = replanner.recovery
@@ -223,7 +223,7 @@ def simulate_line(
             res, reason = None, f"{type(exc).__name__}: {exc}"
         solve_times.append(time.perf_counter() - w0)
         if res is None or not res.ok or res.perch is None:
-            return LineSimResult(mode, int(seed), f"no plan: {reason}", solve_times=np.array(solve_times))
+            return LineSimResult(mode=mode, seed=int(seed), outcome=f"no plan: {reason}", solve_times=np.array(solve_times))
         plan0, recovery = res.perch, res.recovery
 
     def committed() -> Trajectory:
@@ -278,7 +278,7 @@ def simulate_line(
     fails = [name for name, bad in (("gripper", e_grip > crit.gripper), ("attitude", e_ang > crit.angle),
                                     ("speed", speed > crit.speed), ("clearance", d_min < -crit.clearance)) if bad]
     return LineSimResult(
-        mode, int(seed), "success" if not fails else "failed: " + ", ".join(fails),
+        mode=mode, seed=int(seed), outcome="success" if not fails else "failed: " + ", ".join(fails),
         gripper_error=e_grip, angle_error=e_ang, speed=speed, clearance=d_min,
         estimate_error=float(np.linalg.norm(fusion.offset())), first_plan=plan0, final_plan=final,
         recovery=recovery, steps=tuple(replanner.history) if replanner is not None else (),
