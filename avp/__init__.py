@@ -41,16 +41,19 @@ __all__ = [
 ]
 
 from .bounds import Bound, BoundReport, Certificate
-from .camera import Camera, FovConfig, FovPointPolicy
+from .camera import Camera
 from .config import (
     BoundsPolicy,
     ContactVelocity,
+    FovConfig,
+    FovPointPolicy,
     HalfSpace,
     OverhangFlip,
     PlannerConfig,
     PreImpactMode,
     QpForm,
     Relaxation,
+    ReplanConfig,
     Sphere,
     TimeAllocation,
     TimeSearch,
@@ -70,7 +73,7 @@ from .moving import (
 )
 from .planner import PlanResult, PlanStatus, PlanTimings, plan, plan_detailed
 from .platform import MotionModel, MovingTarget
-from .replan import ReplanAction, ReplanConfig, Replanner, ReplanStep
+from .replan import ReplanAction, Replanner, ReplanStep
 from .safety import SafetyReport
 from .trajectory import Derivative, FlatOutput, Provenance, Trajectory
 from .types import PerchTarget, State
