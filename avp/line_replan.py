@@ -20,10 +20,10 @@ from typing import Any
 import numpy as np
 
 from ._typing import Array
-from .config import PlannerConfig
+from .config import PlannerConfig, ReplanConfig
 from .line import LineTarget
 from .line_planner import LineOptions, LinePlanResult, plan_line
-from .replan import ReplanConfig, Replanner, ReplanStep
+from .replan import Replanner, ReplanStep
 from .trajectory import Trajectory
 from .types import State
 

@@ -14,10 +14,10 @@ from hypothesis import strategies as st
 
 import avp
 from avp.cli import EXIT_SOLVED, EXIT_USAGE, main
-from avp.config import PlannerConfig, VehicleLimits, Workspace
+from avp.config import PlannerConfig, ReplanConfig, VehicleLimits, Workspace
 from avp.errors import ConfigError
 from avp.line_replan import LineReplanner, line_change
-from avp.replan import ReplanAction, ReplanConfig, Replanner
+from avp.replan import ReplanAction, Replanner
 from avp.sim.line_run import LineDetector, LineScenario, simulate_line
 from avp.sim.vehicle import VehicleParams
 

@@ -36,12 +36,12 @@ from typing import Any
 import numpy as np
 
 from .._typing import Array
-from ..config import PlannerConfig, Workspace
+from ..config import PlannerConfig, ReplanConfig, Workspace
 from ..errors import AvpError, ConfigError
 from ..line import LineTarget
 from ..line_planner import LineOptions, plan_line
 from ..line_replan import LineReplanner
-from ..replan import ReplanConfig, ReplanStep
+from ..replan import ReplanStep
 from ..trajectory import Trajectory
 from .controller import ControllerGains, FlatReference
 from .flight import DT_CONTROL, fly
