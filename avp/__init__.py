@@ -41,16 +41,19 @@ __all__ = [
 ]
 
 from .bounds import Bound, BoundReport, Certificate
-from .camera import Camera, FovConfig, FovPointPolicy
+from .camera import Camera
 from .config import (
     BoundsPolicy,
     ContactVelocity,
+    FovConfig,
+    FovPointPolicy,
     HalfSpace,
     OverhangFlip,
     PlannerConfig,
     PreImpactMode,
     QpForm,
     Relaxation,
+    ReplanConfig,
     Sphere,
     TimeAllocation,
     TimeSearch,
@@ -59,6 +62,7 @@ from .config import (
 )
 from .line import LineTarget, LineYaw
 from .line_planner import LineOptions, LinePlanResult, LineStatus, plan_line
+from .line_replan import LineReplanner
 from .metrics import Visibility, visibility
 from .moving import (
     MovingConfig,
@@ -69,7 +73,7 @@ from .moving import (
 )
 from .planner import PlanResult, PlanStatus, PlanTimings, plan, plan_detailed
 from .platform import MotionModel, MovingTarget
-from .replan import ReplanAction, ReplanConfig, Replanner, ReplanStep
+from .replan import ReplanAction, Replanner, ReplanStep
 from .safety import SafetyReport
 from .trajectory import Derivative, FlatOutput, Provenance, Trajectory
 from .types import PerchTarget, State
@@ -122,5 +126,5 @@ __all__ += [
 ]
 
 # Line and powerline perches (docs/lines.md)
-__all__ += ["LineOptions", "LinePlanResult", "LineStatus", "LineTarget", "LineYaw", "plan_line"]
+__all__ += ["LineOptions", "LinePlanResult", "LineReplanner", "LineStatus", "LineTarget", "LineYaw", "plan_line"]
 

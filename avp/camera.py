@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from enum import Enum
 from typing import Any
 
 import numpy as np
@@ -30,7 +29,7 @@ from . import _validate as v
 from ._typing import Array
 from .errors import ConfigError
 
-__all__ = ["FRONT_CAMERA_R_BC", "Camera", "FovConfig", "FovPointPolicy"]
+__all__ = ["FRONT_CAMERA_R_BC", "Camera"]
 
 
 FRONT_CAMERA_R_BC = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
@@ -119,102 +118,3 @@ class Camera:
         if self.vertical_fov is not None:
             ok &= np.abs(n_C[..., 1]) <= math.tan(self.vertical_fov / 2) * n_C[..., 2]
         return ok
-
-
-class FovPointPolicy(Enum):
-    """What to do with a FoV point whose linearised row (8) cannot hold anywhere inside its trust
-    region (9) (the target is too far outside the cone at the linearisation point).
-
-    Such a row makes the whole QP infeasible, so the fallback (16) would drop *every* FoV row.
-    """
-
-    SKIP = "skip: leave the point without a FoV row"
-    PROGRESS = "progress: require a fraction of the decrease of h reachable inside the trust region"
-    KEEP = "keep: place the row as is (the QP is infeasible and the fallback (16) fires)"
-
-
-@dataclass(frozen=True)
-class FovConfig:
-    """Perception-aware planning: FoV rows (8) with trust region (9) and the fallback (16).
-
-    Parameters
-    ----------
-    enabled:
-        Place FoV rows at all (``False``: the plain perching QP).
-    n_points:
-        ``n_p``, the number of linearisation points spread equally over the remaining trajectory
-        up to the gate (paper: 8).
-    trust_position, trust_acceleration, trust_yaw:
-        Half-widths of the trust region (9) around the linearisation point: 0.05 m, 0.2 m/s^2,
-        0.1 rad. The paper writes 2-norms; we impose a **box** (per component), the natural linear
-        form: it contains the paper's ball and is at most ``sqrt(3)`` wider along a diagonal.
-    gate:
-        Window before contact (s) without FoV rows. The final pitch-up turns a front camera away
-        from a steep pad, so rows there make the QP infeasible (docs/perception.md measures it).
-    point_policy, progress_fraction:
-        :class:`FovPointPolicy` for points whose row cannot hold inside the trust region; with
-        ``PROGRESS`` the row asks for ``progress_fraction`` of the largest linearised decrease of
-        ``h`` the box allows.
-    reach_fraction:
-        A point counts as out of reach (the policy applies) when meeting its row would take more
-        than this fraction of the largest linearised decrease inside the box (1: only truly
-        impossible rows; smaller values avoid the thin feasible sets on which first-order
-        back-ends report infeasibility).
-    margin:
-        Right-hand side of the linearised row in units of ``|n_d|``: ``h/|n_d| <= -margin``
-        (0: the cone itself). A small positive value absorbs linearisation error.
-    sqp_iterations:
-        Cap on SQP steps for a first plan (no previous plan): solve without FoV, then linearise
-        around the last solution and re-solve while the visibility improves, at most this often.
-    fallback_max_iter:
-        Iteration cap given to iterative back-ends (proxqp, osqp) for the QPs with FoV rows, so an
-        incompatible problem (16) is declared quickly; ``None``: the back-end's setting.
-    camera:
-        :class:`Camera` (front camera, 35 deg half-angle).
-    """
-
-    enabled: bool = True
-    n_points: int = 8
-    trust_position: float = 0.05
-    trust_acceleration: float = 0.2
-    trust_yaw: float = 0.1
-    gate: float = 0.0
-    point_policy: FovPointPolicy = FovPointPolicy.SKIP
-    progress_fraction: float = 0.5
-    reach_fraction: float = 0.5
-    margin: float = 0.0
-    sqp_iterations: int = 3
-    fallback_max_iter: int | None = 4000
-    camera: Camera = field(default_factory=Camera)
-
-    def __post_init__(self) -> None:
-        if not isinstance(self.enabled, bool):
-            raise ConfigError("fov.enabled", f"must be a bool, got {self.enabled!r}")
-        for name, lo in (("n_points", 1), ("sqp_iterations", 1)):
-            val = getattr(self, name)
-            if isinstance(val, bool) or not isinstance(val, (int, np.integer)) or val < lo:
-                raise ConfigError(f"fov.{name}", f"must be an integer >= {lo}, got {val!r}")
-        for name in ("trust_position", "trust_acceleration", "trust_yaw"):
-            v.positive_float(f"fov.{name}", getattr(self, name), allow_inf=True)
-        g = v.finite_float("fov.gate", self.gate)
-        if g < 0.0:
-            raise ConfigError("fov.gate", f"must be >= 0 s, got {g}")
-        if not isinstance(self.point_policy, FovPointPolicy):
-            raise ConfigError("fov.point_policy", f"must be a FovPointPolicy, got {self.point_policy!r}")
-        pf = v.finite_float("fov.progress_fraction", self.progress_fraction)
-        if not 0.0 < pf <= 1.0:
-            raise ConfigError("fov.progress_fraction", f"must be in (0, 1], got {pf}")
-        rf = v.finite_float("fov.reach_fraction", self.reach_fraction)
-        if not 0.0 < rf <= 1.0:
-            raise ConfigError("fov.reach_fraction", f"must be in (0, 1], got {rf}")
-        m = v.finite_float("fov.margin", self.margin)
-        if not 0.0 <= m < 1.0:
-            raise ConfigError("fov.margin", f"must be in [0, 1), got {m}")
-        if self.fallback_max_iter is not None and (
-            isinstance(self.fallback_max_iter, bool)
-            or not isinstance(self.fallback_max_iter, (int, np.integer))
-            or self.fallback_max_iter < 1
-        ):
-            raise ConfigError("fov.fallback_max_iter", f"must be None or an integer >= 1, got {self.fallback_max_iter!r}")
-        if not isinstance(self.camera, Camera):
-            raise ConfigError("fov.camera", f"must be an avp.Camera, got {type(self.camera).__name__}")

@@ -27,6 +27,7 @@ from typing import Any
 
 import numpy as np
 
+from .cli_line import add_line_flags, line_demo, line_simulate
 from .configfile import Settings, load_settings, merge, to_mapping
 from .errors import AvpError, ConfigError
 from .export import trajectory_to_dict
@@ -278,6 +279,7 @@ def _demo_parser(sub: Any, common: argparse.ArgumentParser) -> None:
     p.add_argument("--export", metavar="FILE", help="write the plan to FILE (.json, .csv or .npz by suffix)")
     p.add_argument("--export-rate", type=float, metavar="HZ",
                    help="sample the export at HZ (default: exact coefficients only)")
+    add_line_flags(p)
 
 
 def _ground_default(planner_cls: type) -> dict[str, Any]:
@@ -295,6 +297,11 @@ def demo(args: argparse.Namespace) -> int:
 
     settings = _settings(args, defaults=_ground_default(PlannerConfig))
     config = settings.planner
+    if args.line_pitch_deg is not None:  # a line perch (avp/cli_line.py)
+        code, doc = line_demo(args, config)
+        if args.json:
+            _emit_json(doc)
+        return code
     state, target, height = demo_geometry(args.incline_deg, args.distance, args.lateral, args.height)
     t0 = time.perf_counter()
     result = plan_detailed(state, target, config)
@@ -441,6 +448,7 @@ def _simulate_parser(sub: Any, common: argparse.ArgumentParser) -> None:
     p.add_argument("--output-dir", default="avp_simulation", help="directory for the plots")
     p.add_argument("--no-plot", action="store_true", help="skip the plots")
     p.add_argument("--gif", metavar="FILE.gif", help="animate the first AVP trial of the first condition")
+    add_line_flags(p)
     m = p.add_argument_group("moving platform (the pad rides a platform; [scenario.platform] in --config)")
     m.add_argument("--platform-speed", type=float, metavar="M/S", help="platform speed, m/s (default: a static pad)")
     m.add_argument("--platform-heading-deg", type=float, metavar="DEG",
@@ -472,6 +480,11 @@ def simulate(args: argparse.Namespace) -> int:
     if args.trials < 1:
         raise ConfigError("--trials", f"must be >= 1, got {args.trials}")
     settings = load_settings(args.config, merge(_flag_overrides(args), _platform_overrides(args)))
+    if args.line_pitch_deg is not None:  # closed-loop line perches (avp/cli_line.py)
+        doc = line_simulate(args, settings.planner)
+        if args.json:
+            _emit_json(doc)
+        return EXIT_SOLVED
     trials = campaign.grid(args.incline_deg, args.distance, args.lateral, _heights(args.height),
                            ("one_shot", "avp"), range(args.seed, args.seed + args.trials))
     runner = campaign.Runner(settings.data, keep_result=True)

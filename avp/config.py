@@ -15,19 +15,22 @@ from typing import Any
 import numpy as np
 
 from . import _validate as v
-from .camera import FovConfig
+from .camera import Camera
 from .errors import ConfigError
 from .frames import GRAVITY
 
 __all__ = [
     "BoundsPolicy",
     "ContactVelocity",
+    "FovConfig",
+    "FovPointPolicy",
     "HalfSpace",
     "OverhangFlip",
     "PlannerConfig",
     "PreImpactMode",
     "QpForm",
     "Relaxation",
+    "ReplanConfig",
     "Sphere",
     "TimeAllocation",
     "TimeSearch",
@@ -381,6 +384,105 @@ class Workspace:
                 or bool(self.half_spaces) or bool(self.spheres))
 
 
+class FovPointPolicy(Enum):
+    """What to do with a FoV point whose linearised row (8) cannot hold anywhere inside its trust
+    region (9) (the target is too far outside the cone at the linearisation point).
+
+    Such a row makes the whole QP infeasible, so the fallback (16) would drop *every* FoV row.
+    """
+
+    SKIP = "skip: leave the point without a FoV row"
+    PROGRESS = "progress: require a fraction of the decrease of h reachable inside the trust region"
+    KEEP = "keep: place the row as is (the QP is infeasible and the fallback (16) fires)"
+
+
+@dataclass(frozen=True)
+class FovConfig:
+    """Perception-aware planning: FoV rows (8) with trust region (9) and the fallback (16).
+
+    Parameters
+    ----------
+    enabled:
+        Place FoV rows at all (``False``: the plain perching QP).
+    n_points:
+        ``n_p``, the number of linearisation points spread equally over the remaining trajectory
+        up to the gate (paper: 8).
+    trust_position, trust_acceleration, trust_yaw:
+        Half-widths of the trust region (9) around the linearisation point: 0.05 m, 0.2 m/s^2,
+        0.1 rad. The paper writes 2-norms; we impose a **box** (per component), the natural linear
+        form: it contains the paper's ball and is at most ``sqrt(3)`` wider along a diagonal.
+    gate:
+        Window before contact (s) without FoV rows. The final pitch-up turns a front camera away
+        from a steep pad, so rows there make the QP infeasible (docs/perception.md measures it).
+    point_policy, progress_fraction:
+        :class:`FovPointPolicy` for points whose row cannot hold inside the trust region; with
+        ``PROGRESS`` the row asks for ``progress_fraction`` of the largest linearised decrease of
+        ``h`` the box allows.
+    reach_fraction:
+        A point counts as out of reach (the policy applies) when meeting its row would take more
+        than this fraction of the largest linearised decrease inside the box (1: only truly
+        impossible rows; smaller values avoid the thin feasible sets on which first-order
+        back-ends report infeasibility).
+    margin:
+        Right-hand side of the linearised row in units of ``|n_d|``: ``h/|n_d| <= -margin``
+        (0: the cone itself). A small positive value absorbs linearisation error.
+    sqp_iterations:
+        Cap on SQP steps for a first plan (no previous plan): solve without FoV, then linearise
+        around the last solution and re-solve while the visibility improves, at most this often.
+    fallback_max_iter:
+        Iteration cap given to iterative back-ends (proxqp, osqp) for the QPs with FoV rows, so an
+        incompatible problem (16) is declared quickly; ``None``: the back-end's setting.
+    camera:
+        :class:`Camera` (front camera, 35 deg half-angle).
+    """
+
+    enabled: bool = True
+    n_points: int = 8
+    trust_position: float = 0.05
+    trust_acceleration: float = 0.2
+    trust_yaw: float = 0.1
+    gate: float = 0.0
+    point_policy: FovPointPolicy = FovPointPolicy.SKIP
+    progress_fraction: float = 0.5
+    reach_fraction: float = 0.5
+    margin: float = 0.0
+    sqp_iterations: int = 3
+    fallback_max_iter: int | None = 4000
+    camera: Camera = field(default_factory=Camera)
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.enabled, bool):
+            raise ConfigError("fov.enabled", f"must be a bool, got {self.enabled!r}")
+        for name, lo in (("n_points", 1), ("sqp_iterations", 1)):
+            val = getattr(self, name)
+            if isinstance(val, bool) or not isinstance(val, (int, np.integer)) or val < lo:
+                raise ConfigError(f"fov.{name}", f"must be an integer >= {lo}, got {val!r}")
+        for name in ("trust_position", "trust_acceleration", "trust_yaw"):
+            v.positive_float(f"fov.{name}", getattr(self, name), allow_inf=True)
+        g = v.finite_float("fov.gate", self.gate)
+        if g < 0.0:
+            raise ConfigError("fov.gate", f"must be >= 0 s, got {g}")
+        if not isinstance(self.point_policy, FovPointPolicy):
+            raise ConfigError("fov.point_policy", f"must be a FovPointPolicy, got {self.point_policy!r}")
+        pf = v.finite_float("fov.progress_fraction", self.progress_fraction)
+        if not 0.0 < pf <= 1.0:
+            raise ConfigError("fov.progress_fraction", f"must be in (0, 1], got {pf}")
+        rf = v.finite_float("fov.reach_fraction", self.reach_fraction)
+        if not 0.0 < rf <= 1.0:
+            raise ConfigError("fov.reach_fraction", f"must be in (0, 1], got {rf}")
+        m = v.finite_float("fov.margin", self.margin)
+        if not 0.0 <= m < 1.0:
+            raise ConfigError("fov.margin", f"must be in [0, 1), got {m}")
+        if self.fallback_max_iter is not None and (
+            isinstance(self.fallback_max_iter, bool)
+            or not isinstance(self.fallback_max_iter, (int, np.integer))
+            or self.fallback_max_iter < 1
+        ):
+            raise ConfigError("fov.fallback_max_iter", f"must be None or an integer >= 1, got {self.fallback_max_iter!r}")
+        if not isinstance(self.camera, Camera):
+            raise ConfigError("fov.camera", f"must be an avp.Camera, got {type(self.camera).__name__}")
+
+
 @dataclass(frozen=True)
 class PlannerConfig:
     """Everything one plan needs besides the start state and the target.
@@ -535,3 +637,129 @@ class PlannerConfig:
     def band_samples(self) -> int:
         """Number of band (14) samples, ``round(t_k/dt)`` (``int`` would give 14 for 0.15/0.01)."""
         return int(round(self.t_k / self.dt))
+
+
+@dataclass(frozen=True)
+class ReplanConfig:
+    """Replanning policy (module docstring). Defaults measured in closed loop in the realistic
+    simulator (``docs/simulation.md``, "Replanning policy"; 90 deg wall and 45 deg slope at 4.5 m
+    and 7.5 m, 20 ms motor lag, 3 mm / 1 cm/s odometry noise with drift, 3 % range bias).
+
+    Parameters
+    ----------
+    latency:
+        Time (s) between the odometry sample ``t_rp`` and the switch to the new plan ``t_ex``.
+        20 ms: the median replan step measured 8-15 ms on 2 shared cores.
+    adapt_latency:
+        If true, use ``max(latency, latency_margin * recent median solve time)``.
+    latency_margin:
+        Safety factor on the measured solve time.
+    freeze_horizon:
+        No replanning when less than this (s) is left to contact (at least the band window).
+        0.25 s: 0.15 s gave identical outcomes (6 seeds, wall at 4.5 / 7.5 m): replans that late
+        do not pass the trackability certificate anyway, so the freeze only saves solves.
+    deadline:
+        A solve slower than this (s, wall clock) is discarded as too late; ``None``: no deadline
+        (use ``None`` in simulation for deterministic runs).
+    measured_orders:
+        When re-anchoring: derivative orders taken from odometry (2: position and velocity, yaw
+        and yaw rate); higher orders come from the committed plan, so commands stay continuous (6).
+    warm_start:
+        Pass the committed plan as initial guess to back-ends that accept one.
+    search_on_replan:
+        Let replans run the duration search and relaxations of ``config.bounds``. Off: a replan
+        keeps the committed contact time (in closed loop the search made the contact time drift
+        from 2.5 s to 20 s at 7.5 m and cost up to 55 solves per step).
+    anchor_position, anchor_velocity:
+        Tracking error (m, m/s) between odometry and the committed reference below which a
+        replan starts from the committed plan's own state (anchored), above which it re-anchors
+        on odometry. 0.15 m / 0.5 m/s: above the tracking error seen with certified plans and
+        20 ms motor lag (up to 8 cm at the end of a wall perch), far above the 3 mm / 1 cm/s
+        odometry noise, so noise never re-anchors. With anchoring, exact-estimate runs hold the
+        first plan and match one-shot exactly (100 % vs 100 % over 15 seeds x 6 conditions);
+        a closed-loop report from an independent simulator measured 1/5 such perches when every
+        replan re-anchored on noisy odometry.
+    target_tolerance:
+        Change (m) of the estimated pad centre (and ``target_tolerance`` rad of its normal)
+        below which, when anchored, the step holds the committed plan without solving. 5 mm:
+        a sixth of the 3 cm plane tolerance of a perch (chosen, not tuned; with a perfect
+        estimate every step holds, which is what makes AVP equal one-shot there).
+    reach_acceleration:
+        Budget (m/s^2) on moving the contact point: at most ``0.5 reach_acceleration T^2`` with
+        ``T`` the time left. 6 m/s^2: chosen (not tuned), about 60 % of the 9.8 m/s^2 thrust
+        margin above hover; in the measured runs the trackability certificate, not this budget,
+        was what stopped late corrections (the budget binds early, on far, noisy estimates).
+    partial_fractions:
+        Fractions of the (budgeted) correction tried in order until one certifies. ``(1, 0.5,
+        0.25, 0.125)``: with ``(1, 0.5, 0.25)`` 1/6 (4.5 m) and 4/6 (7.5 m) wall perches succeeded,
+        with the extra 1/8 step 2/6 and 3/6 (6 seeds each; repeated small commits accumulate).
+    reach_tolerance:
+        Distance (m) between the committed contact point and the latest estimate above which a
+        step without a full correction reports ``CANNOT_REACH``. 0.05 m: half the in-plane
+        success radius.
+    snap_max, snap_thrust_max:
+        Trackability limits certified on every committed replan (:mod:`avp.trackability`;
+        ``inf`` skips one): ``|s| < snap_max`` (m/s^4) and ``|s| < snap_thrust_max |a + g e3|``
+        (1/s^2, an angular-acceleration scale). The first plan is certified for the actuator
+        bounds and its own trackability figures are recorded; the limits used for replans are
+        ``max(limit, 1.05 x the first plan's peak)``, so a replan never demands more than the
+        worse of the limit and the plan the user accepted. 600 m/s^4 and 45 1/s^2: first plans
+        from hover at 4.5-7.5 m peak at 120-240 m/s^4 and 18-31 1/s^2 (1.5 m: 320-740, 67-97);
+        the late replans that lost the attitude (40-80 deg at contact with 20 ms motor lag, the
+        rotors at their floor during the pitch-up) carried 75-90 1/s^2.
+    retime_normal:
+        Move the contact time with the normal component ``dn`` of a target correction:
+        the remaining time becomes ``T - dn / v_n`` (``v_n`` the contact normal speed, at most
+        ``retime_fraction`` of ``T`` either way), so a pad found deeper is reached later at the same
+        approach, instead of by a steeper plan. On: at 4.5 m on a wall, late normal corrections of
+        1.5-4 cm were otherwise uncertifiable and the 2 m/s slide turned each cm of normal error into
+        about 7 cm along the pad. Off by default: measured worse (0/6 vs 1/6 at 4.5 m and 0/6 vs
+        4/6 at 7.5 m on a wall), since early corrections from far, noisy estimates moved the
+        contact time by tenths of a second.
+    retime_fraction:
+        Cap on the retiming, as a fraction of the time left.
+    allow_relaxed:
+        Commit plans the planner obtained by relaxing something (``result.relaxations``, status
+        ``SOLVED_RELAXED``). Off: a relaxed plan moves the contact velocity or band.
+    """
+
+    latency: float = 0.02
+    adapt_latency: bool = False
+    latency_margin: float = 1.5
+    freeze_horizon: float = 0.25
+    deadline: float | None = None
+    measured_orders: int = 2
+    warm_start: bool = True
+    search_on_replan: bool = False
+    anchor_position: float = 0.15
+    anchor_velocity: float = 0.5
+    target_tolerance: float = 0.005
+    reach_acceleration: float = 6.0
+    partial_fractions: tuple[float, ...] = (1.0, 0.5, 0.25, 0.125)
+    reach_tolerance: float = 0.05
+    snap_max: float = 600.0
+    snap_thrust_max: float = 45.0
+    retime_normal: bool = False
+    retime_fraction: float = 0.3
+    allow_relaxed: bool = False
+
+    def __post_init__(self) -> None:
+        v.positive_float("replan.latency", self.latency)
+        v.positive_float("replan.latency_margin", self.latency_margin)
+        v.positive_float("replan.freeze_horizon", self.freeze_horizon)
+        if self.deadline is not None:
+            v.positive_float("replan.deadline", self.deadline)
+        if not 0 <= self.measured_orders <= 5:
+            raise ConfigError("replan.measured_orders", "must be in 0..5 (0: all orders from the plan)")
+        for name in ("anchor_position", "anchor_velocity", "target_tolerance"):
+            val = v.finite_float(f"replan.{name}", getattr(self, name))
+            if val < 0:
+                raise ConfigError(f"replan.{name}", f"must be >= 0 (0: never anchor / never hold), got {val}")
+        v.positive_float("replan.reach_acceleration", self.reach_acceleration, allow_inf=True)
+        v.positive_float("replan.reach_tolerance", self.reach_tolerance)
+        v.positive_float("replan.snap_max", self.snap_max, allow_inf=True)
+        v.positive_float("replan.snap_thrust_max", self.snap_thrust_max, allow_inf=True)
+        fr = tuple(float(f) for f in self.partial_fractions)
+        if not fr or any(not 0.0 < f <= 1.0 for f in fr):
+            raise ConfigError("replan.partial_fractions", f"need fractions in (0, 1], got {self.partial_fractions!r}")
+        object.__setattr__(self, "partial_fractions", fr)

@@ -170,6 +170,16 @@ class LinePlanResult:
         return self.status is LineStatus.SOLVED
 
     @property
+    def trajectory(self) -> Trajectory | None:
+        """The perch (the name :class:`~avp.planner.PlanResult` uses, for the replanner)."""
+        return self.perch
+
+    @property
+    def relaxations(self) -> tuple[()]:
+        """None: a line plan is never relaxed (the name :class:`~avp.planner.PlanResult` uses)."""
+        return ()
+
+    @property
     def violations(self) -> list[LineCertificate]:
         return [c for c in self.certificates if not c.ok]
 
@@ -450,12 +460,14 @@ def plan_line(
     options: LineOptions | None = None,
     *,
     duration: float | None = None,
+    perch_search: bool = True,
 ) -> LinePlanResult:
     """Plan a perch on ``line`` from ``state`` and the recovery after it; never raises for an
     infeasible or uncertified plan (the status says so), only for bad input (ConfigError).
 
     ``duration`` overrides the total perch time of the allocation rule (the search still
-    scales it by ``config.bounds`` factors).
+    scales it by ``config.bounds`` factors). ``perch_search=False`` keeps the perch at exactly
+    that time (the recovery still searches): a replan that keeps the committed contact time.
     """
     t_start = time.perf_counter()
     if not isinstance(state, State):
@@ -500,7 +512,8 @@ def plan_line(
         return certs + workspace_certificates(traj, "perch", traj(traj.tf), contact.n, r, cfg.workspace)
 
     perch, ok, report, certs, _f = _search(
-        lambda T: _perch_qp(state, line, contact, cfg, opts, T, on_normal), certify_perch, factors, T0, cfg, log, "perch")
+        lambda T: _perch_qp(state, line, contact, cfg, opts, T, on_normal), certify_perch,
+        factors if perch_search else (1.0,), T0, cfg, log, "perch")
     t_perch = time.perf_counter() - t_start
     if perch is None:
         return LinePlanResult(status=LineStatus.INFEASIBLE, perch=None, recovery=None, contact=contact, grasp=math.nan, log=tuple(log), timings={"perch": t_perch, "recovery": 0.0, "total": t_perch})

@@ -40,8 +40,7 @@ import numpy as np
 from . import _validate as v
 from ._typing import Array
 from .bounds import BoundReport, certify_spline
-from .camera import FovConfig
-from .config import PlannerConfig
+from .config import FovConfig, PlannerConfig
 from .errors import (
     ConfigError,
     InfeasibleError,

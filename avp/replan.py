@@ -34,13 +34,14 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass, replace
 from enum import Enum
+from typing import Any
 
 import numpy as np
 
 from . import _avp_rust
 from . import _validate as v
 from ._typing import Array
-from .config import PlannerConfig
+from .config import PlannerConfig, ReplanConfig
 from .errors import AvpError, ConfigError
 from .planner import PlanResult, PlanStatus, plan_detailed
 from .trackability import SnapReport, certify_snap, trackability_peaks
@@ -67,132 +68,6 @@ class ReplanAction(Enum):
     FROZEN_NEAR_CONTACT = "too close to contact: committed plan kept without replanning"
     CANNOT_REACH = "the latest estimate is beyond what a certified plan reaches in the time left"
     NO_PLAN = "no plan yet: the first plan failed"
-
-
-@dataclass(frozen=True)
-class ReplanConfig:
-    """Replanning policy (module docstring). Defaults measured in closed loop in the realistic
-    simulator (``docs/simulation.md``, "Replanning policy"; 90 deg wall and 45 deg slope at 4.5 m
-    and 7.5 m, 20 ms motor lag, 3 mm / 1 cm/s odometry noise with drift, 3 % range bias).
-
-    Parameters
-    ----------
-    latency:
-        Time (s) between the odometry sample ``t_rp`` and the switch to the new plan ``t_ex``.
-        20 ms: the median replan step measured 8-15 ms on 2 shared cores.
-    adapt_latency:
-        If true, use ``max(latency, latency_margin * recent median solve time)``.
-    latency_margin:
-        Safety factor on the measured solve time.
-    freeze_horizon:
-        No replanning when less than this (s) is left to contact (at least the band window).
-        0.25 s: 0.15 s gave identical outcomes (6 seeds, wall at 4.5 / 7.5 m): replans that late
-        do not pass the trackability certificate anyway, so the freeze only saves solves.
-    deadline:
-        A solve slower than this (s, wall clock) is discarded as too late; ``None``: no deadline
-        (use ``None`` in simulation for deterministic runs).
-    measured_orders:
-        When re-anchoring: derivative orders taken from odometry (2: position and velocity, yaw
-        and yaw rate); higher orders come from the committed plan, so commands stay continuous (6).
-    warm_start:
-        Pass the committed plan as initial guess to back-ends that accept one.
-    search_on_replan:
-        Let replans run the duration search and relaxations of ``config.bounds``. Off: a replan
-        keeps the committed contact time (in closed loop the search made the contact time drift
-        from 2.5 s to 20 s at 7.5 m and cost up to 55 solves per step).
-    anchor_position, anchor_velocity:
-        Tracking error (m, m/s) between odometry and the committed reference below which a
-        replan starts from the committed plan's own state (anchored), above which it re-anchors
-        on odometry. 0.15 m / 0.5 m/s: above the tracking error seen with certified plans and
-        20 ms motor lag (up to 8 cm at the end of a wall perch), far above the 3 mm / 1 cm/s
-        odometry noise, so noise never re-anchors. With anchoring, exact-estimate runs hold the
-        first plan and match one-shot exactly (100 % vs 100 % over 15 seeds x 6 conditions);
-        a closed-loop report from an independent simulator measured 1/5 such perches when every
-        replan re-anchored on noisy odometry.
-    target_tolerance:
-        Change (m) of the estimated pad centre (and ``target_tolerance`` rad of its normal)
-        below which, when anchored, the step holds the committed plan without solving. 5 mm:
-        a sixth of the 3 cm plane tolerance of a perch (chosen, not tuned; with a perfect
-        estimate every step holds, which is what makes AVP equal one-shot there).
-    reach_acceleration:
-        Budget (m/s^2) on moving the contact point: at most ``0.5 reach_acceleration T^2`` with
-        ``T`` the time left. 6 m/s^2: chosen (not tuned), about 60 % of the 9.8 m/s^2 thrust
-        margin above hover; in the measured runs the trackability certificate, not this budget,
-        was what stopped late corrections (the budget binds early, on far, noisy estimates).
-    partial_fractions:
-        Fractions of the (budgeted) correction tried in order until one certifies. ``(1, 0.5,
-        0.25, 0.125)``: with ``(1, 0.5, 0.25)`` 1/6 (4.5 m) and 4/6 (7.5 m) wall perches succeeded,
-        with the extra 1/8 step 2/6 and 3/6 (6 seeds each; repeated small commits accumulate).
-    reach_tolerance:
-        Distance (m) between the committed contact point and the latest estimate above which a
-        step without a full correction reports ``CANNOT_REACH``. 0.05 m: half the in-plane
-        success radius.
-    snap_max, snap_thrust_max:
-        Trackability limits certified on every committed replan (:mod:`avp.trackability`;
-        ``inf`` skips one): ``|s| < snap_max`` (m/s^4) and ``|s| < snap_thrust_max |a + g e3|``
-        (1/s^2, an angular-acceleration scale). The first plan is certified for the actuator
-        bounds and its own trackability figures are recorded; the limits used for replans are
-        ``max(limit, 1.05 x the first plan's peak)``, so a replan never demands more than the
-        worse of the limit and the plan the user accepted. 600 m/s^4 and 45 1/s^2: first plans
-        from hover at 4.5-7.5 m peak at 120-240 m/s^4 and 18-31 1/s^2 (1.5 m: 320-740, 67-97);
-        the late replans that lost the attitude (40-80 deg at contact with 20 ms motor lag, the
-        rotors at their floor during the pitch-up) carried 75-90 1/s^2.
-    retime_normal:
-        Move the contact time with the normal component ``dn`` of a target correction:
-        the remaining time becomes ``T - dn / v_n`` (``v_n`` the contact normal speed, at most
-        ``retime_fraction`` of ``T`` either way), so a pad found deeper is reached later at the same
-        approach, instead of by a steeper plan. On: at 4.5 m on a wall, late normal corrections of
-        1.5-4 cm were otherwise uncertifiable and the 2 m/s slide turned each cm of normal error into
-        about 7 cm along the pad. Off by default: measured worse (0/6 vs 1/6 at 4.5 m and 0/6 vs
-        4/6 at 7.5 m on a wall), since early corrections from far, noisy estimates moved the
-        contact time by tenths of a second.
-    retime_fraction:
-        Cap on the retiming, as a fraction of the time left.
-    allow_relaxed:
-        Commit plans the planner obtained by relaxing something (``result.relaxations``, status
-        ``SOLVED_RELAXED``). Off: a relaxed plan moves the contact velocity or band.
-    """
-
-    latency: float = 0.02
-    adapt_latency: bool = False
-    latency_margin: float = 1.5
-    freeze_horizon: float = 0.25
-    deadline: float | None = None
-    measured_orders: int = 2
-    warm_start: bool = True
-    search_on_replan: bool = False
-    anchor_position: float = 0.15
-    anchor_velocity: float = 0.5
-    target_tolerance: float = 0.005
-    reach_acceleration: float = 6.0
-    partial_fractions: tuple[float, ...] = (1.0, 0.5, 0.25, 0.125)
-    reach_tolerance: float = 0.05
-    snap_max: float = 600.0
-    snap_thrust_max: float = 45.0
-    retime_normal: bool = False
-    retime_fraction: float = 0.3
-    allow_relaxed: bool = False
-
-    def __post_init__(self) -> None:
-        v.positive_float("replan.latency", self.latency)
-        v.positive_float("replan.latency_margin", self.latency_margin)
-        v.positive_float("replan.freeze_horizon", self.freeze_horizon)
-        if self.deadline is not None:
-            v.positive_float("replan.deadline", self.deadline)
-        if not 0 <= self.measured_orders <= 5:
-            raise ConfigError("replan.measured_orders", "must be in 0..5 (0: all orders from the plan)")
-        for name in ("anchor_position", "anchor_velocity", "target_tolerance"):
-            val = v.finite_float(f"replan.{name}", getattr(self, name))
-            if val < 0:
-                raise ConfigError(f"replan.{name}", f"must be >= 0 (0: never anchor / never hold), got {val}")
-        v.positive_float("replan.reach_acceleration", self.reach_acceleration, allow_inf=True)
-        v.positive_float("replan.reach_tolerance", self.reach_tolerance)
-        v.positive_float("replan.snap_max", self.snap_max, allow_inf=True)
-        v.positive_float("replan.snap_thrust_max", self.snap_thrust_max, allow_inf=True)
-        fr = tuple(float(f) for f in self.partial_fractions)
-        if not fr or any(not 0.0 < f <= 1.0 for f in fr):
-            raise ConfigError("replan.partial_fractions", f"need fractions in (0, 1], got {self.partial_fractions!r}")
-        object.__setattr__(self, "partial_fractions", fr)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -305,8 +180,8 @@ class Replanner:
         replan: ReplanConfig | None = None,
         trajectory: Trajectory | None = None,
     ) -> None:
-        if not isinstance(target, PerchTarget):
-            raise ConfigError("target", f"expected avp.PerchTarget, got {type(target).__name__}")
+        if not isinstance(target, self._target_type):
+            raise ConfigError("target", f"expected avp.{self._target_type.__name__}, got {type(target).__name__}")
         self.config = config if config is not None else PlannerConfig()
         self.replan = replan if replan is not None else ReplanConfig()
         self._replan_config = self.config
@@ -356,8 +231,9 @@ class Replanner:
         if not isinstance(odometry, State):
             raise ConfigError("odometry", f"expected avp.State, got {type(odometry).__name__}")
         if target_estimate is not None:
-            if not isinstance(target_estimate, PerchTarget):
-                raise ConfigError("target_estimate", f"expected avp.PerchTarget, got {type(target_estimate).__name__}")
+            if not isinstance(target_estimate, self._target_type):
+                raise ConfigError("target_estimate",
+                                  f"expected avp.{self._target_type.__name__}, got {type(target_estimate).__name__}")
             self.target = target_estimate
         step = self._initial(t, odometry) if self.trajectory is None else self._replan(t, odometry)
         self.history.append(step)
@@ -404,11 +280,11 @@ class Replanner:
         rc = self.replan
         t_ex = t + self.latency
         remaining = committed.tf - t_ex
-        shift, turn = _target_change(self.committed_target, self.target)
+        shift, turn = self._change(self.committed_target, self.target)
         budget = 0.5 * rc.reach_acceleration * max(remaining, 0.0) ** 2
 
         def record(action: ReplanAction, reason: str, **kw: object) -> ReplanStep:
-            err, _ = _target_change(self.committed_target, self.target)
+            err, _ = self._change(self.committed_target, self.target)
             if action in (ReplanAction.KEPT_PREVIOUS, ReplanAction.FROZEN_NEAR_CONTACT, ReplanAction.PARTIAL) \
                     and err > rc.reach_tolerance and self._static_pad:
                 reason = (f"{action.name.lower()}: committed contact point {err:.3f} m from the estimate "
@@ -426,7 +302,7 @@ class Replanner:
         e_p = float(np.linalg.norm(odometry.position - ref[0, :3]))
         e_v = float(np.linalg.norm(odometry.velocity - ref[1, :3]))
         anchored = e_p <= rc.anchor_position and e_v <= rc.anchor_velocity
-        if anchored and shift <= rc.target_tolerance and turn <= rc.target_tolerance and self._static_pad:
+        if anchored and shift <= rc.target_tolerance and turn <= rc.target_tolerance and self._can_hold:
             return record(ReplanAction.HELD, f"tracking {e_p:.3f} m / {e_v:.3f} m/s, estimate moved {shift:.4f} m",
                           anchored=True)
         try:
@@ -468,7 +344,7 @@ class Replanner:
     def _retimed(self, remaining: float, goal: PerchTarget) -> float:
         """Time left after moving the contact time with the normal part of the correction."""
         v_n = self.config.contact_velocity.normal
-        if not self.replan.retime_normal or v_n is None or abs(v_n) < 1e-6:
+        if not self._static_pad or not self.replan.retime_normal or v_n is None or abs(v_n) < 1e-6:
             return remaining
         dn = float((goal.point - self.committed_target.point) @ self.committed_target.s3)
         cap = self.replan.retime_fraction * remaining
@@ -503,6 +379,18 @@ class Replanner:
             state, target if target is not None else self.target, config, durations=durations,
             previous=previous, warm_start=previous if self.replan.warm_start else None,
         )
+
+    _target_type: type = PerchTarget
+    """The target class :meth:`step` accepts (a subclass for another target model sets its own)."""
+
+    def _change(self, a: Any, b: Any) -> tuple[float, float]:
+        """Distance (m) and angle (rad) between two target estimates (the hold and reach tests)."""
+        return _target_change(a, b)
+
+    @property
+    def _can_hold(self) -> bool:
+        """Whether an unchanged estimate with good tracking keeps the plan without a solve."""
+        return self._static_pad
 
     @property
     def _static_pad(self) -> bool:

@@ -106,12 +106,6 @@ def test_bad_durations(durations) -> None:
     assert field_of(exc) == "durations"
 
 
-def test_unknown_solver_is_a_solver_error() -> None:
-    sc = standard(90, 3.5)
-    with pytest.raises(avp.SolverError, match="not installed"):
-        avp.plan(sc.state, sc.target, avp.PlannerConfig(solver="no_such_solver"))
-
-
 def test_wrong_argument_types() -> None:
     sc = standard(90, 3.5)
     with pytest.raises(avp.ConfigError) as exc:

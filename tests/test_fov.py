@@ -373,17 +373,3 @@ def test_fov_blocks_equal_previous_implementation(policy: FovPointPolicy) -> Non
             name = f"{FOV_PREFIX} trust region (9) {label}"
             if name in blocks:
                 np.testing.assert_array_equal(blocks[name].matrix, R)
-
-
-def test_backend_table_drives_warm_starts_and_the_fov_iteration_cap() -> None:
-    from avp import perception, solve
-
-    for name, b in solve.BACKENDS.items():
-        cfg = dataclasses.replace(PlannerConfig(), solver=name)
-        capped = dict(perception._fov_config(cfg).solver_options)
-        assert ("max_iter" in capped) == b.iterative, name
-        assert (name in solve.WARM_START_SOLVERS) == b.warm_start
-        assert solve.SOLVER_DEFAULTS.get(name, {}) == dict(b.defaults)
-    assert solve.backend("no-such-backend") == solve.Backend("no-such-backend")
-    assert not solve.backend("daqp").warm_start and not solve.backend("daqp").iterative
-    assert solve.backend("osqp").max_iter == 200_000

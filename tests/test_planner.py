@@ -143,14 +143,6 @@ def test_free_velocity_components_are_not_constrained() -> None:
     assert snap_cost(traj) <= snap_cost(fixed) * (1 + 1e-6)
 
 
-def test_reduced_and_full_forms_agree() -> None:
-    sc = standard(60, 3.5)
-    red = avp.plan(sc.state, sc.target, avp.PlannerConfig(solver="proxqp"))
-    full = avp.plan(sc.state, sc.target, avp.PlannerConfig(solver="proxqp", qp_form=avp.QpForm.FULL))
-    t = red.sample(0.01)
-    assert np.max(np.abs(red(t) - full(t))) < 1e-4
-
-
 @st.composite
 def random_problem(draw: st.DrawFn) -> tuple[avp.State, avp.PerchTarget]:
     incline = draw(st.floats(0.0, math.pi / 2))

@@ -24,7 +24,8 @@ import numpy.typing as npt
 
 from .. import _avp_rust
 from .._typing import Array
-from ..camera import Camera, FovConfig, FovPointPolicy
+from ..camera import Camera
+from ..config import FovConfig, FovPointPolicy
 from ..frames import GRAVITY
 from .assemble import ConstraintBlock
 from .layout import YAW, DecisionLayout

@@ -16,6 +16,7 @@ off-able:
 - :mod:`~avp.sim.estimator`: the user-side target filter (inverse-variance fusion);
 - :mod:`~avp.sim.contact`: pad contact and the success criterion;
 - :mod:`~avp.sim.run` / :mod:`~avp.sim.evaluate`: one run, comparisons and sweeps.
+- :mod:`~avp.sim.line_run`: one closed-loop line perch (:func:`~avp.sim.line_run.simulate_line`).
 """
 
 from .camera import FRONT_CAMERA_R_BC, CameraMeasurement, CameraParams, CameraSensor

@@ -1,12 +1,13 @@
-"""The elimination cache: a factorisation depends on the equality matrix and the cost only, so
-QPs that differ in their right-hand side (state, target values) share it, and a cached answer is
-exactly the uncached one."""
+"""The perching QP (avp.qp): the reduced and the textbook forms agree, and the elimination cache (a
+factorisation depends on the equality matrix and the cost only, so QPs that differ in their
+right-hand side share it, and a cached answer is exactly the uncached one)."""
 
 from __future__ import annotations
 
 import math
 
 import numpy as np
+from scenarios import standard
 
 import avp
 import avp.qp.assemble as assemble
@@ -90,3 +91,11 @@ def test_cost_matrix_matches_its_definition_and_is_read_only() -> None:
             s = layout.start(axis, seg)
             ref[s:s + n, s:s + n] = (T.sum() / T[seg]) ** (2 * j - 1) * gram(7, j)
     np.testing.assert_allclose(P, ref / np.max(np.diag(ref)), rtol=1e-14, atol=0)
+
+
+def test_reduced_and_full_forms_agree() -> None:
+    sc = standard(60, 3.5)
+    red = avp.plan(sc.state, sc.target, avp.PlannerConfig(solver="proxqp"))
+    full = avp.plan(sc.state, sc.target, avp.PlannerConfig(solver="proxqp", qp_form=avp.QpForm.FULL))
+    t = red.sample(0.01)
+    assert np.max(np.abs(red(t) - full(t))) < 1e-4

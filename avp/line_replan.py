@@ -1,0 +1,100 @@
+"""Replanning a line perch: :class:`LineReplanner`, the :class:`~avp.replan.Replanner` policy with
+:func:`~avp.line_planner.plan_line` as its planning call.
+
+``step(t, odometry, line_estimate)`` takes the latest line estimate as a
+:class:`~avp.line.LineTarget`. The first plan searches the duration; a replan anticipates the
+start state (6) exactly as for a pad (anchored on the committed plan while tracking is good) and
+keeps the committed contact time (``duration = t_f - t_ex``, no duration search), so only the
+line estimate changes. A plan is committed only when every certificate of
+:func:`~avp.line_planner.plan_line` holds (clearance, height, corridor, flip, actuator bounds,
+recovery) and the trackability certificate of :mod:`avp.trackability` holds too. Corrections are
+full ones: the partial corrections and ``CANNOT_REACH`` of the pad policy blend two pad frames and
+do not apply to a line. The recovery of the last committed plan is :attr:`LineReplanner.recovery`.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from ._typing import Array
+from .config import PlannerConfig, ReplanConfig
+from .line import LineTarget
+from .line_planner import LineOptions, LinePlanResult, plan_line
+from .replan import Replanner, ReplanStep
+from .trajectory import Trajectory
+from .types import State
+
+__all__ = ["LineReplanner", "line_change"]
+
+
+def line_change(a: LineTarget, b: LineTarget) -> tuple[float, float]:
+    """Largest vertex displacement (m) and largest angle (rad) between matching pieces of two
+    estimates of one line (``inf`` when their vertex counts differ)."""
+    if a.vertices.shape != b.vertices.shape:
+        return math.inf, math.inf
+    shift = float(np.max(np.linalg.norm(a.vertices - b.vertices, axis=1)))
+    turn = 0.0
+    for k in range(a.n_pieces):
+        da, db = np.diff(a.vertices[k:k + 2], axis=0)[0], np.diff(b.vertices[k:k + 2], axis=0)[0]
+        c = float(da @ db) / (float(np.linalg.norm(da)) * float(np.linalg.norm(db)))
+        turn = max(turn, math.acos(min(1.0, max(-1.0, c))))
+    return shift, turn
+
+
+class LineReplanner(Replanner):
+    """:class:`~avp.replan.Replanner` for a perch on a line (module docstring).
+
+    Parameters
+    ----------
+    target:
+        Initial line estimate.
+    config, replan, trajectory:
+        As for :class:`~avp.replan.Replanner`.
+    options:
+        :class:`~avp.line_planner.LineOptions` of every planning call.
+    """
+
+    _target_type = LineTarget
+
+    def __init__(
+        self,
+        target: LineTarget,
+        config: PlannerConfig | None = None,
+        replan: ReplanConfig | None = None,
+        options: LineOptions | None = None,
+        trajectory: Trajectory | None = None,
+    ) -> None:
+        super().__init__(target, config, replan, trajectory)  # type: ignore[arg-type]
+        self.options = options if options is not None else LineOptions()
+        self.recovery: Trajectory | None = None
+        """Recovery of the last committed plan (None before the first plan or without recovery)."""
+        self.last_result: LinePlanResult | None = None
+        """Result of the last committed planning call."""
+
+    def step(self, t: float, odometry: State, target_estimate: LineTarget | None = None) -> ReplanStep:  # type: ignore[override]
+        step = super().step(t, odometry, target_estimate)  # type: ignore[arg-type]
+        if step.committed and isinstance(step.result, LinePlanResult):
+            self.last_result = step.result
+            self.recovery = step.result.recovery
+        return step
+
+    def _change(self, a: Any, b: Any) -> tuple[float, float]:
+        return line_change(a, b)
+
+    @property
+    def _can_hold(self) -> bool:
+        return True
+
+    def _solve(  # type: ignore[override]  # returns the duck-compatible LinePlanResult
+        self, state: State, durations: Array | None, previous: Trajectory | None, config: PlannerConfig
+    ) -> LinePlanResult:
+        assert isinstance(self.target, LineTarget)
+        if durations is None:  # the first plan: the duration search of ``config``
+            return plan_line(state, self.target, config, self.options)
+        # a replan: the perch keeps the committed contact time unless ``search_on_replan``;
+        # the recovery always searches its duration with the user's ``config.bounds``
+        return plan_line(state, self.target, self.config, self.options, duration=float(np.sum(durations)),
+                         perch_search=self.replan.search_on_replan)
