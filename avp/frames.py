@@ -127,6 +127,16 @@ level ``sin^2 phi < 15/16`` of the body-rate certificate (docs/bounds.md). The c
 is singular at 90 deg; near it the yaw term of the body rate grows as ``1/cos phi``."""
 
 
+def _exact_b2_des(R: Array) -> tuple[Array, float]:
+    """``b2_des`` that makes the construction (13) reproduce ``R`` exactly, and the (unsigned)
+    roll of that attitude (see :func:`contact_yaw`)."""
+    s2, s3 = R[:, 1], R[:, 2]
+    wn = float(np.hypot(s2[2], s3[2]))
+    if wn < 1e-12:  # s1 vertical: any horizontal b2_des along s2 works, phi = 0
+        return np.array([s2[0], s2[1], 0.0]), 0.0
+    return math.copysign(1.0, s3[2]) * (s3[2] * s2 - s2[2] * s3) / wn, math.atan2(abs(s2[2]), abs(s3[2]))
+
+
 def contact_yaw(R_WS: npt.ArrayLike) -> tuple[float, float]:
     """Yaw ``psi`` for which the construction (13) with ``b3 = s3`` gives exactly
     ``R_WB = R_WS`` when that is representable, and the roll ``phi`` (rad) of the attitude it gives.
@@ -146,14 +156,7 @@ def contact_yaw(R_WS: npt.ArrayLike) -> tuple[float, float]:
     """
     R = np.asarray(R_WS, dtype=float)
     s2, s3 = R[:, 1], R[:, 2]
-    w = s3[2] * s2 - s2[2] * s3
-    wn = float(np.hypot(s2[2], s3[2]))
-    if wn < 1e-12:  # s1 vertical: any horizontal b2_des along s2 works, phi = 0
-        b2d = np.array([s2[0], s2[1], 0.0])
-        roll = 0.0
-    else:
-        roll = math.atan2(abs(s2[2]), abs(s3[2]))
-        b2d = math.copysign(1.0, s3[2]) * w / wn
+    b2d, roll = _exact_b2_des(R)
     if roll > MAX_CONTACT_ROLL:  # not representable: the horizontal direction closest to s2
         h = np.array([s2[0], s2[1], 0.0])
         if float(np.linalg.norm(h)) < 1e-9:
@@ -165,9 +168,11 @@ def contact_yaw(R_WS: npt.ArrayLike) -> tuple[float, float]:
 
 def contact_frame_error(R_WS: npt.ArrayLike, g: float = GRAVITY) -> float:
     """Angle (rad) of the rotation about ``s3`` between ``R_WS`` and the contact attitude the
-    planner reaches with :func:`contact_yaw` (0 to rounding when the roll is at most
-    :data:`MAX_CONTACT_ROLL`)."""
+    planner reaches with :func:`contact_yaw`: 0 when the roll is at most :data:`MAX_CONTACT_ROLL`
+    (the construction reproduces ``R_WS`` exactly, nothing to compute on the planner's path)."""
     R = np.asarray(R_WS, dtype=float)
+    if _exact_b2_des(R)[1] <= MAX_CONTACT_ROLL:
+        return 0.0
     psi, _ = contact_yaw(R)
     a_f = 4.0 * R[:, 2] - g * np.array([0.0, 0.0, 1.0])  # any contact thrust along s3
     return float(rotation_error_angle(attitude(a_f, psi), R))

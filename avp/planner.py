@@ -326,6 +326,7 @@ def plan_detailed(
     relaxed: list[Relaxation] = []
     last: _Attempt | None = None
     unsafe: _Attempt | None = None  # latest attempt whose bounds held but whose workspace did not
+    unsafe_report: BoundReport | None = None  # its (certified) bound report
     report: BoundReport | None = None
 
     def finish(status: PlanStatus, attempt: _Attempt | None, T: Array) -> PlanResult:
@@ -410,7 +411,7 @@ def plan_detailed(
                     attempt.fov_dropped = True
                 return finish(solved(attempt), attempt, T)
             if report.certified:
-                unsafe = attempt
+                unsafe, unsafe_report = attempt, report
                 log.append("bounds certified, workspace not: trying other durations")
                 continue
             log.append("bounds: " + "; ".join(str(x) for x in report.violations[:3])
@@ -418,7 +419,7 @@ def plan_detailed(
     if last is None or last.trajectory is None:
         return finish(PlanStatus.INFEASIBLE if last is None or _infeasible(last) else PlanStatus.SOLVER_FAILED, last, T0)
     if unsafe is not None and unsafe.trajectory is not None:
-        report = _certify(unsafe.trajectory, cfg)
+        report = unsafe_report
         failed = ", ".join(unsafe.safety.failed) if unsafe.safety is not None else "workspace"
         log.append(f"no duration in the search and no relaxation kept the workspace certified "
                    f"({attempts} solves): {failed} could not be met")
