@@ -260,6 +260,20 @@ def _sphere_block(name: str, layout: DecisionLayout, knots_rel: Array, r: Region
     return ConstraintBlock(name, G, lower, np.full(times.size, np.inf))
 
 
+def _around(check: RegionCheck, knots_rel: Array, t0: float) -> Array:
+    """9 samples within 20 % of a segment around each proven violation of ``check`` (around
+    contact when it has none), relative to the plan start and strictly inside ``(0, t_f)``."""
+    T_seg = np.diff(knots_rel)
+    tf_rel = float(knots_rel[-1])
+    local: list[Array] = []
+    for t_abs in check.violation_times or [t0 + tf_rel]:
+        t = t_abs - t0
+        seg = int(np.clip(np.searchsorted(knots_rel, t, side="right") - 1, 0, T_seg.size - 1))
+        h = 0.2 * float(T_seg[seg])
+        local.append(np.linspace(t - h, t + h, 9))
+    return np.unique(np.clip(np.concatenate(local), 1e-6 * tf_rel, tf_rel * (1 - 1e-6)))
+
+
 def refinement_blocks(
     layout: DecisionLayout,
     knots_rel: Array,
@@ -281,14 +295,6 @@ def refinement_blocks(
         if check.certified:
             continue
         r = check.region
-        T_seg = np.diff(knots_rel)
-        local: list[Array] = []
-        for t_abs in check.violation_times or [traj.tf]:
-            t = t_abs - t0
-            seg = int(np.clip(np.searchsorted(knots_rel, t, side="right") - 1, 0, T_seg.size - 1))
-            h = 0.2 * float(T_seg[seg])
-            local.append(np.linspace(t - h, t + h, 9))
-        times = np.unique(np.clip(np.concatenate(local), 1e-6 * tf_rel, tf_rel * (1 - 1e-6)))
         if r.kind == "speed":
             times = _sample_times(knots_rel, 4 * ws.samples_per_segment)
             v = traj(t0 + times, 1)
@@ -302,10 +308,12 @@ def refinement_blocks(
             upper = np.full(int(keep.sum()), max(r.offset - margin, 0.5 * r.offset))
             out.append(ConstraintBlock(f"workspace refinement: {r.name}", G, np.full(upper.size, -np.inf), upper))
         elif r.kind == "sphere":
-            times = np.unique(np.concatenate([times, _sample_times(knots_rel, 2 * ws.samples_per_segment)]))
+            times = np.unique(np.concatenate([_around(check, knots_rel, t0),
+                                              _sample_times(knots_rel, 2 * ws.samples_per_segment)]))
             out.append(_sphere_block(f"workspace refinement: {r.name}", layout, knots_rel, r, times,
                                      traj(t0 + times), margin))
         else:
+            times = _around(check, knots_rel, t0)
             taper = np.minimum(1.0, (tf_rel - times) / max(config.t_k, 1e-3)) if r.touches else np.ones(times.size)
             out.append(_plane_block(f"workspace refinement: {r.name}", layout, knots_rel, r.normal,
                                     r.offset + margin * taper, times))
