@@ -36,6 +36,7 @@ from .safety import (
     workspace_blocks,
 )
 from .solve import WARM_START_SOLVERS, QpOutcome, solve_perching_qp
+from .time_search import DurationSearch
 from .timing import check_durations, initial_durations
 from .trajectory import Provenance, Trajectory
 from .types import PerchTarget, State
@@ -243,14 +244,26 @@ def _solve_at(
 
 
 def _certify(traj: Trajectory, cfg: PlannerConfig) -> BoundReport:
-    """Algorithm 1 on every bound and segment (Rust), with the limits mass-normalised."""
+    """Algorithm 1 on every bound and segment (Rust), with the limits mass-normalised.
+
+    The floating-point path runs first: a proven violation already fails the plan, so the exact
+    fallback (up to :data:`~avp.bounds.EXACT_BUDGET` on near-tangent cells) runs only when that
+    path left cells undecided and proved nothing violated. A failed plan's report may then keep
+    UNKNOWN cells next to its proven violations; a certified one is decided everywhere."""
     lim = cfg.limits
-    return certify_spline(
-        traj.coefficients, traj.knots,
-        thrust_min=lim.accel_min, thrust_max=lim.accel_max,
-        thrust_rate_max=lim.thrust_rate_max / lim.mass,
-        tilt_rate_max=lim.tilt_rate_max, body_rate_max=lim.body_rate_max, g=cfg.g,
-    )
+
+    def run(exact: bool) -> BoundReport:
+        return certify_spline(
+            traj.coefficients, traj.knots,
+            thrust_min=lim.accel_min, thrust_max=lim.accel_max,
+            thrust_rate_max=lim.thrust_rate_max / lim.mass,
+            tilt_rate_max=lim.tilt_rate_max, body_rate_max=lim.body_rate_max, g=cfg.g, exact=exact,
+        )
+
+    fast = run(False)
+    if fast.certified or fast.violations or not fast.unknown:
+        return fast
+    return run(True)
 
 
 def _relax(cfg: PlannerConfig, relaxation: Relaxation, target: PerchTarget) -> PlannerConfig:
@@ -353,7 +366,6 @@ def plan_detailed(
             return PlanStatus.SOLVED_RELAXED
         return PlanStatus.SOLVED_WITHOUT_FOV if attempt.fov_dropped else PlanStatus.SOLVED
 
-    schedule = (1.0,) + (cfg.bounds.schedule() if cfg.bounds.certify else ())
     stages: list[Relaxation | None] = [None]
     if cfg.bounds.certify:
         stages += list(cfg.bounds.relaxations)
@@ -363,10 +375,12 @@ def plan_detailed(
             stage_cfg = _relax(stage_cfg, stage, target)
             relaxed.append(stage)
             log.append(f"relaxing: {stage.value} (the workspace limits stay)")
-        for factor in schedule:
+        search = DurationSearch(cfg.bounds, reach=stage is None)
+        factor: float | None = 1.0
+        while factor is not None:
             T = T0 * factor
             if factor != 1.0 or stage is not None:
-                log.append(f"durations x{factor:g}: total {T.sum():.3f} s")
+                log.append(f"durations x{factor:.4g}: total {T.sum():.3f} s")
             initvals = None
             if warm_start is not None and cfg.solver in WARM_START_SOLVERS:
                 knots = state.time + np.concatenate([[0.0], np.cumsum(T)])
@@ -388,6 +402,7 @@ def plan_detailed(
                 if not cfg.bounds.certify:
                     status = PlanStatus.INFEASIBLE if _infeasible(attempt) else PlanStatus.SOLVER_FAILED
                     return finish(status, attempt, T)
+                factor = search.next(None, True, cfg.limits, cfg.g)
                 continue
             last = attempt
             if not cfg.bounds.certify:
@@ -413,9 +428,13 @@ def plan_detailed(
             if report.certified:
                 unsafe, unsafe_report = attempt, report
                 log.append("bounds certified, workspace not: trying other durations")
-                continue
-            log.append("bounds: " + "; ".join(str(x) for x in report.violations[:3])
-                       + ("; undecided: " + str(report.unknown) if report.unknown else ""))
+            else:
+                log.append("bounds: " + "; ".join(str(x) for x in report.violations[:3])
+                           + ("; undecided: " + str(report.unknown) if report.unknown else ""))
+            factor = search.next(attempt.trajectory, not report.certified, cfg.limits, cfg.g)
+            if factor is None and search.predicted and not report.certified:
+                log.append(f"time search: no total duration predicted to meet the bounds after {search.predicted} "
+                           f"step(s) (the violation does not scale away)")
     if last is None or last.trajectory is None:
         return finish(PlanStatus.INFEASIBLE if last is None or _infeasible(last) else PlanStatus.SOLVER_FAILED, last, T0)
     if unsafe is not None and unsafe.trajectory is not None:
