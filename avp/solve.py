@@ -190,7 +190,7 @@ class TwoSidedSolution(qpsolvers.Solution):
 def _solve_two_sided(H: Array, g: Array, G: Array, lower: Array, upper: Array,
                      options: dict[str, Any]) -> TwoSidedSolution:
     """``min 1/2 z^T H z + g^T z`` s.t. ``lower <= G z <= upper`` by ``daqp.solve`` directly."""
-    import daqp
+    import daqp  # type: ignore[import-not-found]
 
     options = {k: v for k, v in options.items() if k != "verbose"}  # a qpsolvers keyword
     bu = np.where(np.isfinite(upper), upper, _INF)
@@ -269,15 +269,16 @@ def solve_perching_qp(qp: PerchingQp, config: PlannerConfig, initvals: Array | N
     G_full, lo_full, hi_full = qp.stacked_inequalities()
     facts = backend(config.solver)
     if config.qp_form is QpForm.REDUCED and facts.two_sided:
-        red = qp.reduce()
+        two = qp.reduce()
         build_time = time.perf_counter() - t_build
         t_solve = time.perf_counter()
         try:
-            solution: qpsolvers.Solution = _solve_two_sided(red.H, red.g, red.G, red.lower, red.upper, _options(config))
+            solution: qpsolvers.Solution = _solve_two_sided(two.H, two.g, two.G, two.lower, two.upper, _options(config))
         except Exception as exc:  # back-end errors must not leak (one hierarchy)
             raise SolverError(f"QP back-end '{config.solver}' failed: {exc}") from exc
         solve_time = time.perf_counter() - t_solve
         return _outcome(qp, config, red, solution, G_full, lo_full, hi_full, build_time, solve_time)
+    red: ReducedQp | None = None
     if config.qp_form is QpForm.REDUCED:
         red = qp.reduce()
         Gs, hs = _one_sided(red.G, red.lower, red.upper)
@@ -286,7 +287,6 @@ def solve_perching_qp(qp: PerchingQp, config: PlannerConfig, initvals: Array | N
         if initvals is not None and initvals.shape == red.c_p.shape:
             init = red.Z.T @ (initvals - red.c_p)
     else:
-        red = None
         A, b = qp.stacked_equalities()
         Gs, hs = _one_sided(G_full, lo_full, hi_full)
         problem = qpsolvers.Problem(P=_writable(qp.P), q=np.zeros(qp.layout.n_variables), G=Gs, h=hs,
