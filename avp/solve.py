@@ -277,7 +277,7 @@ def solve_perching_qp(qp: PerchingQp, config: PlannerConfig, initvals: Array | N
         except Exception as exc:  # back-end errors must not leak (one hierarchy)
             raise SolverError(f"QP back-end '{config.solver}' failed: {exc}") from exc
         solve_time = time.perf_counter() - t_solve
-        return _outcome(qp, config, red, solution, G_full, lo_full, hi_full, build_time, solve_time)
+        return _outcome(qp, config, two, solution, G_full, lo_full, hi_full, build_time, solve_time)
     red: ReducedQp | None = None
     if config.qp_form is QpForm.REDUCED:
         red = qp.reduce()
