@@ -103,7 +103,7 @@ def _factor(A: Array, P: Array) -> _Factor:
     key = (A.shape, P.shape, f"{_fingerprint(A):.9e}", f"{_fingerprint(P):.9e}")
     with _FACTORS_LOCK:
         for hit in _FACTORS.get(key, ()):
-            if _close(hit.A, A) and _close(hit.P, P):
+            if (hit.P is P or _close(hit.P, P)) and _close(hit.A, A):
                 _FACTORS.move_to_end(key)
                 return hit
     Q, R, piv = scipy.linalg.qr(A.T, pivoting=True, check_finite=False)
@@ -116,7 +116,8 @@ def _factor(A: Array, P: Array) -> _Factor:
     # back-ends' absolute dual tolerances become meaningful (raw entries reach 1e7).
     scale = 1.0 / max(float(np.max(np.abs(np.diag(H)))) if H.size else 1.0, 1e-300)
     H = (0.5 * scale) * (H + H.T)
-    f = _Factor(A.copy(), P.copy(), Q[:, :rank], R[:rank, :rank], piv[:rank], Z, PZ, H, scale)
+    P_kept = P if not P.flags.writeable else P.copy()  # the cached cost matrices are read-only
+    f = _Factor(A.copy(), P_kept, Q[:, :rank], R[:rank, :rank], piv[:rank], Z, PZ, H, scale)
     for arr in (f.A, f.P, f.Q1, f.R1, f.piv, f.Z, f.PZ, f.H):
         arr.setflags(write=False)
     with _FACTORS_LOCK:
@@ -204,7 +205,10 @@ class PerchingQp:
         """The :class:`~avp.trajectory.Trajectory` of normalised coefficients ``c_hat``, starting
         at ``t0`` with this QP's durations."""
         coeffs = self.layout.to_physical(c_hat, self.durations)
-        return Trajectory(coeffs, self.t0 + self.knots_rel, g=g)
+        knots = self.t0 + self.knots_rel
+        if not (np.isfinite(coeffs).all() and np.all(np.diff(knots) > 0.0)):
+            return Trajectory(coeffs, knots, g=g)  # raises the typed error
+        return Trajectory._trusted(coeffs, knots, g)
 
     def with_inequalities(self, *blocks: ConstraintBlock) -> PerchingQp:
         """A copy with more inequality blocks (e.g. the FoV rows (8) and trust region (9))."""

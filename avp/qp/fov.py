@@ -82,10 +82,14 @@ def fov_gradient(
     aa = np.atleast_2d(np.asarray(a, dtype=float))
     pp = np.atleast_1d(np.asarray(psi, dtype=float))
     m = max(xx.shape[0], aa.shape[0], pp.shape[0])
+
+    def rows(v: Array, shape: tuple[int, ...]) -> Array:
+        return np.ascontiguousarray(v if v.shape == shape else np.broadcast_to(v, shape))
+
     h, d_x, d_psi, d_a, dist = _avp_rust.fov_gradient(
-        np.ascontiguousarray(np.broadcast_to(xx, (m, 3))),
-        np.ascontiguousarray(np.broadcast_to(pp, (m,))),
-        np.ascontiguousarray(np.broadcast_to(aa, (m, 3))),
+        rows(xx, (m, 3)),
+        rows(pp, (m,)),
+        rows(aa, (m, 3)),
         np.ascontiguousarray(s, dtype=float),
         np.ascontiguousarray(camera.axis_B),
         math.cos(camera.half_fov),
