@@ -50,13 +50,14 @@ SAMPLES_PER_SEGMENT = 32
 _BODY_RATE_A, _BODY_RATE_B = 3.0, 4.0  # the roll-level constants of (25), docs/bounds.md
 
 
-def _samples(traj: Trajectory) -> tuple[Array, Array, Array]:
-    """Acceleration, jerk (x, y, z) and yaw rate of ``traj`` at the segment midpoint grid."""
+def _samples(traj: Trajectory) -> tuple[Array, Array, Array, Array]:
+    """``|a|^2``, ``a_z``, ``|j|^2`` and the yaw rate of ``traj`` at the segment midpoint grid."""
     u = (np.arange(SAMPLES_PER_SEGMENT) + 0.5) / SAMPLES_PER_SEGMENT
     knots = traj.knots
     t = (knots[:-1, None] + u[None, :] * np.diff(knots)[:, None]).reshape(-1)
     d = traj.derivatives(t, (1, 2, 3))
-    return d[1, :, :3], d[2, :, :3], d[0, :, 3]
+    a, j = d[1, :, :3], d[2, :, :3]
+    return np.einsum("ni,ni->n", a, a), a[:, 2].copy(), np.einsum("ni,ni->n", j, j), d[0, :, 3]
 
 
 def scaled_excess(traj: Trajectory, limits: VehicleLimits, g: float, scales: Array = SCALES) -> Array:
@@ -66,23 +67,24 @@ def scaled_excess(traj: Trajectory, limits: VehicleLimits, g: float, scales: Arr
     return _excess(_samples(traj), limits, g, np.asarray(scales, dtype=float))
 
 
-def _excess(samples: tuple[Array, Array, Array], limits: VehicleLimits, g: float, scales: Array) -> Array:
-    a, j, yaw_rate = samples
-    s = scales[:, None]
-    f = a[None, :, :] * (s**-2)[:, :, None]
-    f[:, :, 2] += g
-    f_norm = np.maximum(np.sqrt(np.einsum("kni,kni->kn", f, f)), 1e-12)
-    j_norm = np.sqrt(np.einsum("ni,ni->n", j, j))[None, :] * s**-3
-    ratios = [f_norm.max(axis=1) / limits.accel_max]
+def _excess(samples: tuple[Array, Array, Array, Array], limits: VehicleLimits, g: float, scales: Array) -> Array:
+    a2, a_z, j2, yaw_rate = samples
+    s2 = scales[:, None] ** -2.0
+    # |a/s^2 + g e3|^2 = |a|^2 s^-4 + 2 g a_z s^-2 + g^2;  |j/s^3|^2 = |j|^2 s^-6
+    f2 = np.maximum(a2[None, :] * s2 * s2 + (2.0 * g) * a_z[None, :] * s2 + g * g, 1e-24)
+    ratios = [np.sqrt(f2.max(axis=1)) / limits.accel_max]
     if limits.accel_min > 0.0:
-        ratios.append(limits.accel_min / f_norm.min(axis=1))
-    if math.isfinite(limits.thrust_rate_max):
-        ratios.append(j_norm.max(axis=1) * limits.mass / limits.thrust_rate_max)
-    if math.isfinite(limits.tilt_rate_max):
-        ratios.append((j_norm / f_norm).max(axis=1) / limits.tilt_rate_max)
-    if math.isfinite(limits.body_rate_max):
-        w2 = _BODY_RATE_A * (j_norm / f_norm) ** 2 + _BODY_RATE_B * (yaw_rate[None, :] / s) ** 2
-        ratios.append(np.sqrt(w2.max(axis=1)) / limits.body_rate_max)
+        ratios.append(limits.accel_min / np.sqrt(f2.min(axis=1)))
+    if math.isfinite(limits.thrust_rate_max) or math.isfinite(limits.tilt_rate_max) or math.isfinite(limits.body_rate_max):
+        jj = j2[None, :] * (s2 * s2 * s2)
+        if math.isfinite(limits.thrust_rate_max):
+            ratios.append(np.sqrt(jj.max(axis=1)) * limits.mass / limits.thrust_rate_max)
+        tilt2 = jj / f2
+        if math.isfinite(limits.tilt_rate_max):
+            ratios.append(np.sqrt(tilt2.max(axis=1)) / limits.tilt_rate_max)
+        if math.isfinite(limits.body_rate_max):
+            w2 = _BODY_RATE_A * tilt2 + _BODY_RATE_B * (yaw_rate[None, :] ** 2) * s2
+            ratios.append(np.sqrt(w2.max(axis=1)) / limits.body_rate_max)
     return np.max(ratios, axis=0) - 1.0
 
 
