@@ -114,6 +114,8 @@ def solve_with_fov(
     previous: Trajectory | None = None,
     initvals: Array | None = None,
     extra: tuple[ConstraintBlock, ...] = (),
+    *,
+    first: tuple[PerchingQp, QpOutcome, Trajectory] | None = None,
 ) -> FovSolve:
     """Solve the perching QP at durations ``T`` with FoV rows (8)-(9) and the fallback (16).
 
@@ -121,6 +123,9 @@ def solve_with_fov(
     solved without FoV rows because the rows were incompatible (16). ``initvals`` (normalised
     coefficients) warm-start every solve of back-ends that take a guess. ``extra`` inequality
     blocks (the workspace rows of :mod:`avp.safety`) are part of every QP, with or without FoV.
+    ``first``: this QP without FoV rows (``extra`` included) and its solution, when the caller
+    already has them (the planner's time search at these durations); a first plan's SQP then
+    starts from them instead of building and solving that QP again.
 
     Raises
     ------
@@ -128,9 +133,12 @@ def solve_with_fov(
         The back-end is missing or failed on the FoV-free QP.
     """
     t0 = time.perf_counter()
-    base = build_perching_qp(state, target, cfg, T)
-    if extra:
-        base = base.with_inequalities(*extra)
+    if first is not None and previous is None:
+        base = first[0]
+    else:
+        base = build_perching_qp(state, target, cfg, T)
+        if extra:
+            base = base.with_inequalities(*extra)
     build = time.perf_counter() - t0
     solve = 0.0
     fov_cfg = _fov_config(cfg)
@@ -193,7 +201,13 @@ def solve_with_fov(
         out, traj = plain("QP without FoV rows (fallback (16))")
         return FovSolve(out, traj, True, build, solve, 1, lin)
 
-    out0, traj0 = plain("QP (first plan, before FoV)")
+    out0: QpOutcome | None
+    traj0: Trajectory | None
+    if first is not None:
+        _qp, out0, traj0 = first
+        log.append("QP (first plan, before FoV): the search step's solution at these durations")
+    else:
+        out0, traj0 = plain("QP (first plan, before FoV)")
     if traj0 is None or out0 is None:
         return FovSolve(out0, None, False, build, solve)
     if fov_times(0.0, float(np.sum(T)), cfg.fov).size == 0:

@@ -25,7 +25,7 @@ from .errors import (
 )
 from .frames import MAX_CONTACT_ROLL, contact_frame_error
 from .platform import MovingTarget
-from .qp.assemble import ConstraintBlock, build_perching_qp
+from .qp.assemble import ConstraintBlock, PerchingQp, build_perching_qp
 from .qp.layout import DecisionLayout, layout_for
 from .request import check_request
 from .safety import (
@@ -162,6 +162,8 @@ class _Attempt:
     certify: float = 0.0
     safety: SafetyReport | None = None
     relaxations: tuple[Relaxation, ...] = ()
+    refined: bool = False  # solved with workspace refinement rows (not the initial rows only)
+    qp: PerchingQp | None = None  # the QP solved (without FoV rows), when there are none
 
     @property
     def safe(self) -> bool:
@@ -177,14 +179,20 @@ def _solve_once(
     previous: Trajectory | None,
     initvals: Array | None,
     extra: tuple[ConstraintBlock, ...],
+    seed: _Attempt | None = None,
 ) -> _Attempt:
     """Build and solve the perching QP for durations ``T`` with the ``extra`` rows.
 
     Field-of-view rows (8)-(9) and the fallback (16) plug in here: see :mod:`avp.perception`.
+    ``seed`` is a solve of this very QP without FoV rows (same durations, rows and start), which
+    the first-plan SQP then starts from instead of solving it again.
     """
     if cfg.fov.enabled:  # FoV rows (8)-(9), SQP step, fallback (16): avp.perception
         from .perception import solve_with_fov
-        r = solve_with_fov(state, target, cfg, T, log, previous, initvals, extra)
+        first = None
+        if seed is not None and seed.qp is not None and seed.outcome is not None and seed.trajectory is not None:
+            first = (seed.qp, seed.outcome, seed.trajectory)
+        r = solve_with_fov(state, target, cfg, T, log, previous, initvals, extra, first=first)
         return _Attempt(r.outcome, r.trajectory, r.fov_dropped, r.build, r.solve)
     t0 = time.perf_counter()
     qp = build_perching_qp(state, target, cfg, T)
@@ -198,7 +206,7 @@ def _solve_once(
         return _Attempt(None, None, False, build, 0.0)
     log.append(f"QP {cfg.solver}: {outcome.status.value} (max violation {outcome.max_violation:.1e})")
     traj = qp.trajectory(outcome.c_hat, cfg.g) if outcome.ok and outcome.c_hat is not None else None
-    return _Attempt(outcome, traj, False, build + outcome.build_time, outcome.solve_time)
+    return _Attempt(outcome, traj, False, build + outcome.build_time, outcome.solve_time, qp=qp)
 
 
 def _solve_at(
@@ -209,18 +217,24 @@ def _solve_at(
     log: list[str],
     previous: Trajectory | None = None,
     initvals: Array | None = None,
+    seed: _Attempt | None = None,
 ) -> _Attempt:
     """Solve at durations ``T`` with the workspace rows, certify the workspace limits, and
-    re-solve with refined rows around proven violations (``workspace.refinement_rounds``)."""
+    re-solve with refined rows around proven violations (``workspace.refinement_rounds``).
+    ``seed``: an attempt at the same durations without FoV rows (see :func:`_solve_once`); used
+    only when it was solved with the initial rows (no refinement)."""
     ws = cfg.workspace
+    if seed is not None and seed.refined:
+        seed = None
     if not ws.active:
-        return _solve_once(state, target, cfg, T, log, previous, initvals, ())
+        return _solve_once(state, target, cfg, T, log, previous, initvals, (), seed)
     layout = layout_for(cfg.n_segments, cfg.degree)
     knots_rel = np.concatenate([[0.0], np.cumsum(T)])
     extra = workspace_blocks(layout, knots_rel, state, target, cfg)
     build = solve = certify = 0.0
     for round_index in range(ws.refinement_rounds + 1):
-        attempt = _solve_once(state, target, cfg, T, log, previous, initvals, extra)
+        attempt = _solve_once(state, target, cfg, T, log, previous, initvals, extra, seed if round_index == 0 else None)
+        attempt.refined = round_index > 0
         build += attempt.build
         solve += attempt.solve
         attempt.build, attempt.solve = build, solve
@@ -415,7 +429,7 @@ def plan_detailed(
             if report.certified and attempt.safe:
                 log.append("bounds certified (Algorithm 1, exact)")
                 if attempt_cfg is not stage_cfg:
-                    with_fov, fov_report = _with_fov(state, target, stage_cfg, T, log, previous, initvals)
+                    with_fov, fov_report = _with_fov(state, target, stage_cfg, T, log, previous, initvals, attempt)
                     with_fov.relaxations = attempt.relaxations
                     attempts += 1
                     build, solve, certify = (build + with_fov.build, solve + with_fov.solve,
@@ -461,11 +475,12 @@ def _measured(traj: Trajectory, target: PerchTarget, cfg: PlannerConfig) -> str:
 
 def _with_fov(
     state: State, target: PerchTarget, cfg: PlannerConfig, T: Array, log: list[str],
-    previous: Trajectory | None, initvals: Array | None,
+    previous: Trajectory | None, initvals: Array | None, seed: _Attempt,
 ) -> tuple[_Attempt, tuple[BoundReport | None, float]]:
-    """Re-solve a certified search step with the FoV rows; ``(attempt, (report, seconds))`` with
-    ``report`` set only when that plan certifies too (bounds and workspace)."""
-    attempt = _solve_at(state, target, cfg, T, log, previous, initvals)
+    """Re-solve a certified search step ``seed`` with the FoV rows (the SQP starts from the
+    seed's plan); ``(attempt, (report, seconds))`` with ``report`` set only when that plan
+    certifies too (bounds and workspace)."""
+    attempt = _solve_at(state, target, cfg, T, log, previous, initvals, seed)
     if attempt.trajectory is None or not attempt.safe or attempt.fov_dropped:
         log.append("FoV rows dropped (16): the plan with them did not solve or certify")
         return attempt, (None, 0.0)
