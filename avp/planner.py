@@ -390,6 +390,8 @@ def plan_detailed(
             relaxed.append(stage)
             log.append(f"relaxing: {stage.value} (the workspace limits stay)")
         search = DurationSearch(cfg.bounds, reach=stage is None)
+        search_cfg = stage_cfg if not stage_cfg.fov.enabled else replace(
+            stage_cfg, fov=replace(stage_cfg.fov, enabled=False))
         factor: float | None = 1.0
         while factor is not None:
             T = T0 * factor
@@ -402,8 +404,7 @@ def plan_detailed(
             # The search runs without the FoV rows after the first solve; the rows are added back
             # once a duration certifies (they change the plan little and cost 2-3 QPs each).
             first = stage is None and factor == 1.0
-            attempt_cfg = stage_cfg if first or not stage_cfg.fov.enabled else replace(
-                stage_cfg, fov=replace(stage_cfg.fov, enabled=False))
+            attempt_cfg = stage_cfg if first else search_cfg
             attempt = _solve_at(state, target, attempt_cfg, T, log, previous, initvals)
             attempt.relaxations = tuple(relaxed)
             attempts += 1

@@ -169,16 +169,12 @@ def pre_impact_rows(
     kappa = math.tan(config.cone_half_angle) * math.cos(math.pi / config.cone_facets)
     dirs = [math.cos(th) * s1 + math.sin(th) * s2
             for th in 2 * math.pi * np.arange(config.cone_facets) / config.cone_facets]
-    rows: list[Array] = []
-    lower: list[float] = []
-    upper: list[float] = []
-    for k in range(times.size):
-        rows.append(s3 @ A[k])
-        lower.append(float(alpha_lo - s3 @ gz))
-        upper.append(float((1.0 + config.q) * alpha_hi - s3 @ gz))
-        for d in dirs:
-            w = d - kappa * s3
-            rows.append(w @ A[k])
-            lower.append(-np.inf)
-            upper.append(float(-(w @ gz)))
-    return np.array(rows), np.array(lower), np.array(upper)
+    # per sample: the thrust row along s3, then one facet row per direction (the order of the
+    # rows is sample-major, as the diagnostics read them)
+    W = np.vstack([s3[None, :], np.asarray(dirs) - kappa * s3[None, :]])  # (1 + facets, 3)
+    G = np.einsum("fi,kin->kfn", W, A).reshape(-1, n)
+    lower_k = np.full(W.shape[0], -np.inf)
+    lower_k[0] = alpha_lo - s3 @ gz
+    upper_k = -(W @ gz)
+    upper_k[0] = (1.0 + config.q) * alpha_hi - s3 @ gz
+    return G, np.tile(lower_k, times.size), np.tile(upper_k, times.size)
