@@ -390,8 +390,7 @@ def plan_detailed(
             relaxed.append(stage)
             log.append(f"relaxing: {stage.value} (the workspace limits stay)")
         search = DurationSearch(cfg.bounds, reach=stage is None)
-        search_cfg = stage_cfg if not stage_cfg.fov.enabled else replace(
-            stage_cfg, fov=replace(stage_cfg.fov, enabled=False))
+        search_cfg: PlannerConfig | None = None  # stage_cfg without FoV rows, built when first needed
         factor: float | None = 1.0
         while factor is not None:
             T = T0 * factor
@@ -404,7 +403,10 @@ def plan_detailed(
             # The search runs without the FoV rows after the first solve; the rows are added back
             # once a duration certifies (they change the plan little and cost 2-3 QPs each).
             first = stage is None and factor == 1.0
-            attempt_cfg = stage_cfg if first else search_cfg
+            if not first and search_cfg is None:
+                search_cfg = stage_cfg if not stage_cfg.fov.enabled else replace(
+                    stage_cfg, fov=replace(stage_cfg.fov, enabled=False))
+            attempt_cfg = stage_cfg if first or search_cfg is None else search_cfg
             attempt = _solve_at(state, target, attempt_cfg, T, log, previous, initvals)
             attempt.relaxations = tuple(relaxed)
             attempts += 1

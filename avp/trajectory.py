@@ -168,6 +168,8 @@ class Trajectory:
 
     # -- evaluation ------------------------------------------------------------------------
     def _times(self, t: Any) -> tuple[Array, tuple[int, ...]]:
+        if isinstance(t, float) and self.t0 - TIME_TOL <= t <= self.tf + TIME_TOL:  # one time, in range
+            return np.array([min(max(t, self.t0), self.tf)]), ()
         arr = np.asarray(t, dtype=float)
         if not np.all(np.isfinite(arr)):
             raise ConfigError("t", "contains NaN or inf")

@@ -186,7 +186,7 @@ class PerchingQp:
 
     @cached_property
     def _stacked_equalities(self) -> tuple[Array, Array]:
-        A = np.vstack([b.matrix for b in self.equalities])
+        A = np.concatenate([b.matrix for b in self.equalities], axis=0)
         b = np.concatenate([b.lower for b in self.equalities])
         return _read_only(A), _read_only(b)
 
@@ -196,7 +196,7 @@ class PerchingQp:
         if not self.inequalities:
             return _read_only(np.zeros((0, n))), _read_only(np.zeros(0)), _read_only(np.zeros(0))
         return (
-            _read_only(np.vstack([b.matrix for b in self.inequalities])),
+            _read_only(np.concatenate([b.matrix for b in self.inequalities], axis=0)),
             _read_only(np.concatenate([b.lower for b in self.inequalities])),
             _read_only(np.concatenate([b.upper for b in self.inequalities])),
         )
