@@ -165,7 +165,7 @@ def fov_blocks(
     if m == 0:
         return FovLinearisation((), t, empty, empty, np.zeros(0, bool), np.zeros(0, bool))
     grad = fov_gradient(x0, psi0, a0, target_point, fov.camera, g)
-    ok = np.isfinite(grad.h) & np.isfinite(grad.d_a).all(axis=1) & np.isfinite(grad.d_psi) & (grad.distance > 1e-6)
+    ok = np.isfinite(grad.h) & np.all(np.isfinite(grad.d_a), axis=1) & np.isfinite(grad.d_psi) & (grad.distance > 1e-6)
     dist = np.where(ok, grad.distance, 1.0)
     gx = np.where(ok[:, None], grad.d_x, 0.0) / dist[:, None]
     ga = np.where(ok[:, None], grad.d_a, 0.0) / dist[:, None]
@@ -192,9 +192,9 @@ def fov_blocks(
     L[:, 1:4, :3] = eye * b0[:, None, None, :]
     L[:, 4:7, :3] = eye * b2[:, None, None, :]
     L[:, 7, YAW] = b0
-    rows = np.zeros((m, 8, 4, layout.n_segments, n_c))
-    rows[np.arange(m), :, :, seg, :] = L
-    rows = rows.reshape(m, 8, layout.n_variables)
+    scatter = np.zeros((m, 8, 4, layout.n_segments, n_c))
+    scatter[np.arange(m), :, :, seg, :] = L
+    rows: Array = scatter.reshape(m, 8, layout.n_variables)
     lin0 = np.sum(gx * x0, 1) + np.sum(ga * a0, 1) + gp * psi0
     rhs = lin0 - h0 - fov.margin
     placed = ok.copy()
