@@ -28,7 +28,7 @@ from .config import PlannerConfig, Workspace
 from .errors import ConfigError
 from .qp.assemble import ConstraintBlock
 from .qp.layout import DecisionLayout
-from .qp.rows import vector_rows
+from .qp.rows import direction_rows, vector_rows
 from .trajectory import Trajectory
 from .types import PerchTarget, State
 
@@ -217,8 +217,7 @@ def _sample_times(knots_rel: Array, per_segment: int) -> Array:
 
 def _plane_block(name: str, layout: DecisionLayout, knots_rel: Array, normal: Array, offset: Array | float,
                  times: Array) -> ConstraintBlock:
-    P = vector_rows(layout, knots_rel, 0, times)  # (m, 3, n)
-    G = np.einsum("i,min->mn", normal, P)
+    G = direction_rows(layout, knots_rel, 0, times, normal)
     lower = np.broadcast_to(np.asarray(offset, dtype=float), (times.size,)).copy()
     return ConstraintBlock(name, G, lower, np.full(times.size, np.inf))
 
@@ -254,8 +253,7 @@ def _sphere_block(name: str, layout: DecisionLayout, knots_rel: Array, r: Region
     d = points - r.normal[None, :]
     norm = np.linalg.norm(d, axis=1)
     d = np.where(norm[:, None] > 1e-9, d / np.maximum(norm, 1e-300)[:, None], np.array([0.0, 0.0, 1.0]))
-    P = vector_rows(layout, knots_rel, 0, times)
-    G = np.einsum("mi,min->mn", d, P)
+    G = direction_rows(layout, knots_rel, 0, times, d)
     lower = d @ r.normal + r.offset + margin
     return ConstraintBlock(name, G, lower, np.full(times.size, np.inf))
 
