@@ -172,9 +172,9 @@ class PerchingQp:
     equalities: tuple[ConstraintBlock, ...]
     inequalities: tuple[ConstraintBlock, ...] = field(default=())
 
-    @property
+    @cached_property
     def knots_rel(self) -> Array:
-        return np.concatenate([[0.0], np.cumsum(self.durations)])
+        return _read_only(np.concatenate([[0.0], np.cumsum(self.durations)]))
 
     def stacked_equalities(self) -> tuple[Array, Array]:
         """``(A, b)`` of all equality blocks (stacked once per QP, read-only)."""
@@ -193,6 +193,16 @@ class PerchingQp:
     @cached_property
     def _stacked_inequalities(self) -> tuple[Array, Array, Array]:
         n = self.layout.n_variables
+        parent = self.__dict__.get("_parent")
+        if parent is not None and "_stacked_inequalities" in parent.__dict__:
+            # a copy with more blocks: the parent's stacked rows, then the new blocks
+            G0, lo0, hi0 = parent._stacked_inequalities
+            new = self.inequalities[len(parent.inequalities):]
+            return (
+                _read_only(np.concatenate([G0, *(b.matrix for b in new)], axis=0)),
+                _read_only(np.concatenate([lo0, *(b.lower for b in new)])),
+                _read_only(np.concatenate([hi0, *(b.upper for b in new)])),
+            )
         if not self.inequalities:
             return _read_only(np.zeros((0, n))), _read_only(np.zeros(0)), _read_only(np.zeros(0))
         return (
@@ -211,8 +221,11 @@ class PerchingQp:
         return Trajectory._trusted(coeffs, knots, g)
 
     def with_inequalities(self, *blocks: ConstraintBlock) -> PerchingQp:
-        """A copy with more inequality blocks (e.g. the FoV rows (8) and trust region (9))."""
-        return self._same_equalities(replace(self, inequalities=self.inequalities + tuple(blocks)))
+        """A copy with more inequality blocks (e.g. the FoV rows (8) and trust region (9)); its
+        stacked and reduced rows reuse this QP's when computed (only the new blocks are added)."""
+        other = self._same_equalities(replace(self, inequalities=self.inequalities + tuple(blocks)))
+        other.__dict__["_parent"] = self
+        return other
 
     def without(self, name_prefix: str) -> PerchingQp:
         """A copy without the inequality blocks whose name starts with ``name_prefix``."""
@@ -221,7 +234,7 @@ class PerchingQp:
 
     def _same_equalities(self, other: PerchingQp) -> PerchingQp:
         """``other`` has this QP's cost and equalities: hand over the elimination if computed."""
-        for name in ("elimination", "_stacked_equalities"):
+        for name in ("elimination", "_stacked_equalities", "knots_rel"):
             if name in self.__dict__:
                 other.__dict__[name] = self.__dict__[name]
         return other
@@ -254,8 +267,26 @@ class PerchingQp:
         return f.Z, c_p, f.H, g
 
     def reduce(self) -> ReducedQp:
-        """The QP in ``z`` (see :attr:`elimination`): only inequalities, positive-definite Hessian."""
+        """The QP in ``z`` (see :attr:`elimination`): only inequalities, positive-definite Hessian.
+        Computed once per QP; a copy made by :meth:`with_inequalities` reduces only its new rows
+        when this QP's reduction exists."""
+        return self._reduced
+
+    @cached_property
+    def _reduced(self) -> ReducedQp:
         Z, c_p, H, g = self.elimination
+        parent = self.__dict__.get("_parent")
+        if parent is not None and "_reduced" in parent.__dict__:
+            r0 = parent._reduced
+            new = self.inequalities[len(parent.inequalities):]
+            if new:
+                Gn = np.concatenate([b.matrix for b in new], axis=0)
+                Gc = Gn @ c_p
+                return ReducedQp(H=H, g=g, G=np.concatenate([r0.G, Gn @ Z], axis=0),
+                                 lower=np.concatenate([r0.lower, np.concatenate([b.lower for b in new]) - Gc]),
+                                 upper=np.concatenate([r0.upper, np.concatenate([b.upper for b in new]) - Gc]),
+                                 Z=Z, c_p=c_p)
+            return replace(r0)
         G, lo, hi = self.stacked_inequalities()
         Gc = G @ c_p
         return ReducedQp(H=H, g=g, G=G @ Z, lower=lo - Gc, upper=hi - Gc, Z=Z, c_p=c_p)
