@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import time
 import warnings
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -116,6 +117,7 @@ def solve_with_fov(
     extra: tuple[ConstraintBlock, ...] = (),
     *,
     first: tuple[PerchingQp, QpOutcome, Trajectory] | None = None,
+    worth_fov: Callable[[Trajectory], bool] | None = None,
 ) -> FovSolve:
     """Solve the perching QP at durations ``T`` with FoV rows (8)-(9) and the fallback (16).
 
@@ -125,7 +127,10 @@ def solve_with_fov(
     blocks (the workspace rows of :mod:`avp.safety`) are part of every QP, with or without FoV.
     ``first``: this QP without FoV rows (``extra`` included) and its solution, when the caller
     already has them (the planner's time search at these durations); a first plan's SQP then
-    starts from them instead of building and solving that QP again.
+    starts from them instead of building and solving that QP again. ``worth_fov``: a test of
+    a first plan's FoV-free solution; when it returns ``False`` (the planner: a sampled bound
+    is already violated, so a search over durations follows) no SQP step is taken and that
+    solution is returned (the rows are not dropped, they were not tried).
 
     Raises
     ------
@@ -212,6 +217,9 @@ def solve_with_fov(
         return FovSolve(out0, None, False, build, solve)
     if fov_times(0.0, float(np.sum(T)), cfg.fov).size == 0:
         log.append("no FoV points: the gate covers the whole plan")
+        return FovSolve(out0, traj0, False, build, solve)
+    if worth_fov is not None and not worth_fov(traj0):
+        log.append("no SQP step: the plan without FoV rows already violates a vehicle limit")
         return FovSolve(out0, traj0, False, build, solve)
     best_out, best_traj = out0, traj0
     best_score: float | None = None  # scored with the first step's plan, in one pass

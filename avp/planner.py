@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from enum import Enum
 from typing import Any
@@ -36,7 +37,7 @@ from .safety import (
     workspace_blocks,
 )
 from .solve import WARM_START_SOLVERS, QpOutcome, solve_perching_qp
-from .time_search import DurationSearch
+from .time_search import DurationSearch, scaled_excess
 from .timing import check_durations, initial_durations
 from .trajectory import Provenance, Trajectory
 from .types import PerchTarget, State
@@ -180,6 +181,7 @@ def _solve_once(
     initvals: Array | None,
     extra: tuple[ConstraintBlock, ...],
     seed: _Attempt | None = None,
+    worth_fov: Callable[[Trajectory], bool] | None = None,
 ) -> _Attempt:
     """Build and solve the perching QP for durations ``T`` with the ``extra`` rows.
 
@@ -192,7 +194,7 @@ def _solve_once(
         first = None
         if seed is not None and seed.qp is not None and seed.outcome is not None and seed.trajectory is not None:
             first = (seed.qp, seed.outcome, seed.trajectory)
-        r = solve_with_fov(state, target, cfg, T, log, previous, initvals, extra, first=first)
+        r = solve_with_fov(state, target, cfg, T, log, previous, initvals, extra, first=first, worth_fov=worth_fov)
         return _Attempt(r.outcome, r.trajectory, r.fov_dropped, r.build, r.solve)
     t0 = time.perf_counter()
     qp = build_perching_qp(state, target, cfg, T)
@@ -218,6 +220,7 @@ def _solve_at(
     previous: Trajectory | None = None,
     initvals: Array | None = None,
     seed: _Attempt | None = None,
+    worth_fov: Callable[[Trajectory], bool] | None = None,
 ) -> _Attempt:
     """Solve at durations ``T`` with the workspace rows, certify the workspace limits, and
     re-solve with refined rows around proven violations (``workspace.refinement_rounds``).
@@ -227,13 +230,14 @@ def _solve_at(
     if seed is not None and seed.refined:
         seed = None
     if not ws.active:
-        return _solve_once(state, target, cfg, T, log, previous, initvals, (), seed)
+        return _solve_once(state, target, cfg, T, log, previous, initvals, (), seed, worth_fov)
     layout = layout_for(cfg.n_segments, cfg.degree)
     knots_rel = np.concatenate([[0.0], np.cumsum(T)])
     extra = workspace_blocks(layout, knots_rel, state, target, cfg)
     build = solve = certify = 0.0
     for round_index in range(ws.refinement_rounds + 1):
-        attempt = _solve_once(state, target, cfg, T, log, previous, initvals, extra, seed if round_index == 0 else None)
+        attempt = _solve_once(state, target, cfg, T, log, previous, initvals, extra,
+                              seed if round_index == 0 else None, worth_fov)
         attempt.refined = round_index > 0
         build += attempt.build
         solve += attempt.solve
@@ -380,6 +384,11 @@ def plan_detailed(
             return PlanStatus.SOLVED_RELAXED
         return PlanStatus.SOLVED_WITHOUT_FOV if attempt.fov_dropped else PlanStatus.SOLVED
 
+    def within_sampled(traj: Trajectory) -> bool:
+        # A sample beyond a limit is a proven violation of the certified quantity, so the SQP
+        # step of the first plan would be wasted: the time search starts without it.
+        return float(scaled_excess(traj, cfg.limits, cfg.g, np.ones(1), per_segment=4)[0]) <= 0.0
+
     stages: list[Relaxation | None] = [None]
     if cfg.bounds.certify:
         stages += list(cfg.bounds.relaxations)
@@ -407,7 +416,8 @@ def plan_detailed(
                 search_cfg = stage_cfg if not stage_cfg.fov.enabled else replace(
                     stage_cfg, fov=replace(stage_cfg.fov, enabled=False))
             attempt_cfg = stage_cfg if first or search_cfg is None else search_cfg
-            attempt = _solve_at(state, target, attempt_cfg, T, log, previous, initvals)
+            attempt = _solve_at(state, target, attempt_cfg, T, log, previous, initvals,
+                                worth_fov=within_sampled if first and cfg.bounds.certify else None)
             attempt.relaxations = tuple(relaxed)
             attempts += 1
             build += attempt.build

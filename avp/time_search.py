@@ -24,6 +24,7 @@ import math
 
 import numpy as np
 
+from . import _avp_rust
 from ._typing import Array
 from .config import BoundsPolicy, TimeSearch, VehicleLimits
 from .trajectory import Trajectory
@@ -50,21 +51,26 @@ SAMPLES_PER_SEGMENT = 32
 _BODY_RATE_A, _BODY_RATE_B = 3.0, 4.0  # the roll-level constants of (25), docs/bounds.md
 
 
-def _samples(traj: Trajectory) -> tuple[Array, Array, Array, Array]:
-    """``|a|^2``, ``a_z``, ``|j|^2`` and the yaw rate of ``traj`` at the segment midpoint grid."""
-    u = (np.arange(SAMPLES_PER_SEGMENT) + 0.5) / SAMPLES_PER_SEGMENT
+def _samples(traj: Trajectory, per_segment: int) -> tuple[Array, Array, Array, Array]:
+    """``|a|^2``, ``a_z``, ``|j|^2`` and the yaw rate of ``traj`` at ``per_segment`` midpoints
+    of equal parts of every segment."""
     knots = traj.knots
-    t = (knots[:-1, None] + u[None, :] * np.diff(knots)[:, None]).reshape(-1)
-    d = traj.derivatives(t, (1, 2, 3))
+    mid = (np.arange(per_segment) + 0.5) / per_segment
+    t = (knots[:-1, None] + mid[None, :] * (knots[1:] - knots[:-1])[:, None]).reshape(-1)
+    # interior times of valid knots: the kernel directly, without the public range checks
+    d = _avp_rust.eval_spline(traj.coefficients, knots, t, [1, 2, 3]).reshape(3, t.size, 4)
     a, j = d[1, :, :3], d[2, :, :3]
-    return np.einsum("ni,ni->n", a, a), a[:, 2].copy(), np.einsum("ni,ni->n", j, j), d[0, :, 3]
+    return (a * a).sum(axis=1), a[:, 2].copy(), (j * j).sum(axis=1), d[0, :, 3]
 
 
-def scaled_excess(traj: Trajectory, limits: VehicleLimits, g: float, scales: Array = SCALES) -> Array:
+def scaled_excess(traj: Trajectory, limits: VehicleLimits, g: float, scales: Array = SCALES,
+                  per_segment: int = SAMPLES_PER_SEGMENT) -> Array:
     """``excess[k]``: worst relative excess, ``max(value / limit) - 1`` over the checked bounds
     (thrust range (15), thrust rate (21), tilt rate (22), body rate (24)), of ``traj``
-    time-scaled by ``scales[k]``, on the sample grid (negative: every sample within)."""
-    return _excess(_samples(traj), limits, g, np.asarray(scales, dtype=float))
+    time-scaled by ``scales[k]``, on ``per_segment`` samples per segment (negative: every
+    sample within). A positive excess at scale 1 is a proven violation of the certified
+    polynomial at a sample (the tilt and body rates as the certificate bounds them)."""
+    return _excess(_samples(traj, per_segment), limits, g, np.asarray(scales, dtype=float))
 
 
 def _excess(samples: tuple[Array, Array, Array, Array], limits: VehicleLimits, g: float, scales: Array) -> Array:
