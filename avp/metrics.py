@@ -103,16 +103,18 @@ def visibility_many(
         R = frames.attitude(ev[1, :, :, :3], ev[0, :, :, 3], first.g)  # (n, k, 3, 3), (11), (13)
         flags = cam.sees(x, R, target.point).astype(float)
         flags[~np.all(np.isfinite(R.reshape(t.size, k, -1)), axis=2)] = 0.0
-    dtimes = np.diff(t)
+    dtimes = t[1:] - t[:-1]
     total_t = float(dtimes.sum())
+    # per plan, contiguous rows: the same arithmetic whatever the batch (one plan or several)
+    w = np.ascontiguousarray((0.5 * (flags[1:] + flags[:-1])).T)  # (k, n - 1) trapezoid weights
+    dx = x[1:] - x[:-1]
+    ds = np.ascontiguousarray(np.sqrt(np.einsum("nki,nki->kn", dx, dx)))  # (k, n - 1) chords
+    lost = flags[:-1] < 0.5
+    first = lost.argmax(axis=0)
     out = []
     for j in range(k):
-        f = flags[:, j]
-        w = 0.5 * (f[1:] + f[:-1])
-        ds = np.linalg.norm(np.diff(x[:, j], axis=0), axis=1)
-        total_s = float(ds.sum())
-        tf = float(w @ dtimes / total_t) if total_t > 0 else 0.0
-        pf = float(w @ ds / total_s) if total_s > 0 else tf
-        lost = np.flatnonzero(f[:-1] < 0.5)
-        out.append(Visibility(tf, pf, float(t[lost[0]]) if lost.size else None))
+        total_s = float(ds[j].sum())
+        tf = float(w[j] @ dtimes / total_t) if total_t > 0 else 0.0
+        pf = float(w[j] @ ds[j] / total_s) if total_s > 0 else tf
+        out.append(Visibility(tf, pf, float(t[first[j]]) if lost[first[j], j] else None))
     return out
