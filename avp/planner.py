@@ -222,6 +222,7 @@ def _solve_at(
     initvals: Array | None = None,
     seed: _Attempt | None = None,
     worth_fov: Callable[[Trajectory], bool] | None = None,
+    ws_rows: dict[bytes, tuple[ConstraintBlock, ...]] | None = None,
 ) -> _Attempt:
     """Solve at durations ``T`` with the workspace rows, certify the workspace limits, and
     re-solve with refined rows around proven violations (``workspace.refinement_rounds``).
@@ -234,7 +235,13 @@ def _solve_at(
         return _solve_once(state, target, cfg, T, log, previous, initvals, (), seed, worth_fov)
     layout = layout_for(cfg.n_segments, cfg.degree)
     knots_rel = np.concatenate([[0.0], np.cumsum(T)])
-    extra = workspace_blocks(layout, knots_rel, state, target, cfg)
+    key = T.tobytes()
+    if ws_rows is not None and key in ws_rows:  # the same durations in another stage of the plan
+        extra = ws_rows[key]
+    else:
+        extra = workspace_blocks(layout, knots_rel, state, target, cfg)
+        if ws_rows is not None:
+            ws_rows[key] = extra
     build = solve = certify = 0.0
     for round_index in range(ws.refinement_rounds + 1):
         attempt = _solve_once(state, target, cfg, T, log, previous, initvals, extra,
@@ -390,6 +397,10 @@ def plan_detailed(
         # step of the first plan would be wasted: the time search starts without it.
         return float(scaled_excess(traj, cfg.limits, cfg.g, np.ones(1), per_segment=4)[0]) <= 0.0
 
+    # The initial workspace rows depend on the durations, the start and the target only (never
+    # relaxed): built once per durations of this plan.
+    ws_rows: dict[bytes, tuple[ConstraintBlock, ...]] = {}
+
     # Stages: as asked; on an overhang, without the horizontal-thrust waypoint (a planner
     # heuristic, not a user constraint: a plan found without it is still SOLVED); then the
     # relaxations, cumulatively on the configuration as asked.
@@ -427,7 +438,8 @@ def plan_detailed(
                     stage_cfg, fov=replace(stage_cfg.fov, enabled=False))
             attempt_cfg = stage_cfg if first or search_cfg is None else search_cfg
             attempt = _solve_at(state, target, attempt_cfg, T, log, previous, initvals,
-                                worth_fov=within_sampled if first and cfg.bounds.certify else None)
+                                worth_fov=within_sampled if first and cfg.bounds.certify else None,
+                                ws_rows=ws_rows)
             attempt.relaxations = tuple(relaxed)
             attempts += 1
             build += attempt.build
@@ -452,7 +464,8 @@ def plan_detailed(
             if report.certified and attempt.safe:
                 log.append("bounds certified (Algorithm 1, exact)")
                 if attempt_cfg is not stage_cfg:
-                    with_fov, fov_report = _with_fov(state, target, stage_cfg, T, log, previous, initvals, attempt)
+                    with_fov, fov_report = _with_fov(state, target, stage_cfg, T, log, previous, initvals, attempt,
+                                                     ws_rows)
                     with_fov.relaxations = attempt.relaxations
                     attempts += 1
                     build, solve, certify = (build + with_fov.build, solve + with_fov.solve,
@@ -503,11 +516,12 @@ def _measured(traj: Trajectory, target: PerchTarget, cfg: PlannerConfig) -> str:
 def _with_fov(
     state: State, target: PerchTarget, cfg: PlannerConfig, T: Array, log: list[str],
     previous: Trajectory | None, initvals: Array | None, seed: _Attempt,
+    ws_rows: dict[bytes, tuple[ConstraintBlock, ...]] | None = None,
 ) -> tuple[_Attempt, tuple[BoundReport | None, float]]:
     """Re-solve a certified search step ``seed`` with the FoV rows (the SQP starts from the
     seed's plan); ``(attempt, (report, seconds))`` with ``report`` set only when that plan
     certifies too (bounds and workspace)."""
-    attempt = _solve_at(state, target, cfg, T, log, previous, initvals, seed)
+    attempt = _solve_at(state, target, cfg, T, log, previous, initvals, seed, ws_rows=ws_rows)
     if attempt.trajectory is None or not attempt.safe or attempt.fov_dropped:
         log.append("FoV rows dropped (16): the plan with them did not solve or certify")
         return attempt, (None, 0.0)
