@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from enum import Enum
 from typing import Any
@@ -13,6 +12,7 @@ from typing import Any
 import numpy as np
 
 from ._typing import Array
+from .attempt import Attempt, solve_at
 from .bounds import BoundReport, certify_spline
 from .config import PlannerConfig, PreImpactMode, Relaxation
 from .errors import (
@@ -26,18 +26,12 @@ from .errors import (
 )
 from .frames import MAX_CONTACT_ROLL, contact_frame_error
 from .platform import MovingTarget
-from .qp.assemble import ConstraintBlock, PerchingQp, build_perching_qp
+from .qp.assemble import ConstraintBlock
 from .qp.layout import DecisionLayout, layout_for
 from .qp.perching import is_overhang
 from .request import check_request
-from .safety import (
-    SafetyReport,
-    certify_workspace,
-    check_endpoints,
-    refinement_blocks,
-    workspace_blocks,
-)
-from .solve import WARM_START_SOLVERS, QpOutcome, solve_perching_qp
+from .safety import SafetyReport, check_endpoints
+from .solve import WARM_START_SOLVERS, QpOutcome
 from .time_search import DurationSearch, scaled_excess
 from .timing import check_durations, initial_durations
 from .trajectory import Provenance, Trajectory
@@ -152,123 +146,6 @@ def _check_inputs(state: Any, target: Any, config: Any) -> PlannerConfig:
     return config
 
 
-@dataclass
-class _Attempt:
-    """One QP solve at fixed durations, with its workspace refinements (internal)."""
-
-    outcome: QpOutcome | None
-    trajectory: Trajectory | None
-    fov_dropped: bool
-    build: float
-    solve: float
-    certify: float = 0.0
-    safety: SafetyReport | None = None
-    relaxations: tuple[Relaxation, ...] = ()
-    refined: bool = False  # solved with workspace refinement rows (not the initial rows only)
-    qp: PerchingQp | None = None  # the QP solved (without FoV rows), when there are none
-
-    @property
-    def safe(self) -> bool:
-        return self.safety is None or self.safety.certified
-
-
-def _solve_once(
-    state: State,
-    target: PerchTarget,
-    cfg: PlannerConfig,
-    T: Array,
-    log: list[str],
-    previous: Trajectory | None,
-    initvals: Array | None,
-    extra: tuple[ConstraintBlock, ...],
-    seed: _Attempt | None = None,
-    worth_fov: Callable[[Trajectory], bool] | None = None,
-) -> _Attempt:
-    """Build and solve the perching QP for durations ``T`` with the ``extra`` rows.
-
-    Field-of-view rows (8)-(9) and the fallback (16) plug in here: see :mod:`avp.perception`.
-    ``seed`` is a solve of this very QP without FoV rows (same durations, rows and start), which
-    the first-plan SQP then starts from instead of solving it again.
-    """
-    if cfg.fov.enabled:  # FoV rows (8)-(9), SQP step, fallback (16): avp.perception
-        from .perception import solve_with_fov
-        first = None
-        if seed is not None and seed.qp is not None and seed.outcome is not None and seed.trajectory is not None:
-            first = (seed.qp, seed.outcome, seed.trajectory)
-        r = solve_with_fov(state, target, cfg, T, log, previous, initvals, extra, first=first, worth_fov=worth_fov)
-        return _Attempt(r.outcome, r.trajectory, r.fov_dropped, r.build, r.solve)
-    t0 = time.perf_counter()
-    qp = build_perching_qp(state, target, cfg, T)
-    if extra:
-        qp = qp.with_inequalities(*extra)
-    build = time.perf_counter() - t0
-    try:
-        outcome = solve_perching_qp(qp, cfg, initvals)
-    except InfeasibleError as exc:
-        log.append(str(exc))
-        return _Attempt(None, None, False, build, 0.0)
-    log.append(f"QP {cfg.solver}: {outcome.status.value} (max violation {outcome.max_violation:.1e})")
-    traj = qp.trajectory(outcome.c_hat, cfg.g) if outcome.ok and outcome.c_hat is not None else None
-    return _Attempt(outcome, traj, False, build + outcome.build_time, outcome.solve_time, qp=qp)
-
-
-def _solve_at(
-    state: State,
-    target: PerchTarget,
-    cfg: PlannerConfig,
-    T: Array,
-    log: list[str],
-    previous: Trajectory | None = None,
-    initvals: Array | None = None,
-    seed: _Attempt | None = None,
-    worth_fov: Callable[[Trajectory], bool] | None = None,
-    ws_rows: dict[bytes, tuple[ConstraintBlock, ...]] | None = None,
-) -> _Attempt:
-    """Solve at durations ``T`` with the workspace rows, certify the workspace limits, and
-    re-solve with refined rows around proven violations (``workspace.refinement_rounds``).
-    ``seed``: an attempt at the same durations without FoV rows (see :func:`_solve_once`); used
-    only when it was solved with the initial rows (no refinement)."""
-    ws = cfg.workspace
-    if seed is not None and seed.refined:
-        seed = None
-    if not ws.active:
-        return _solve_once(state, target, cfg, T, log, previous, initvals, (), seed, worth_fov)
-    layout = layout_for(cfg.n_segments, cfg.degree)
-    knots_rel = np.concatenate([[0.0], np.cumsum(T)])
-    key = T.tobytes()
-    if ws_rows is not None and key in ws_rows:  # the same durations in another stage of the plan
-        extra = ws_rows[key]
-    else:
-        extra = workspace_blocks(layout, knots_rel, state, target, cfg)
-        if ws_rows is not None:
-            ws_rows[key] = extra
-    build = solve = certify = 0.0
-    for round_index in range(ws.refinement_rounds + 1):
-        attempt = _solve_once(state, target, cfg, T, log, previous, initvals, extra,
-                              seed if round_index == 0 else None, worth_fov)
-        attempt.refined = round_index > 0
-        build += attempt.build
-        solve += attempt.solve
-        attempt.build, attempt.solve = build, solve
-        if attempt.trajectory is None:
-            attempt.certify = certify
-            return attempt
-        t_cert = time.perf_counter()
-        report = certify_workspace(attempt.trajectory, target, ws)
-        certify += time.perf_counter() - t_cert
-        attempt.certify, attempt.safety = certify, report
-        if report.certified:
-            log.append("workspace certified (" + ", ".join(c.region.name for c in report.checks) + ")")
-            return attempt
-        log.append("workspace: " + "; ".join(str(c) for c in report.checks if not c.certified))
-        if round_index == ws.refinement_rounds:
-            return attempt
-        tb = time.perf_counter()
-        extra = extra + refinement_blocks(layout, knots_rel, attempt.trajectory, report, round_index + 1, cfg)
-        build += time.perf_counter() - tb
-    raise AssertionError("unreachable")  # pragma: no cover
-
-
 def _certify(traj: Trajectory, cfg: PlannerConfig) -> BoundReport:
     """Algorithm 1 on every bound and segment (Rust), with the limits mass-normalised.
 
@@ -363,12 +240,12 @@ def plan_detailed(
     build = solve = certify = 0.0
     attempts = 0
     relaxed: list[Relaxation] = []
-    last: _Attempt | None = None
-    unsafe: _Attempt | None = None  # latest attempt whose bounds held but whose workspace did not
+    last: Attempt | None = None
+    unsafe: Attempt | None = None  # latest attempt whose bounds held but whose workspace did not
     unsafe_report: BoundReport | None = None  # its (certified) bound report
     report: BoundReport | None = None
 
-    def finish(status: PlanStatus, attempt: _Attempt | None, T: Array) -> PlanResult:
+    def finish(status: PlanStatus, attempt: Attempt | None, T: Array) -> PlanResult:
         traj = attempt.trajectory if attempt else None
         if traj is not None:
             traj.provenance = Provenance(
@@ -387,7 +264,7 @@ def plan_detailed(
             safety=attempt.safety if attempt else None,
         )
 
-    def solved(attempt: _Attempt) -> PlanStatus:
+    def solved(attempt: Attempt) -> PlanStatus:
         if relaxed:
             return PlanStatus.SOLVED_RELAXED
         return PlanStatus.SOLVED_WITHOUT_FOV if attempt.fov_dropped else PlanStatus.SOLVED
@@ -437,9 +314,10 @@ def plan_detailed(
                 search_cfg = stage_cfg if not stage_cfg.fov.enabled else replace(
                     stage_cfg, fov=replace(stage_cfg.fov, enabled=False))
             attempt_cfg = stage_cfg if first or search_cfg is None else search_cfg
-            attempt = _solve_at(state, target, attempt_cfg, T, log, previous, initvals,
-                                worth_fov=within_sampled if first and cfg.bounds.certify else None,
-                                ws_rows=ws_rows)
+            attempt = solve_at(state, target, attempt_cfg, T, previous=previous, initvals=initvals,
+                               worth_fov=within_sampled if first and cfg.bounds.certify else None,
+                               ws_rows=ws_rows)
+            log.extend(attempt.log)
             attempt.relaxations = tuple(relaxed)
             attempts += 1
             build += attempt.build
@@ -515,13 +393,14 @@ def _measured(traj: Trajectory, target: PerchTarget, cfg: PlannerConfig) -> str:
 
 def _with_fov(
     state: State, target: PerchTarget, cfg: PlannerConfig, T: Array, log: list[str],
-    previous: Trajectory | None, initvals: Array | None, seed: _Attempt,
+    previous: Trajectory | None, initvals: Array | None, seed: Attempt,
     ws_rows: dict[bytes, tuple[ConstraintBlock, ...]] | None = None,
-) -> tuple[_Attempt, tuple[BoundReport | None, float]]:
+) -> tuple[Attempt, tuple[BoundReport | None, float]]:
     """Re-solve a certified search step ``seed`` with the FoV rows (the SQP starts from the
     seed's plan); ``(attempt, (report, seconds))`` with ``report`` set only when that plan
     certifies too (bounds and workspace)."""
-    attempt = _solve_at(state, target, cfg, T, log, previous, initvals, seed, ws_rows=ws_rows)
+    attempt = solve_at(state, target, cfg, T, previous=previous, initvals=initvals, seed=seed, ws_rows=ws_rows)
+    log.extend(attempt.log)
     if attempt.trajectory is None or not attempt.safe or attempt.fov_dropped:
         log.append("FoV rows dropped (16): the plan with them did not solve or certify")
         return attempt, (None, 0.0)
@@ -535,7 +414,7 @@ def _with_fov(
     return attempt, (report, seconds)
 
 
-def _infeasible(attempt: _Attempt) -> bool:
+def _infeasible(attempt: Attempt) -> bool:
     o = attempt.outcome
     return o is None or (o.solution is not None and not o.solution.found)
 

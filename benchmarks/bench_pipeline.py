@@ -44,6 +44,11 @@ import avp
 import avp.perception as perception
 import avp.planner as planner
 import avp.solve
+
+try:  # the one attempt path (absent before it was unified)
+    import avp.attempt as attempt
+except ImportError:  # pragma: no cover
+    attempt = None
 from avp.qp import assemble, boundary, perching
 from avp.qp.cost import gram
 from avp.qp.layout import N_AXES, YAW, layout_for
@@ -82,7 +87,8 @@ class StageTimer:
 def instrumented(timer: StageTimer) -> Iterator[None]:
     """Wraps the stage functions wherever the planner looks them up; restores them after."""
     targets: list[tuple[Any, str, str]] = [
-        (perception, "build_perching_qp", "build"),
+        (attempt, "build_perching_qp", "build"),  # the one attempt path (avp.attempt)
+        (perception, "build_perching_qp", "build"),  # before: FoV solves lived in avp.perception
         (planner, "build_perching_qp", "build"),
         (assemble.PerchingQp, "reduce", "elimination"),
         (perception, "linearise_on", "FoV"),
@@ -94,10 +100,13 @@ def instrumented(timer: StageTimer) -> Iterator[None]:
         (planner, "certify_workspace", "workspace"),  # clearance/workspace certificates (avp.safety)
         (planner, "workspace_blocks", "workspace"),
         (planner, "refinement_blocks", "workspace"),
+        (attempt, "certify_workspace", "workspace"),
+        (attempt, "workspace_blocks", "workspace"),
+        (attempt, "refinement_blocks", "workspace"),
     ]
     saved = []
     for obj, name, stage in targets:
-        if hasattr(obj, name):
+        if obj is not None and hasattr(obj, name):
             saved.append((obj, name, getattr(obj, name)))
             setattr(obj, name, timer.wrap(stage, getattr(obj, name)))
     try:
