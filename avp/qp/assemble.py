@@ -211,6 +211,21 @@ class PerchingQp:
             _read_only(np.concatenate([b.upper for b in self.inequalities])),
         )
 
+    def violation_scales(self) -> tuple[Array, Array, Array]:
+        """``1 / max(1, |bound|)`` of the equality right-hand sides and of the inequality lower
+        and upper bounds (1 for an infinite bound), for the relative feasibility check."""
+        return self._violation_scales
+
+    @cached_property
+    def _violation_scales(self) -> tuple[Array, Array, Array]:
+        _, b = self.stacked_equalities()
+        _, lo, hi = self.stacked_inequalities()
+
+        def inv(x: Array) -> Array:
+            return _read_only(np.where(np.isfinite(x), 1.0 / np.maximum(1.0, np.abs(x)), 1.0))
+
+        return inv(b), inv(lo), inv(hi)
+
     def trajectory(self, c_hat: Array, g: float) -> Trajectory:
         """The :class:`~avp.trajectory.Trajectory` of normalised coefficients ``c_hat``, starting
         at ``t0`` with this QP's durations."""
