@@ -31,8 +31,8 @@ from .trajectory import Trajectory
 
 __all__ = ["MARGIN", "STALL", "DurationSearch", "predicted_factor", "scaled_excess"]
 
-SCALES = np.exp(np.linspace(math.log(0.25), math.log(4.0), 193))
-"""Relative time-scale factors considered by :func:`predicted_factor` (1.5 % apart)."""
+SCALES = np.exp(np.linspace(math.log(0.25), math.log(4.0), 97))
+"""Relative time-scale factors considered by :func:`predicted_factor` (3 % apart)."""
 
 MARGIN = 0.1
 """Relative margin the predicted plan keeps from every limit. The re-solved plan keeps less
@@ -45,7 +45,7 @@ STALL = 0.9
 fraction of itself inside the factor range, or the stage's search ends (after the reach step
 of :class:`DurationSearch`)."""
 
-SAMPLES_PER_SEGMENT = 32
+SAMPLES_PER_SEGMENT = 16
 """Samples per segment of the plan whose scaling is predicted (midpoints)."""
 
 _BODY_RATE_A, _BODY_RATE_B = 3.0, 4.0  # the roll-level constants of (25), docs/bounds.md
