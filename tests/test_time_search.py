@@ -13,7 +13,13 @@ from hypothesis import strategies as st
 from scenarios import standard, standard_grid
 
 import avp
-from avp.time_search import MARGIN, DurationSearch, predicted_factor, scaled_excess
+from avp.time_search import (
+    MARGIN,
+    SAMPLES_PER_SEGMENT,
+    DurationSearch,
+    predicted_factor,
+    scaled_excess,
+)
 
 LIMITS = avp.VehicleLimits(mass=1.0, thrust_min=2.0, thrust_max=15.0, thrust_rate_max=40.0,
                            tilt_rate_max=4.0, body_rate_max=6.0)
@@ -41,7 +47,7 @@ def test_excess_is_the_sampled_worst_ratio() -> None:
     sc = standard(60, 3.5)
     traj = avp.plan(sc.state, sc.target, avp.PlannerConfig(bounds=avp.BoundsPolicy(certify=False)))
     limits = avp.VehicleLimits(mass=1.0, thrust_min=2.0, thrust_max=15.0)  # thrust range only
-    u = (np.arange(32) + 0.5) / 32
+    u = (np.arange(SAMPLES_PER_SEGMENT) + 0.5) / SAMPLES_PER_SEGMENT
     t = np.concatenate([a + u * (b - a) for a, b in zip(traj.knots[:-1], traj.knots[1:], strict=True)])
     f = traj.thrust(t)
     expected = max(f.max() / 15.0, 2.0 / f.min()) - 1.0
