@@ -21,6 +21,7 @@ the next duration; every returned plan is certified.
 from __future__ import annotations
 
 import math
+from functools import lru_cache
 
 import numpy as np
 
@@ -48,15 +49,20 @@ of :class:`DurationSearch`)."""
 SAMPLES_PER_SEGMENT = 16
 """Samples per segment of the plan whose scaling is predicted (midpoints)."""
 
-_BODY_RATE_A, _BODY_RATE_B = 3.0, 4.0  # the roll-level constants of (25), docs/bounds.md
+_BODY_RATE_A, _BODY_RATE_B = 3.0, 4.0
+_ONE = np.ones(1)
+
+
+@lru_cache(maxsize=8)
+def _midpoints(per_segment: int) -> Array:
+    return (np.arange(per_segment) + 0.5) / per_segment  # the roll-level constants of (25), docs/bounds.md
 
 
 def _samples(traj: Trajectory, per_segment: int) -> tuple[Array, Array, Array, Array]:
     """``|a|^2``, ``a_z``, ``|j|^2`` and the yaw rate of ``traj`` at ``per_segment`` midpoints
     of equal parts of every segment."""
     knots = traj.knots
-    mid = (np.arange(per_segment) + 0.5) / per_segment
-    t = (knots[:-1, None] + mid[None, :] * (knots[1:] - knots[:-1])[:, None]).reshape(-1)
+    t = (knots[:-1, None] + _midpoints(per_segment)[None, :] * (knots[1:] - knots[:-1])[:, None]).reshape(-1)
     # interior times of valid knots: the kernel directly, without the public range checks
     d = _avp_rust.eval_spline(traj.coefficients, knots, t, [1, 2, 3]).reshape(3, t.size, 4)
     a, j = d[1, :, :3], d[2, :, :3]
@@ -97,10 +103,15 @@ def _excess(samples: tuple[Array, Array, Array, Array], limits: VehicleLimits, g
 def predicted_factor(traj: Trajectory, limits: VehicleLimits, g: float, lo: float, hi: float) -> float | None:
     """The relative time-scale factor in ``[lo, hi]`` closest to 1 (in ratio) at which ``traj``,
     scaled, meets every bound with :data:`MARGIN` on the samples; ``None`` when there is none."""
+    return _predict(_samples(traj, SAMPLES_PER_SEGMENT), limits, g, lo, hi)
+
+
+def _predict(samples: tuple[Array, Array, Array, Array], limits: VehicleLimits, g: float,
+             lo: float, hi: float) -> float | None:
     scales = SCALES[(SCALES >= lo) & (SCALES <= hi)]
     if scales.size == 0:
         return None
-    ok = scales[scaled_excess(traj, limits, g, scales) < -MARGIN]
+    ok = scales[_excess(samples, limits, g, scales) < -MARGIN]
     if ok.size == 0:
         return None
     return float(ok[np.argmin(np.abs(np.log(ok)))])
@@ -160,9 +171,10 @@ class DurationSearch:
         if self.predicted >= self.policy.max_steps:
             return None
         current = self.current
-        self.measured.append((math.log(current), float(scaled_excess(traj, limits, g, np.ones(1))[0])))
+        samples = _samples(traj, SAMPLES_PER_SEGMENT)
+        self.measured.append((math.log(current), float(_excess(samples, limits, g, _ONE)[0])))
         if len(self.measured) == 1:  # the scaling law of this plan
-            s = predicted_factor(traj, limits, g, self.lo / current, self.hi / current)
+            s = _predict(samples, limits, g, self.lo / current, self.hi / current)
             if s is None:
                 return None
             if abs(math.log(s)) < 0.02:  # the samples miss what the certificate found: nudge
