@@ -101,28 +101,6 @@ def test_reduced_and_full_forms_agree() -> None:
     assert np.max(np.abs(red(t) - full(t))) < 1e-4
 
 
-def test_direction_rows_equal_contracted_vector_rows() -> None:
-    """The direction rows of the workspace and clearance blocks against the full per-axis rows
-    contracted with the same directions (one direction, and one per time)."""
-    import numpy as np
-
-    from avp.qp.layout import layout_for
-    from avp.qp.rows import direction_rows, vector_rows
-
-    layout = layout_for(3, 9)
-    knots = np.array([0.0, 0.4, 1.1, 1.6])
-    times = np.linspace(0.05, 1.6, 17)
-    rng = np.random.default_rng(3)
-    for order in (0, 1, 2):
-        full = vector_rows(layout, knots, order, times)
-        d = rng.normal(size=3)
-        np.testing.assert_allclose(direction_rows(layout, knots, order, times, d),
-                                   np.einsum("i,min->mn", d, full), rtol=1e-14, atol=1e-14)
-        D = rng.normal(size=(times.size, 3))
-        np.testing.assert_allclose(direction_rows(layout, knots, order, times, D),
-                                   np.einsum("mi,min->mn", D, full), rtol=1e-14, atol=1e-14)
-
-
 def test_incremental_reduction_equals_a_fresh_one() -> None:
     """A copy with FoV blocks reuses its parent's stacked and reduced rows: the result equals
     stacking and reducing the same blocks from scratch."""

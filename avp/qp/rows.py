@@ -61,19 +61,3 @@ def vector_rows(layout: DecisionLayout, knots_rel: Array, order: int, times: Arr
     """Rows for the position vector's derivative: shape ``(len(times), 3, n_variables)``."""
     return point_rows(layout, knots_rel, order, times)
 
-
-def direction_rows(
-    layout: DecisionLayout, knots_rel: Array, order: int, times: Array, directions: Array
-) -> Array:
-    """Rows of shape ``(len(times), n_variables)`` with ``row_j @ c_hat = d_j . p^(order)(t_j)``
-    for the position; ``directions`` of shape ``(3,)`` (one for all times) or ``(len(times), 3)``.
-    Equal to contracting :func:`vector_rows` with the directions, without building its rows."""
-    t = np.atleast_1d(np.asarray(times, dtype=float))
-    seg, u = layout.locate(knots_rel, t)
-    T = knots_rel[seg + 1] - knots_rel[seg]
-    local = layout.basis(order, u) / (T**order)[:, None]  # (m, C)
-    d = np.broadcast_to(np.asarray(directions, dtype=float), (t.size, 3))
-    m, n_c = t.size, layout.n_coeffs
-    scatter = np.zeros((m, 4, layout.n_segments, n_c))
-    scatter[np.arange(m), :3, seg, :] = d[:, :, None] * local[:, None, :]
-    return scatter.reshape(m, layout.n_variables)
