@@ -419,9 +419,11 @@ class SimConfig:
                            filter_estimate_scale=bool(self.filter_estimate_scale))
 
     def perfect_estimate(self) -> SimConfig:
-        """The same vehicle with a perfect target estimate and perfect odometry."""
+        """The same vehicle with a perfect target estimate and perfect odometry (and a filter that
+        fits no scale error: with noise-free detections a fitted scale absorbs the small mismatch
+        of a fitted turn rate and moved a CTRV platform's estimate by metres)."""
         return dataclasses.replace(self, camera_noise_scale=0.0, camera_scale_bias=0.0, camera_normal_tilt_deg=0.0,
-                                   perfect_odometry=True)
+                                   perfect_odometry=True, filter_scale_error=0.0, filter_estimate_scale=False)
 
 
 @dataclass(frozen=True)
