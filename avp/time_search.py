@@ -49,13 +49,16 @@ of :class:`DurationSearch`)."""
 SAMPLES_PER_SEGMENT = 16
 """Samples per segment of the plan whose scaling is predicted (midpoints)."""
 
-_BODY_RATE_A, _BODY_RATE_B = 3.0, 4.0
+_BODY_RATE_A, _BODY_RATE_B = 3.0, 4.0  # the roll-level constants of (25), docs/bounds.md
 _ONE = np.ones(1)
 
 
 @lru_cache(maxsize=8)
 def _midpoints(per_segment: int) -> Array:
-    return (np.arange(per_segment) + 0.5) / per_segment  # the roll-level constants of (25), docs/bounds.md
+    """Midpoints of ``per_segment`` equal parts of the unit interval (read-only)."""
+    u = (np.arange(per_segment) + 0.5) / per_segment
+    u.setflags(write=False)
+    return u
 
 
 def _samples(traj: Trajectory, per_segment: int) -> tuple[Array, Array, Array, Array]:
