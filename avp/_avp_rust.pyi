@@ -18,6 +18,7 @@ __all__ = [
     "eval_spline",
     "fov_gradient",
     "sturm_count",
+    "trackability_rows",
 ]
 
 __version__: str
@@ -141,6 +142,20 @@ def bound_polynomial(
 ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
     """Rigorous enclosure ``(lo, hi)`` of the checked polynomial of row ``bound`` on ``segment``
     in ``u = (t - knots[i]) / (knots[i+1] - knots[i])`` (the body rate at the 45 deg roll level)."""
+
+def trackability_rows(
+    coeffs: npt.NDArray[np.float64],
+    knots: npt.NDArray[np.float64],
+    snap_max: float,
+    ratio_max: float,
+    g: float = 9.81,
+) -> npt.NDArray[np.float64]:
+    """Exact, upward-rounded coefficients of the trackability polynomials of every segment of
+    ``coeffs`` ``(S, A >= 3, C)``: the row of ``|s|^2 - snap_max^2`` (if ``snap_max`` is finite),
+    then that of ``|s|^2 - ratio_max^2 |a + g e3|^2`` (if ``ratio_max`` is finite), ascending in
+    ``u = (t - t_i) / T_i``, zero-padded: ``(S * rows per segment, width)``. Bit for bit the
+    ``fractions.Fraction`` computation of :mod:`avp.trackability`; ``KernelError`` when a
+    coefficient is outside the normal float range."""
 
 # --- workspace certificates (regions.rs) ------------------------------------------------------
 

@@ -21,9 +21,14 @@ for a differential), the thrust-relative form
     G_i(u) = |s_i(T_i u)|^2 - k^2 |a_i(T_i u) + g e3|^2 < 0,   i.e. |s| < k |f|,
 
 in the normalised time ``u = (t - t_i) / T_i``. Soundness of the coefficients: the spline's
-float coefficients and knots are read as exact rationals, ``F_i``'s coefficients are computed
-exactly with :class:`fractions.Fraction` (a degree-``2(N-4)`` polynomial: a few hundred
-operations), and each is rounded *upward* to the next float. Because ``u^k >= 0`` on ``[0, 1]``,
+float coefficients and knots are read as exact rationals (every float is a dyadic rational
+``m 2^e``), ``F_i``'s coefficients are computed exactly (a degree-``2(N-4)`` polynomial: a few
+hundred operations), and each is rounded *upward* to the next float. The computation is the
+Rust kernel ``avp._avp_rust.trackability_rows`` (big-integer mantissas with a binary exponent:
+sums and products of dyadic rationals stay dyadic, so no division or gcd is needed); the
+reference :class:`fractions.Fraction` computation (:func:`snap_polynomial`,
+:func:`snap_thrust_polynomial`) gives the same floats bit for bit and is the fallback when a
+coefficient leaves the normal float range. Because ``u^k >= 0`` on ``[0, 1]``,
 the rounded polynomial is ``>= F_i`` pointwise, so proving it negative proves ``F_i < 0``. The
 proof is the Rust kernel ``avp._avp_rust.certify_below_many`` (floating-point fast path with
 rigorous error bounds and an exact fallback, ``docs/bounds.md``): a ``WITHIN`` verdict is never
@@ -44,7 +49,8 @@ from .bounds import Certificate
 from .errors import ConfigError
 from .trajectory import Trajectory
 
-__all__ = ["SnapReport", "certify_snap", "snap_polynomial", "snap_thrust_polynomial", "trackability_peaks"]
+__all__ = ["SnapReport", "certify_snap", "snap_polynomial", "snap_thrust_polynomial", "trackability_peaks",
+           "trackability_rows"]
 
 
 def _round_up(q: Fraction) -> float:
@@ -143,6 +149,35 @@ def _limit(name: str, value: float) -> float:
     return out
 
 
+def trackability_rows(trajectory: Trajectory, snap_max: float, snap_thrust_max: float) -> np.ndarray:
+    """Upper-bounding coefficients of every segment's polynomials, one row each (segment order;
+    per segment :func:`snap_polynomial` if ``snap_max`` is finite, then
+    :func:`snap_thrust_polynomial` if ``snap_thrust_max`` is finite), zero-padded.
+
+    Computed exactly in Rust (``avp._avp_rust.trackability_rows``: dyadic big-integer
+    arithmetic, the same upward rounding, bit for bit the :class:`~fractions.Fraction` result);
+    a coefficient outside the normal float range falls back to the Fraction path."""
+    try:
+        return _avp_rust.trackability_rows(trajectory.coefficients, trajectory.knots, snap_max, snap_thrust_max,
+                                           trajectory.g)
+    except _avp_rust.KernelError:
+        pass
+    knots = trajectory.knots
+    rows = []
+    for i in range(trajectory.n_segments):
+        T = Fraction(float(knots[i + 1])) - Fraction(float(knots[i]))
+        c = trajectory.coefficients[i]
+        if math.isfinite(snap_max):
+            rows.append(snap_polynomial(c, T, snap_max))
+        if math.isfinite(snap_thrust_max):
+            rows.append(snap_thrust_polynomial(c, T, snap_thrust_max, trajectory.g))
+    width = max(len(r) for r in rows)
+    polys = np.zeros((len(rows), width))
+    for j, r in enumerate(rows):
+        polys[j, :len(r)] = r
+    return polys
+
+
 def certify_snap(trajectory: Trajectory, snap_max: float, *, snap_thrust_max: float = math.inf,
                  exact: bool = True) -> SnapReport:
     """Prove ``|x(t)| < snap_max`` (m/s^4) and ``|x(t)| < snap_thrust_max |a + g e3|``
@@ -154,20 +189,9 @@ def certify_snap(trajectory: Trajectory, snap_max: float, *, snap_thrust_max: fl
     if math.isinf(smax) and math.isinf(kmax):
         return SnapReport(snap_max=smax, verdicts=(Certificate.NOT_CHECKED,) * n_seg, times=(math.nan,) * n_seg, snap_thrust_max=kmax)
     knots = trajectory.knots
-    rows = []
-    for i in range(n_seg):
-        T = Fraction(float(knots[i + 1])) - Fraction(float(knots[i]))
-        c = trajectory.coefficients[i]
-        if math.isfinite(smax):
-            rows.append(snap_polynomial(c, T, smax))
-        if math.isfinite(kmax):
-            rows.append(snap_thrust_polynomial(c, T, kmax, trajectory.g))
-    width = max(len(r) for r in rows)
-    polys = np.zeros((len(rows), width))
-    for j, r in enumerate(rows):
-        polys[j, :len(r)] = r
+    polys = trackability_rows(trajectory, smax, kmax)
     codes, t, _ = _avp_rust.certify_below_many(np.ascontiguousarray(polys), 0.0, 1.0, exact)
-    per = len(rows) // n_seg
+    per = polys.shape[0] // n_seg
     codes_map = (Certificate.WITHIN, Certificate.VIOLATED, Certificate.UNKNOWN)
     verdicts, times = [], []
     for i in range(n_seg):

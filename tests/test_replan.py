@@ -19,7 +19,8 @@ from avp.planner import PlanStatus
 from avp.replan import ReplanAction, ReplanConfig, Replanner
 from avp.sim.evaluate import SimConfig, wilson_interval
 from avp.sim.run import Mode, SimScenario, sim_config, simulate
-from avp.trackability import certify_snap, snap_polynomial, snap_thrust_polynomial
+from avp.trackability import certify_snap, snap_polynomial, snap_thrust_polynomial, trackability_rows
+from avp.trajectory import Trajectory
 
 WALL = avp.PerchTarget.from_incline([4.5, 0.0, 1.5], math.radians(90.0))
 START = avp.State.hover([0.0, 0.0, 1.5])
@@ -233,6 +234,48 @@ def test_snap_polynomial_coefficients_bound_the_exact_ones_by_one_ulp(seed, dura
     for i, g in enumerate(got_k):
         e = (snap[i] if i < len(snap) else 0) - Fraction(k) ** 2 * thrust[i]
         assert Fraction(g) >= e
+
+
+def _fraction_rows(tr, snap_max, ratio_max):
+    """The reference rows: the Fraction computation of avp.trackability, segment by segment."""
+    rows = []
+    for i in range(tr.n_segments):
+        T = Fraction(float(tr.knots[i + 1])) - Fraction(float(tr.knots[i]))
+        if math.isfinite(snap_max):
+            rows.append(snap_polynomial(tr.coefficients[i], T, snap_max))
+        if math.isfinite(ratio_max):
+            rows.append(snap_thrust_polynomial(tr.coefficients[i], T, ratio_max, tr.g))
+    out = np.zeros((len(rows), max(len(r) for r in rows)))
+    for j, r in enumerate(rows):
+        out[j, :len(r)] = r
+    return out
+
+
+@settings(max_examples=60, deadline=None)
+@given(seed=st.integers(0, 2**31), n_seg=st.integers(1, 4), n_coeffs=st.integers(3, 12),
+       decades=st.floats(0.0, 8.0), t0=st.floats(-50.0, 50.0),
+       limits=st.sampled_from([(300.0, 40.0), (math.inf, 12.5), (1e3 / 3, math.inf), (0.7, 1e-3)]))
+def test_rust_trackability_rows_are_the_fraction_rows_bit_for_bit(seed, n_seg, n_coeffs, decades, t0, limits):
+    rng = np.random.default_rng(seed)
+    c = rng.normal(size=(n_seg, 4, n_coeffs)) * 10.0 ** rng.uniform(-decades, decades, size=(n_seg, 4, n_coeffs))
+    knots = t0 + np.cumsum(np.r_[0.0, rng.uniform(1e-3, 3.0, size=n_seg)])
+    tr = Trajectory(c, knots)
+    got = avp._avp_rust.trackability_rows(tr.coefficients, tr.knots, *limits, tr.g)
+    ref = _fraction_rows(tr, *limits)
+    assert got.shape == ref.shape
+    assert np.array_equal(got, ref) and np.array_equal(np.signbit(got), np.signbit(ref))
+
+
+def test_trackability_rows_fall_back_to_fractions_outside_the_float_range():
+    c = np.zeros((1, 4, 8))
+    c[0, 0, 6] = 1e200  # its snap squared overflows a float: the kernel refuses, Fraction decides
+    tr = Trajectory(c, np.array([0.0, 1.0]))
+    with pytest.raises(avp._avp_rust.KernelError, match="normal f64 range"):
+        avp._avp_rust.trackability_rows(tr.coefficients, tr.knots, 10.0, math.inf, tr.g)
+    with pytest.raises(OverflowError):  # the Fraction path's own answer, as before the kernel
+        trackability_rows(tr, 10.0, math.inf)
+    tiny = Trajectory(c * 1e-180, np.array([0.0, 1.0]))  # |s|^2 ~ 1e-355: subnormal, the kernel refuses
+    assert np.array_equal(trackability_rows(tiny, math.inf, 2.0), _fraction_rows(tiny, math.inf, 2.0))
 
 
 def test_snap_certificate_agrees_with_dense_sampling():

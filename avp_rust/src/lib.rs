@@ -25,6 +25,7 @@ pub mod regions;
 pub mod roll;
 pub mod spline;
 pub mod sturm;
+pub mod trackability;
 
 #[cfg(feature = "python")]
 mod python;

@@ -16,6 +16,7 @@ use crate::bounds::{self, BoundKind, Limits, ALL_BOUNDS};
 use crate::certify::{self, ExactMethod};
 use crate::descartes::Budget;
 use crate::sturm;
+use crate::trackability;
 
 /// Exact number of distinct real roots of `sum coeffs[k] x^k` in the closed interval `[a, b]`.
 #[pyfunction(name = "sturm_count")]
@@ -219,12 +220,38 @@ fn bound_polynomial_py<'py>(
     Ok((lo.into_pyarray(py), hi.into_pyarray(py)))
 }
 
+/// Exact, upward-rounded coefficients of the trackability polynomials (`avp.trackability`):
+/// per segment of `coeffs` `(S, A >= 3, C)` and `knots` `(S + 1,)`, the row of
+/// `|s|^2 - snap_max^2` if `snap_max` is finite, then the row of `|s|^2 - ratio_max^2 |a + g e3|^2`
+/// if `ratio_max` is finite, ascending in `u = (t - t_i) / T_i`, zero-padded: float64
+/// `(S * rows per segment, width)`. `KernelError` when a coefficient is outside the normal f64
+/// range (the caller computes it otherwise).
+#[pyfunction(name = "trackability_rows")]
+#[pyo3(signature = (coeffs, knots, snap_max, ratio_max, g = 9.81))]
+fn trackability_rows_py<'py>(
+    py: Python<'py>,
+    coeffs: PyReadonlyArray3<'py, f64>,
+    knots: PyReadonlyArray1<'py, f64>,
+    snap_max: f64,
+    ratio_max: f64,
+    g: f64,
+) -> PyResult<Bound<'py, PyArray2<f64>>> {
+    let view = spline_view(&coeffs, &knots)?;
+    let (rows, n, width) =
+        guarded(|| trackability::trackability_rows(&view, snap_max, ratio_max, g))
+            .map_err(to_py_err)?;
+    let arr = Array2::from_shape_vec((n, width), rows)
+        .map_err(|e| kernel_err("coeffs", format!("internal shape error: {e}")))?;
+    Ok(arr.into_pyarray(py))
+}
+
 pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(sturm_count_py, m)?)?;
     m.add_function(wrap_pyfunction!(certify_below_py, m)?)?;
     m.add_function(wrap_pyfunction!(certify_below_many_py, m)?)?;
     m.add_function(wrap_pyfunction!(certify_spline_py, m)?)?;
     m.add_function(wrap_pyfunction!(bound_polynomial_py, m)?)?;
+    m.add_function(wrap_pyfunction!(trackability_rows_py, m)?)?;
     m.add(
         "BOUND_NAMES",
         ALL_BOUNDS
