@@ -19,7 +19,12 @@ from avp.planner import PlanStatus
 from avp.replan import ReplanAction, ReplanConfig, Replanner
 from avp.sim.evaluate import SimConfig, wilson_interval
 from avp.sim.run import Mode, SimScenario, sim_config, simulate
-from avp.trackability import certify_snap, snap_polynomial, snap_thrust_polynomial, trackability_rows
+from avp.trackability import (
+    certify_snap,
+    snap_polynomial,
+    snap_thrust_polynomial,
+    trackability_rows,
+)
 from avp.trajectory import Trajectory
 
 WALL = avp.PerchTarget.from_incline([4.5, 0.0, 1.5], math.radians(90.0))
