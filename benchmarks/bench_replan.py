@@ -12,9 +12,11 @@ inside it. Every step is reported, the initial plan apart: the ``HELD`` and
 steps that solve, with their solves per step, by action.
 
 Baseline in the same run: after each simulation, every planning call the steps made
-(``plan_detailed`` at the same start state, goal, durations and previous plan) is repeated bare
-and timed the same way; a solving step's cost over the sum of its bare planning calls is the
-step's overhead (policy, snap certificate, bookkeeping).
+(``plan_detailed`` at the same start state, goal, durations and previous plan) is repeated bare,
+in the same order and from the same state of the elimination cache (``avp.qp.assemble``) as in
+the loop, and timed the same way; a solving step's cost over the sum of its bare planning calls
+is the step's overhead (policy, snap certificate, bookkeeping, and the colder CPU caches of a
+step that follows 33 ms of simulation).
 
 ``--save FILE`` writes what the replanner decided (every step's action, fraction and solves, and
 a digest of every committed plan's coefficients); ``--compare FILE`` checks the run against such
@@ -31,22 +33,25 @@ import json
 import math
 import time
 import warnings
-from collections import Counter, defaultdict
+from collections import Counter, OrderedDict, defaultdict
 from typing import Any, ClassVar
 
 import numpy as np
 
 import avp.sim.run as sim_run
+from avp._blas import serial_blas
 from avp.planner import plan_detailed
+from avp.qp import assemble
 from avp.replan import ReplanConfig, Replanner
 from avp.sim.run import Mode, SimScenario, simulate
 
-_GC = [0]
+_GC = [0, 0]  # collections started, of which of the oldest generation
 
 
 def _count_gc(phase: str, info: dict[str, Any]) -> None:
     if phase == "start":
         _GC[0] += 1
+        _GC[1] += info["generation"] == 2
 
 
 class TimedReplanner(Replanner):
@@ -56,13 +61,13 @@ class TimedReplanner(Replanner):
     calls: ClassVar[list[tuple[int, tuple[Any, ...]]]] = []
 
     def step(self, t: float, odometry: Any, target_estimate: Any = None) -> Any:
-        gc0 = _GC[0]
+        gc0, gc2 = _GC[0], _GC[1]
         w0, c0 = time.perf_counter(), time.thread_time()
         s = super().step(t, odometry, target_estimate)
         c1, w1 = time.thread_time(), time.perf_counter()
         traj = self.trajectory
         TimedReplanner.records.append(dict(
-            cpu=c1 - c0, wall=w1 - w0, gc=_GC[0] - gc0, action=s.action.name, n_solves=s.n_solves,
+            cpu=c1 - c0, wall=w1 - w0, gc=_GC[0] - gc0, gc2=_GC[1] - gc2, action=s.action.name, n_solves=s.n_solves,
             fraction=s.fraction,
             plan=hashlib.sha1(traj.coefficients.tobytes() + traj.knots.tobytes()).hexdigest()[:16]
             if s.committed and traj is not None else "",
@@ -74,13 +79,23 @@ class TimedReplanner(Replanner):
         return super()._plan(state, target, durations, previous, config)
 
 
+def _factor_cache() -> OrderedDict[Any, list[Any]]:
+    return OrderedDict((k, list(v)) for k, v in assemble._FACTORS.items())
+
+
+def _set_factor_cache(state: OrderedDict[Any, list[Any]]) -> None:
+    assemble._FACTORS.clear()
+    assemble._FACTORS.update((k, list(v)) for k, v in state.items())
+
+
 def bare(args: tuple[Any, ...], warm: bool) -> float:
     """CPU seconds of one bare ``plan_detailed`` at a step's planning arguments."""
     state, target, durations, previous, config = args
     c0 = time.thread_time()
     try:
-        plan_detailed(state, target, config, durations=durations, previous=previous,
-                      warm_start=previous if warm else None)
+        with serial_blas():  # as Replanner.step plans (avp._blas)
+            plan_detailed(state, target, config, durations=durations, previous=previous,
+                          warm_start=previous if warm else None)
     except Exception:  # the step turned the same failure into a result
         pass
     return time.thread_time() - c0
@@ -101,12 +116,18 @@ def main() -> None:
     ap.add_argument("--seeds", type=int, default=40)
     ap.add_argument("--distances", type=float, nargs="+", default=[1.5, 4.5, 7.5])
     ap.add_argument("--inclines", type=float, nargs="+", default=[90.0, 45.0], help="degrees")
+    ap.add_argument("--gc-freeze", action="store_true",
+                    help="gc.freeze() after the imports and a first run, as a real-time loop would after its setup")
     ap.add_argument("--save", help="write the decisions and committed-plan digests to this JSON file")
     ap.add_argument("--compare", help="compare the decisions and plans with this JSON file")
     args = ap.parse_args()
     warnings.simplefilter("ignore")
     gc.callbacks.append(_count_gc)
     sim_run.Replanner = TimedReplanner  # type: ignore[misc]  # the loop builds this class
+    if args.gc_freeze:
+        simulate(SimScenario(distance=args.distances[0]), Mode.AVP, seed=10**6)  # not counted
+        gc.collect()
+        gc.freeze()
     rows: list[dict[str, Any]] = []
     decisions: dict[str, Any] = {}
     c_all = time.thread_time()
@@ -114,11 +135,15 @@ def main() -> None:
         for d in args.distances:
             for seed in range(args.seeds):
                 TimedReplanner.records, TimedReplanner.calls = [], []
+                before = _factor_cache()
                 r = simulate(SimScenario(distance=d, incline=math.radians(inc)), Mode.AVP, seed=seed)
                 recs, calls = TimedReplanner.records, TimedReplanner.calls
+                after = _factor_cache()
+                _set_factor_cache(before)  # the replay meets the elimination cache the loop met
                 base = defaultdict(float)
                 for i, a in calls:
                     base[i] += bare(a, ReplanConfig().warm_start)
+                _set_factor_cache(after)  # and the next run the one this run left
                 for i, rec in enumerate(recs):
                     rec["bare"] = base.get(i, 0.0)
                 rows.extend(recs[1:])  # the first step is the initial plan, not a replan
@@ -133,6 +158,7 @@ def main() -> None:
     n_solves = np.array([x["n_solves"] for x in rows])
     bare_ms = np.array([x["bare"] for x in rows]) * 1e3
     with_gc = np.array([x["gc"] > 0 for x in rows])
+    with_gc2 = np.array([x["gc2"] > 0 for x in rows])
     solving = n_solves > 0
     print(f"{len(decisions)} closed-loop runs (inclines {args.inclines} deg, distances {args.distances} m, "
           f"{args.seeds} seeds), {cpu_total:.1f} s CPU in all; ms per Replanner.step:")
@@ -145,6 +171,7 @@ def main() -> None:
     print(f"{'  one bare plan_detailed call':<34} "
           f"{stats(np.array([b / n for b, n in zip(bare_ms[solving], n_solves[solving], strict=True)]))}")
     print(f"{'steps with a garbage collection':<34} {stats(cpu[with_gc])}")
+    print(f"{'  of the oldest generation':<34} {stats(cpu[with_gc2])}")
     if solving.any():
         ratio = cpu[solving] / np.maximum(bare_ms[solving], 1e-9)
         print(f"solving steps: {solving.mean():.1%} of steps, {n_solves[solving].mean():.2f} solves per solving step "
@@ -165,11 +192,17 @@ def main() -> None:
     if args.compare:
         with open(args.compare) as fh:
             ref = json.load(fh)
-        same = [k for k in decisions if k in ref and json.loads(json.dumps(decisions[k])) == ref[k]]
-        missing = [k for k in decisions if k not in ref]
-        diff = [k for k in decisions if k in ref and k not in same]
-        print(f"compared with {args.compare}: {len(same)} runs identical (actions, fractions, solves, "
-              f"committed plans bit for bit, outcome), {len(diff)} different {diff[:10]}, {len(missing)} not in the file")
+        mine = {k: json.loads(json.dumps(v)) for k, v in decisions.items() if k in ref}
+
+        def policy(v: dict[str, Any]) -> Any:
+            return v["outcome"], [s[:3] for s in v["steps"]]
+
+        same = [k for k in mine if mine[k] == ref[k]]
+        same_policy = [k for k in mine if policy(mine[k]) == policy(ref[k])]
+        print(f"compared with {args.compare}: {len(mine)} runs in both; {len(same_policy)} with the same outcome "
+              f"and per-step actions, fractions and solves; {len(same)} also with every committed plan bit for bit; "
+              f"different decisions: {sorted(set(mine) - set(same_policy))[:10]}, "
+              f"different plan bits only: {sorted(set(same_policy) - set(same))[:10]}")
 
 
 if __name__ == "__main__":

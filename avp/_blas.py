@@ -1,0 +1,56 @@
+"""Serial BLAS for latency-bound calls (a replanning step).
+
+OpenBLAS runs a matrix product above about 2.6e5 multiply-adds on several threads; the
+reduction of a QP with a few hundred inequality rows (``G Z``: 175 x 96 by 96 x 33) is just
+above. On a loaded machine the calling thread then waits, spinning, for a second core: one
+step of the 30 Hz loop took 13-26 ms CPU instead of 8 (``benchmarks/bench_replan.py``). With
+one thread the products are computed by the same kernel on the calling thread, and the results
+were the same bit for bit on the benchmark's closed-loop runs (row blocking instead of a thread
+limit was not: it changes the kernel OpenBLAS picks).
+
+:func:`serial_blas` limits the BLAS libraries loaded in the process to one thread for the
+duration of a ``with`` block, through ``threadpoolctl`` (a dependency; without it the block does
+nothing). The limit is process-wide while it holds: another thread's BLAS call made meanwhile
+runs serially too.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import threading
+from collections.abc import Iterator
+from typing import Any
+
+__all__ = ["serial_blas", "warm"]
+
+_CONTROLLER: list[Any] = []  # [ThreadpoolController | None], created on first use
+_LOCK = threading.Lock()
+
+
+def _controller() -> Any:
+    with _LOCK:
+        if not _CONTROLLER:
+            try:
+                from threadpoolctl import ThreadpoolController
+            except ImportError:  # pragma: no cover - a dependency, but optional at run time
+                _CONTROLLER.append(None)
+            else:
+                import scipy.linalg  # noqa: F401  # load every BLAS the planner uses first
+                _CONTROLLER.append(ThreadpoolController())
+        return _CONTROLLER[0]
+
+
+def warm() -> None:
+    """Find the BLAS libraries now (about 1 ms, once per process), not in the first limited call."""
+    _controller()
+
+
+@contextlib.contextmanager
+def serial_blas() -> Iterator[None]:
+    """Run the block with one BLAS thread (module docstring); about 6 us to enter and leave."""
+    ctl = _controller()
+    if ctl is None:  # pragma: no cover
+        yield
+        return
+    with ctl.limit(limits=1, user_api="blas"):
+        yield
