@@ -1,7 +1,7 @@
 """Cost of every ``Replanner.step`` inside the simulated 30 Hz closed loop, in CPU time.
 
     python benchmarks/bench_replan.py [--seeds 40] [--distances 1.5 4.5 7.5] [--inclines 90 45]
-                                      [--save FILE | --compare FILE]
+                                      [--previous] [--gc-freeze] [--save FILE] [--compare FILE]
 
 Runs ``avp.sim.run.simulate`` in ``Mode.AVP`` for every seed, distance and incline, with the
 ``Replanner`` the loop builds replaced by a subclass that times each :meth:`step` call with
@@ -20,13 +20,16 @@ step that follows 33 ms of simulation).
 
 ``--save FILE`` writes what the replanner decided (every step's action, fraction and solves, and
 a digest of every committed plan's coefficients); ``--compare FILE`` checks the run against such
-a file, to show a speed change leaves the policy and its plans unchanged. Nothing is asserted
+a file, to show a speed change leaves the policy and its plans unchanged. ``--previous`` runs
+the code paths this file's speed work replaced (Fraction snap coefficients, threaded BLAS), for
+a before/after in one session. Nothing is asserted
 by the tests; these numbers are for this machine and its load.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import gc
 import hashlib
 import json
@@ -34,11 +37,13 @@ import math
 import time
 import warnings
 from collections import Counter, OrderedDict, defaultdict
+from types import SimpleNamespace
 from typing import Any, ClassVar
 
 import numpy as np
 
 import avp.sim.run as sim_run
+from avp import _avp_rust, replan, trackability
 from avp._blas import serial_blas
 from avp.planner import plan_detailed
 from avp.qp import assemble
@@ -77,6 +82,21 @@ class TimedReplanner(Replanner):
     def _plan(self, state: Any, target: Any, durations: Any, previous: Any, config: Any) -> Any:
         TimedReplanner.calls.append((len(TimedReplanner.records), (state, target, durations, previous, config)))
         return super()._plan(state, target, durations, previous, config)
+
+
+def use_previous_paths() -> None:
+    """Switch this process to the code paths before the speed work on ``Replanner.step``: the
+    trackability coefficients by :class:`fractions.Fraction` (the kernel's fallback, the
+    previous implementation) and planning with the default BLAS threads."""
+
+    def refuse(*args: Any, **kw: Any) -> Any:
+        raise _avp_rust.KernelError("coeffs: the Fraction path is measured")
+
+    trackability._avp_rust = SimpleNamespace(  # type: ignore[attr-defined]
+        trackability_rows=refuse, KernelError=_avp_rust.KernelError,
+        certify_below_many=_avp_rust.certify_below_many)
+    replan.serial_blas = contextlib.nullcontext  # type: ignore[attr-defined]
+    globals()["serial_blas"] = contextlib.nullcontext
 
 
 def _factor_cache() -> OrderedDict[Any, list[Any]]:
@@ -118,12 +138,16 @@ def main() -> None:
     ap.add_argument("--inclines", type=float, nargs="+", default=[90.0, 45.0], help="degrees")
     ap.add_argument("--gc-freeze", action="store_true",
                     help="gc.freeze() after the imports and a first run, as a real-time loop would after its setup")
+    ap.add_argument("--previous", action="store_true",
+                    help="the previous code paths: Fraction snap coefficients, threaded BLAS in the step")
     ap.add_argument("--save", help="write the decisions and committed-plan digests to this JSON file")
     ap.add_argument("--compare", help="compare the decisions and plans with this JSON file")
     args = ap.parse_args()
     warnings.simplefilter("ignore")
     gc.callbacks.append(_count_gc)
     sim_run.Replanner = TimedReplanner  # type: ignore[misc]  # the loop builds this class
+    if args.previous:
+        use_previous_paths()
     if args.gc_freeze:
         simulate(SimScenario(distance=args.distances[0]), Mode.AVP, seed=10**6)  # not counted
         gc.collect()
