@@ -109,29 +109,28 @@ fn round_up(d: &Dyadic) -> Option<f64> {
     Some(if negative { -magnitude } else { magnitude })
 }
 
-/// Exact coefficients in `u` of the `order`-th derivative of one axis polynomial at `t = T u`.
-fn axis_derivative(c: &[f64], order: usize, t: &Dyadic) -> Vec<Dyadic> {
+/// Exact coefficients in `u` of the `order`-th derivative of one axis polynomial at `t = T u`,
+/// given `t_pows[k] = T^k`.
+fn axis_derivative(c: &[f64], order: usize, t_pows: &[Dyadic]) -> Vec<Dyadic> {
     let n = c.len();
     if n <= order {
         return Vec::new();
     }
-    let mut out = Vec::with_capacity(n - order);
-    let mut t_pow = Dyadic {
-        m: BigInt::from(1),
-        e: 0,
-    };
-    for k in 0..n - order {
-        // (k + order)! / k!
-        let falling: u64 = ((k + 1)..=(k + order)).map(|j| j as u64).product();
-        let mut term = Dyadic::from_f64(c[k + order]).mul(&t_pow);
-        term.m *= falling;
-        out.push(term);
-        t_pow = t_pow.mul(t);
-    }
-    out
+    (0..n - order)
+        .map(|k| {
+            // (k + order)! / k!
+            let falling: u64 = ((k + 1)..=(k + order)).map(|j| j as u64).product();
+            let mut term = Dyadic::from_f64(c[k + order]).mul(&t_pows[k]);
+            term.m *= falling;
+            term
+        })
+        .collect()
 }
 
 /// Exact coefficients of `sum_axis p_axis(u)^2` (length `2 max_len - 1`, at least 1).
+///
+/// The coefficients are first brought to one exponent (the smallest), so every product has the
+/// same exponent and the sums are plain integer sums; `p_i p_j` is formed once for `i < j`.
 fn square_norm(rows: &[Vec<Dyadic>]) -> Vec<Dyadic> {
     let size = rows
         .iter()
@@ -139,18 +138,38 @@ fn square_norm(rows: &[Vec<Dyadic>]) -> Vec<Dyadic> {
         .map(|r| 2 * r.len() - 1)
         .max()
         .unwrap_or(1);
-    let mut out = vec![Dyadic::zero(); size];
+    let e = rows
+        .iter()
+        .flatten()
+        .filter(|d| !d.m.is_zero())
+        .map(|d| d.e)
+        .min()
+        .unwrap_or(0);
+    let mut out = vec![BigInt::zero(); size];
     for r in rows {
-        for (i, ri) in r.iter().enumerate() {
-            if ri.m.is_zero() {
+        let m: Vec<BigInt> = r
+            .iter()
+            .map(|d| {
+                if d.m.is_zero() {
+                    BigInt::zero()
+                } else {
+                    &d.m << ((d.e - e) as usize)
+                }
+            })
+            .collect();
+        for (i, mi) in m.iter().enumerate() {
+            if mi.is_zero() {
                 continue;
             }
-            for (j, rj) in r.iter().enumerate() {
-                out[i + j].add_assign(&ri.mul(rj));
+            out[2 * i] += mi * mi;
+            for (j, mj) in m.iter().enumerate().skip(i + 1) {
+                if !mj.is_zero() {
+                    out[i + j] += (mi * mj) << 1usize;
+                }
             }
         }
     }
-    out
+    out.into_iter().map(|m| Dyadic { m, e: 2 * e }).collect()
 }
 
 fn rounded(total: &[Dyadic], width: usize, out: &mut Vec<f64>) -> Result<()> {
@@ -219,8 +238,17 @@ pub fn trackability_rows(
     for seg in 0..spline.n_segments() {
         let mut t = Dyadic::from_f64(knots[seg + 1]);
         t.add_assign(&Dyadic::from_f64(knots[seg]).neg());
+        let mut t_pows = Vec::with_capacity(n_c);
+        t_pows.push(Dyadic {
+            m: BigInt::from(1),
+            e: 0,
+        });
+        for k in 1..n_c {
+            let next = t_pows[k - 1].mul(&t);
+            t_pows.push(next);
+        }
         let snap_axes: Vec<Vec<Dyadic>> = (0..3)
-            .map(|a| axis_derivative(spline.poly(seg, a), 4, &t))
+            .map(|a| axis_derivative(spline.poly(seg, a), 4, &t_pows))
             .collect();
         let snap = square_norm(&snap_axes);
         if with_snap {
@@ -230,7 +258,7 @@ pub fn trackability_rows(
         }
         if with_ratio {
             let mut acc: Vec<Vec<Dyadic>> = (0..3)
-                .map(|a| axis_derivative(spline.poly(seg, a), 2, &t))
+                .map(|a| axis_derivative(spline.poly(seg, a), 2, &t_pows))
                 .collect();
             if acc[2].is_empty() {
                 acc[2].push(Dyadic::zero());
