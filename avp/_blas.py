@@ -45,16 +45,28 @@ def warm() -> None:
     _blas_libraries()
 
 
+_DEPTH = [0]  # blocks open in the process (threads may nest or overlap them)
+_SAVED: list[int] = []  # the thread counts the first open block found
+
+
 @contextlib.contextmanager
 def serial_blas() -> Iterator[None]:
     """Run the block with one BLAS thread (module docstring); about 4 us to enter and leave
-    (the libraries' own get/set calls; ``threadpoolctl``'s ``limit`` context takes 12 us)."""
+    (the libraries' own get/set calls; ``threadpoolctl``'s ``limit`` context takes 12 us).
+    Blocks may nest or overlap across threads: the first to open saves the thread counts, the
+    last to close restores them."""
     libs = _blas_libraries()
-    previous = [lib.get_num_threads() for lib in libs]
-    for lib in libs:
-        lib.set_num_threads(1)
+    with _LOCK:
+        if _DEPTH[0] == 0:
+            _SAVED[:] = [lib.get_num_threads() for lib in libs]
+            for lib in libs:
+                lib.set_num_threads(1)
+        _DEPTH[0] += 1
     try:
         yield
     finally:
-        for lib, n in zip(libs, previous, strict=True):
-            lib.set_num_threads(n)
+        with _LOCK:
+            _DEPTH[0] -= 1
+            if _DEPTH[0] == 0:
+                for lib, n in zip(libs, _SAVED, strict=True):
+                    lib.set_num_threads(n)

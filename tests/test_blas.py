@@ -28,6 +28,21 @@ def test_serial_blas_limits_and_restores_the_thread_count():
     assert _blas_threads() == before
 
 
+def test_nested_and_overlapping_blocks_restore_the_first_counts():
+    before = _blas_threads()
+    outer = serial_blas()
+    outer.__enter__()
+    with serial_blas():  # another replanner (or thread) inside the first block
+        assert all(n == 1 for n in _blas_threads())
+    assert all(n == 1 for n in _blas_threads())  # the outer block still holds
+    inner = serial_blas()
+    inner.__enter__()
+    outer.__exit__(None, None, None)  # overlapping: the first to open closes first
+    assert all(n == 1 for n in _blas_threads())
+    inner.__exit__(None, None, None)
+    assert _blas_threads() == before
+
+
 def test_plans_under_serial_blas_are_the_plans_with_default_threads():
     # a replan-like call whose reduction products (rows x 96 x 33) exceed OpenBLAS's threading threshold
     start = avp.State.hover([0.0, 0.0, 1.5])
