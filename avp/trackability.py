@@ -156,7 +156,12 @@ def trackability_rows(trajectory: Trajectory, snap_max: float, snap_thrust_max: 
 
     Computed exactly in Rust (``avp._avp_rust.trackability_rows``: dyadic big-integer
     arithmetic, the same upward rounding, bit for bit the :class:`~fractions.Fraction` result);
-    a coefficient outside the normal float range falls back to the Fraction path."""
+    a coefficient outside the normal float range falls back to the Fraction path. Limits as in
+    :func:`certify_snap` (``> 0``, ``inf`` skips one; not both)."""
+    snap_max = _limit("snap_max", snap_max)
+    snap_thrust_max = _limit("snap_thrust_max", snap_thrust_max)
+    if math.isinf(snap_max) and math.isinf(snap_thrust_max):
+        raise ConfigError("snap_max", "both limits are inf: no polynomial to build (certify_snap reports NOT_CHECKED)")
     try:
         return _avp_rust.trackability_rows(trajectory.coefficients, trajectory.knots, snap_max, snap_thrust_max,
                                            trajectory.g)

@@ -279,6 +279,10 @@ def test_trackability_rows_fall_back_to_fractions_outside_the_float_range():
         avp._avp_rust.trackability_rows(tr.coefficients, tr.knots, 10.0, math.inf, tr.g)
     with pytest.raises(OverflowError):  # the Fraction path's own answer, as before the kernel
         trackability_rows(tr, 10.0, math.inf)
+    with pytest.raises(avp.ConfigError, match="snap_thrust_max"):
+        trackability_rows(tr, 10.0, -1.0)
+    with pytest.raises(avp.ConfigError, match="snap_max"):
+        trackability_rows(tr, math.inf, math.inf)
     tiny = Trajectory(c * 1e-180, np.array([0.0, 1.0]))  # |s|^2 ~ 1e-355: subnormal, the kernel refuses
     assert np.array_equal(trackability_rows(tiny, math.inf, 2.0), _fraction_rows(tiny, math.inf, 2.0))
 
