@@ -18,7 +18,11 @@ with range:
   in ``(q, b)``. The filter solves that weighted least-squares problem with the prior
   ``b ~ N(0, scale_error^2)`` (so a hover-only start, where ``b`` is unobservable, gives the plain
   fusion) and returns ``p = q / (1 + b)``. Detections taken from different ranges along the line
-  of sight make ``b`` observable, which an approach provides.
+  of sight make ``b`` observable, which an approach provides. This fit weights each detection by
+  ``1 / sigma_i^2`` alone: ``b`` is a parameter here, and inflating the variances by
+  ``(scale_error d_i)^2`` as well counts the scale error twice and discards the far detections
+  that make ``b`` observable (measured in the realistic simulator, 20 seeds each, AVP on a wall
+  at 4.5 m: 4/20 perches with the inflated weights, 13/20 without; on a 60 deg slope 18/20).
 
 ``var_i = sigma_i^2 + (scale_error d_i)^2`` with ``sigma_i`` the detector's per-axis std at range
 ``d_i`` (the camera's ``sigma_p(d)``, Fig. 9). Its per-axis std is ``(sum w_i)^-1/2`` (noise only;
@@ -110,7 +114,10 @@ class TargetEstimator:
         Rs = np.array([m.R_WS for m in ms], dtype=float)
         p_W = (w_pos @ P) / w_pos.sum()
         if self.estimate_scale and all(m.p_cam_W is not None for m in ms):
-            p_W = self._scale_corrected(ms, w_pos, P)
+            # the scale error is a parameter of this fit, not noise: weight by the detector's
+            # noise alone (inflating by (scale_error d)^2 as well would count it twice)
+            w_noise = np.array([1.0 / max(m.sigma_pos, 1e-9) ** 2 for m in ms])
+            p_W = self._scale_corrected(ms, w_noise, P)
         return TargetEstimate(
             p_W=p_W,
             R_WS=project_so3(np.einsum("i,ijk->jk", w_ang, Rs) / w_ang.sum()),
