@@ -449,20 +449,20 @@ def _sweep_flags(p: argparse.ArgumentParser, distances: Sequence[float]) -> None
 
 def _simulator_settings(args: argparse.Namespace) -> dict[str, Any]:
     """Resolve ``--backend avp|rotorpy`` (short for ``--simulator``; the trials then run
-    serially, or on ``auto`` for ``avp campaign``) and return the ``defaults`` mapping of the
-    simulator: ``{"scenario": {"backend": ..., "gains": {"rotor_drag": ...}}}`` for rotorpy (a
-    ``[scenario]`` table in ``--config`` wins), ``{}`` otherwise."""
+    serially, or on ``auto`` for ``avp campaign``) and return the simulator's ``defaults``
+    mapping, ``{"scenario": {"backend": ...}}`` (``{}`` without the flag)."""
     if args.backend in SIMULATORS:
         if args.simulator is not None and args.simulator != args.backend:
             raise ConfigError("--backend", f"{args.backend!r} contradicts --simulator {args.simulator!r}")
         args.simulator = args.backend
         args.backend = "auto" if args.command == "campaign" else "serial"
-    if args.simulator in (None, "avp"):
-        return {} if args.simulator is None else {"scenario": {"backend": "avp"}}
-    from .sim.backend import ROTORPY_ROTOR_DRAG, require_rotorpy
+    if args.simulator is None:
+        return {}
+    if args.simulator == "rotorpy":
+        from .sim.backend import require_rotorpy
 
-    require_rotorpy("--simulator")
-    return {"scenario": {"backend": args.simulator, "gains": {"rotor_drag": list(ROTORPY_ROTOR_DRAG)}}}
+        require_rotorpy("--simulator")
+    return {"scenario": {"backend": args.simulator}}
 
 
 def _simulate_parser(sub: Any, common: argparse.ArgumentParser) -> None:

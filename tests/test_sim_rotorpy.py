@@ -175,10 +175,26 @@ def test_perfect_estimate_perch_in_rotorpy(rotorpy: object) -> None:
     with avp's feed-forward controller meets the success criterion with the drag fed forward;
     without it rotor drag leaves the vehicle short of the pad plane at the contact time."""
     sc = SimScenario(incline=math.radians(45.0), distance=4.5, backend="rotorpy").without_noise()
-    fed = simulate(dataclasses.replace(sc, gains=rotorpy_gains()), "one_shot", seed=0)
+    fed = simulate(sc, "one_shot", seed=0)  # gains.rotor_drag None: rotorpy's drag fed forward
     assert fed.success, fed.outcome
+    assert fed.scenario.gains == rotorpy_gains()
     assert fed.vehicle is not None and fed.first_plan is not None
     assert fed.vehicle.limits is fed.scenario.vehicle.limits  # the vehicle rotorpy flew is the certified one
-    bare = simulate(dataclasses.replace(sc, gains=ControllerGains()), "one_shot", seed=0)
+    bare = simulate(dataclasses.replace(sc, gains=ControllerGains(rotor_drag=(0.0, 0.0, 0.0))), "one_shot", seed=0)
     assert bare.perch is not None and fed.perch is not None
     assert bare.perch.error_S[2] > 0.02 > abs(fed.perch.error_S[2])  # on the free side of the plane
+
+
+@pytest.mark.parametrize(("argv", "execution"), [
+    (["simulate", "--backend", "rotorpy"], "serial"),
+    (["campaign", "--backend", "rotorpy"], "auto"),
+    (["simulate", "--simulator", "rotorpy", "--backend", "pool"], "pool"),
+])
+def test_cli_selects_rotorpy_with_drag_feedforward(rotorpy: object, argv: list[str], execution: str) -> None:
+    from avp.cli import _simulator_settings, build_parser
+    from avp.configfile import load_settings
+
+    args = build_parser().parse_args(argv)
+    sc = load_settings(None, {}, _simulator_settings(args)).scenario()
+    assert args.backend == execution and args.simulator == "rotorpy"
+    assert sc.backend is Backend.ROTORPY and sc.gains.rotor_drag is None  # simulate() fills in rotorpy's drag

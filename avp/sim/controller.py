@@ -100,10 +100,12 @@ class ControllerGains:
 
     Each is a scalar or a 3-vector (diagonal). Units: ``k_x`` 1/s^2, ``k_v`` 1/s, ``k_R`` 1/s^2,
     ``k_omega`` 1/s. ``feedforward`` switches ``Omega_C`` and ``Omega_C'`` (set both to zero
-    when False, for ablations). ``rotor_drag``: ``None`` (default: the vehicle has no drag, as in
-    model (1)), or the per-rotor drag coefficients ``(k_d, k_d, k_z)`` (N per rad/s per m/s) of a
-    vehicle whose rotors drag, fed forward by :func:`drag_acceleration` (a calibrated drag model,
-    as a flight stack would have; :func:`avp.sim.backend.rotorpy_gains` sets rotorpy's).
+    when False, for ablations). ``rotor_drag``: the per-rotor drag coefficients ``(k_d, k_d,
+    k_z)`` (N per rad/s per m/s) fed forward by :func:`drag_acceleration` (a calibrated drag
+    model, as a flight stack would have), or ``None``: :func:`control` feeds no drag forward and
+    :func:`avp.sim.run.simulate` uses its back-end's drag model (none for avp's model (1),
+    rotorpy's for rotorpy: :func:`avp.sim.backend.rotorpy_gains`); ``(0, 0, 0)`` switches the
+    feed-forward off everywhere.
     """
 
     k_x: Any = 25.0

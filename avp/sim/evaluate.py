@@ -27,7 +27,7 @@ import numpy as np
 from ..config import PlannerConfig
 from ..errors import ConfigError
 from ..replan import ReplanConfig
-from .backend import Backend, rotorpy_gains
+from .backend import Backend
 from .camera import CameraParams
 from .controller import ControllerGains
 from .odometry import OdometryNoise
@@ -360,8 +360,9 @@ class SimConfig:
     backend:
         Simulator back-end (:class:`~avp.sim.backend.Backend` name): ``"avp"`` or ``"rotorpy"``.
     drag_feedforward:
-        On the rotorpy back-end, feed rotorpy's rotor drag forward in the controller
-        (:func:`~avp.sim.backend.rotorpy_gains`); ignored on avp's, which has no drag.
+        Feed the back-end's rotor drag forward in the controller (rotorpy's:
+        :func:`~avp.sim.backend.rotorpy_gains`; avp's model has none). False:
+        ``ControllerGains(rotor_drag=(0, 0, 0))``.
     """
 
     n_trials: int = 100
@@ -423,7 +424,7 @@ class SimConfig:
             drift_p=float(self.odometry_drift), rate_hz=float(self.odometry_rate_hz))
         vehicle = VehicleParams(motor_time_constant=float(self.motor_time_constant), mixer=bool(self.mixer))
         backend = Backend.parse(self.backend, "sim.backend")
-        gains = rotorpy_gains() if backend is Backend.ROTORPY and self.drag_feedforward else ControllerGains()
+        gains = ControllerGains(rotor_drag=None if self.drag_feedforward else (0.0, 0.0, 0.0))
         return SimScenario(incline=math.radians(incline_deg), distance=float(distance), camera=cam, backend=backend,
                            gains=gains,
                            odometry=odo, vehicle=vehicle, initial_frames=int(self.initial_frames),

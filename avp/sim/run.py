@@ -59,7 +59,7 @@ from ..qp.moving import TerminalYaw
 from ..replan import ReplanAction, ReplanConfig, Replanner, ReplanStep
 from ..trajectory import Trajectory
 from ..types import PerchTarget, State
-from .backend import Backend, Plant, plant, require_rotorpy
+from .backend import Backend, Plant, plant, require_rotorpy, rotorpy_gains
 from .camera import CameraMeasurement, CameraParams, CameraSensor
 from .contact import (
     Contact,
@@ -232,7 +232,8 @@ class SimScenario:
         :class:`~avp.sim.backend.Backend` (or its name): what integrates the vehicle, ``"avp"``
         (model (1), default) or ``"rotorpy"`` (rotorpy's ``Multirotor`` with parameters from
         ``vehicle``; needs ``pip install "avp[rotorpy]"``, else a ``ConfigError`` here). The rest
-        of the loop, avp's feed-forward controller included, is the same.
+        of the loop, avp's feed-forward controller included, is the same; with
+        ``gains.rotor_drag=None`` :func:`simulate` feeds rotorpy's rotor drag forward.
     """
 
     incline: float = math.pi / 2
@@ -562,6 +563,8 @@ def simulate(
         the noisy heading of the fitted velocity).
     """
     sc, cfg = _shared(scenario if scenario is not None else SimScenario(), config)
+    if sc.backend is Backend.ROTORPY and sc.gains.rotor_drag is None:  # the back-end's drag model
+        sc = dataclasses.replace(sc, gains=rotorpy_gains(sc.gains))
     mode = Mode.parse(mode)
     rcfg = replan if replan is not None else ReplanConfig()
     streams = np.random.SeedSequence(int(seed)).spawn(4)
