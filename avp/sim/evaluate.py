@@ -433,9 +433,11 @@ class SimConfig:
                            filter_estimate_scale=bool(self.filter_estimate_scale))
 
     def perfect_estimate(self) -> SimConfig:
-        """The same vehicle with a perfect target estimate and perfect odometry."""
+        """The same vehicle with a perfect target estimate and perfect odometry (exact detections
+        leave no scale error to fit: the filter fuses them plainly; its scale fit, weighted by
+        the detector's noise alone, is singular for noise-free detections from one place)."""
         return dataclasses.replace(self, camera_noise_scale=0.0, camera_scale_bias=0.0, camera_normal_tilt_deg=0.0,
-                                   perfect_odometry=True)
+                                   perfect_odometry=True, filter_estimate_scale=False)
 
 
 @dataclass(frozen=True)
