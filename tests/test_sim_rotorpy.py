@@ -198,3 +198,16 @@ def test_cli_selects_rotorpy_with_drag_feedforward(rotorpy: object, argv: list[s
     sc = load_settings(None, {}, _simulator_settings(args)).scenario()
     assert args.backend == execution and args.simulator == "rotorpy"
     assert sc.backend is Backend.ROTORPY and sc.gains.rotor_drag is None  # simulate() fills in rotorpy's drag
+
+
+@pytest.mark.parametrize("backend", ["avp", "rotorpy"])
+def test_perfect_estimate_avp_matches_one_shot_on_each_backend(backend: str) -> None:
+    """SimConfig's perfect-estimate point on a wall: both modes perch and AVP is not worse."""
+    if backend == "rotorpy":
+        pytest.importorskip("rotorpy.vehicles.multirotor")
+    sc = dataclasses.replace(SimConfig(), backend=backend).perfect_estimate().scenario(90.0, 4.5)
+    assert sc.backend is Backend.parse(backend)
+    one, avp_ = (simulate(sc, mode, seed=1) for mode in ("one_shot", "avp"))
+    assert one.success and avp_.success, (one.outcome, avp_.outcome)
+    assert one.perch is not None and avp_.perch is not None
+    assert np.linalg.norm(avp_.perch.error_S) <= np.linalg.norm(one.perch.error_S) + 1e-3
