@@ -27,6 +27,7 @@ from .frames import MAX_CONTACT_ROLL, contact_frame_error
 from .platform import MovingTarget
 from .qp.assemble import ConstraintBlock, build_perching_qp
 from .qp.layout import DecisionLayout, layout_for
+from .qp.perching import is_overhang
 from .request import check_request
 from .safety import (
     SafetyReport,
@@ -354,13 +355,22 @@ def plan_detailed(
         return PlanStatus.SOLVED_WITHOUT_FOV if attempt.fov_dropped else PlanStatus.SOLVED
 
     schedule = (1.0,) + (cfg.bounds.schedule() if cfg.bounds.certify else ())
-    stages: list[Relaxation | None] = [None]
+    # Stages: as asked; on an overhang, without the horizontal-thrust waypoint (a planner
+    # heuristic, not a user constraint: a plan found without it is still SOLVED); then the
+    # relaxations, cumulatively on the configuration as asked.
+    stages: list[Relaxation | str | None] = [None]
+    if cfg.bounds.certify and is_overhang(target, cfg):
+        stages.append(_WITHOUT_WAYPOINT)
     if cfg.bounds.certify:
         stages += list(cfg.bounds.relaxations)
     stage_cfg = cfg
     for stage in stages:
-        if stage is not None:
-            stage_cfg = _relax(stage_cfg, stage, target)
+        if stage is _WITHOUT_WAYPOINT:
+            stage_cfg = replace(cfg, flip=replace(cfg.flip, enabled=False))
+            log.append("overhang: searching again without the horizontal-thrust waypoint (a planner heuristic; "
+                       "nothing the request asked is relaxed)")
+        elif isinstance(stage, Relaxation):
+            stage_cfg = _relax(cfg if not relaxed else stage_cfg, stage, target)
             relaxed.append(stage)
             log.append(f"relaxing: {stage.value} (the workspace limits stay)")
         for factor in schedule:
@@ -427,6 +437,10 @@ def plan_detailed(
     log.append(f"no duration in the search and no relaxation gave certified bounds ({attempts} solves); "
                + _measured(last.trajectory, target, cfg))
     return finish(PlanStatus.BOUNDS_NOT_CERTIFIED, last, last.trajectory.durations)
+
+
+_WITHOUT_WAYPOINT = "without the overhang waypoint"
+"""The :func:`plan_detailed` stage that drops :class:`~avp.config.OverhangFlip`'s waypoint."""
 
 
 def _measured(traj: Trajectory, target: PerchTarget, cfg: PlannerConfig) -> str:

@@ -71,3 +71,28 @@ def test_flip_settings_are_validated() -> None:
     with pytest.raises(avp.ConfigError) as exc:
         avp.OverhangFlip(min_incline=0.5)
     assert exc.value.field == "flip.min_incline"
+
+
+# A wall 7.5 m away as a noisy first detection sees it: the estimated normal tips 5.2 deg past
+# vertical (an "overhang" of 95.2 deg) and yaws 0.6 deg (a closed-loop run of the simulator).
+NOISY_WALL_R_WS = np.array([
+    [-9.1112684901362179e-02, 4.6005222251508559e-04, -9.9584048270896097e-01],
+    [-1.1408316953307741e-01, 9.9341144085710631e-01, 1.0896770324033109e-02],
+    [9.8928434187515113e-01, 1.1460147261776436e-01, -9.0459899372526922e-02],
+])
+
+
+def test_a_barely_overhanging_estimate_is_solved_without_the_waypoint() -> None:
+    """Just past ``min_incline`` the horizontal-thrust waypoint is a hindrance: with it no
+    duration certifies and only relaxations gave a plan (measured before this fallback). The
+    planner searches again without it before relaxing anything the request asked, so the result
+    is SOLVED, with every certificate, and the log says the waypoint was dropped."""
+    target = avp.PerchTarget(point=[7.9238, -0.0769, 1.7418], R_WS=NOISY_WALL_R_WS)
+    assert math.degrees(target.incline) > 95.0
+    state = avp.State(position=[0.0, 0.0, 1.5])
+    res = avp.plan_detailed(state, target, avp.PlannerConfig())
+    assert res.status is avp.PlanStatus.SOLVED
+    assert res.relaxations == ()
+    assert res.bounds is not None and res.bounds.certified
+    assert res.safety is not None and res.safety.certified
+    assert any("without the horizontal-thrust waypoint" in line for line in res.log)
