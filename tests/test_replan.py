@@ -74,7 +74,11 @@ def test_perfect_estimate_avp_matches_one_shot():
 
 
 def test_every_committed_plan_is_certified_including_trackability():
-    r = simulate(BIASED.scenario(90.0, 7.5), Mode.AVP, seed=0)
+    # without the filter's scale fit the estimate converges only as the range shrinks, so the
+    # replanner commits a correction again and again (with it, noise-free detections give the
+    # exact pad after the first approach steps and one correction suffices)
+    unfitted = dataclasses.replace(BIASED, filter_estimate_scale=False)
+    r = simulate(unfitted.scenario(90.0, 7.5), Mode.AVP, seed=0)
     committed = [s for s in r.steps if s.committed]
     assert len(committed) > 3
     limits = None

@@ -131,15 +131,30 @@ class TargetEstimator:
         """Weighted least squares for ``(q, b)`` in ``p_i = q - b c_i`` with the prior
         ``b ~ N(0, scale_error^2)``; returns ``q / (1 + b)``."""
         C = np.array([m.p_cam_W for m in ms], dtype=float)
-        H = np.zeros((4, 4))
-        r = np.zeros(4)
-        for wi, pi, ci in zip(w, P, C, strict=True):
-            A = np.hstack([np.eye(3), -ci[:, None]])  # p_i = A [q; b]
-            H += wi * A.T @ A
-            r += wi * A.T @ pi
-        H[3, 3] += 1.0 / self.scale_error**2
-        x = np.linalg.solve(H, r)
+        A = np.zeros((len(ms), 3, 4))
+        A[:, :, :3] = np.eye(3)
+        A[:, :, 3] = -C  # p_i = A_i [q; b]
+        x = _whitened_lstsq(A, P, w, 3, self.scale_error)
         return x[:3] / (1.0 + x[3])
+
+
+def _whitened_lstsq(A: np.ndarray, P: np.ndarray, w: np.ndarray, prior_index: int, prior_std: float) -> Array:
+    """``argmin_x sum_i w_i |A_i x - p_i|^2 + x_k^2 / prior_std^2`` (``k = prior_index``).
+
+    Solved on the whitened rows by an orthogonal factorisation (``numpy.linalg.lstsq``), not by
+    the normal equations: with precise detections (weights up to ``1e18`` for a noise-free
+    camera) and a parameter the data leave unobservable (the scale error while hovering, or
+    while tracking a platform at a constant offset), the normal equations' condition number is
+    the square of this one and their solution was metres off.
+    """
+    n, _, k = A.shape
+    root = np.sqrt(w)[:, None, None]
+    rows = (root * A).reshape(n * 3, k)
+    rhs = (np.sqrt(w)[:, None] * P).reshape(n * 3)
+    prior = np.zeros((1, k))
+    prior[0, prior_index] = 1.0 / prior_std
+    sol, *_ = np.linalg.lstsq(np.vstack([rows, prior]), np.concatenate([rhs, [0.0]]), rcond=None)
+    return np.asarray(sol)
 
 
 class PlatformEstimator(TargetEstimator):
@@ -205,10 +220,10 @@ class PlatformEstimator(TargetEstimator):
             A[:, 0, 3], A[:, 0, 4], A[:, 1, 3], A[:, 1, 4], A[:, 2, 5] = s_, -c_, c_, s_, dt
             if scale:
                 A[:, :, 6] = -np.array([m.p_cam_W for m in ms], dtype=float)
-            H = np.einsum("i,ija,ijb->ab", w, A, A)
             if scale:
-                H[6, 6] += 1.0 / self.scale_error**2
-            X = np.linalg.solve(H, np.einsum("i,ija,ij->a", w, A, P))
+                X = _whitened_lstsq(A, P, w, 6, self.scale_error)
+            else:
+                X = np.linalg.solve(np.einsum("i,ija,ijb->ab", w, A, A), np.einsum("i,ija,ij->a", w, A, P))
             k = 1.0 / (1.0 + X[6]) if scale else 1.0
             p, vel = k * X[:3], k * X[3:6]
         else:

@@ -433,11 +433,11 @@ class SimConfig:
                            filter_estimate_scale=bool(self.filter_estimate_scale))
 
     def perfect_estimate(self) -> SimConfig:
-        """The same vehicle with a perfect target estimate and perfect odometry (exact detections
-        leave no scale error to fit: the filter fuses them plainly; its scale fit, weighted by
-        the detector's noise alone, is singular for noise-free detections from one place)."""
+        """The same vehicle with a perfect target estimate and perfect odometry (and a filter that
+        fits no scale error: with noise-free detections a fitted scale absorbs the small mismatch
+        of a fitted turn rate and moved a CTRV platform's estimate by metres)."""
         return dataclasses.replace(self, camera_noise_scale=0.0, camera_scale_bias=0.0, camera_normal_tilt_deg=0.0,
-                                   perfect_odometry=True, filter_estimate_scale=False)
+                                   perfect_odometry=True, filter_scale_error=0.0, filter_estimate_scale=False)
 
 
 @dataclass(frozen=True)
