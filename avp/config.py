@@ -229,6 +229,7 @@ class TimeSearch(Enum):
 
     PAPER = "paper: lengthen every segment by a factor until the bounds hold (capped)"
     BIDIRECTIONAL = "bidirectional: try longer and shorter totals alternately (feasibility is not monotone in T)"
+    SCALING = "scaling: predict the total from how the bounds scale with time, stop when that stalls"
 
 
 class Relaxation(Enum):
@@ -251,15 +252,18 @@ class BoundsPolicy:
     time_search:
         :class:`TimeSearch`.
     factors:
-        BIDIRECTIONAL: total-duration factors tried in order.
+        BIDIRECTIONAL: total-duration factors tried in order. SCALING: their range bounds the
+        total-duration factor, and they are tried in order only after a plan whose bounds hold
+        but whose workspace does not.
     growth, max_steps:
-        PAPER: factor per step and the cap on steps.
+        PAPER: factor per step and the cap on steps. SCALING: ``max_steps`` caps the predicted
+        steps per relaxation stage.
     relaxations:
         Tried in order, cumulatively, each with the time search, when no duration works.
     """
 
     certify: bool = True
-    time_search: TimeSearch = TimeSearch.BIDIRECTIONAL
+    time_search: TimeSearch = TimeSearch.SCALING
     factors: tuple[float, ...] = (1.15, 0.87, 1.3, 0.77, 1.5, 0.67, 1.75, 2.0, 2.5, 3.0)
     growth: float = 1.2
     max_steps: int = 10
@@ -276,7 +280,7 @@ class BoundsPolicy:
             raise ConfigError("bounds.max_steps", "must be >= 0")
 
     def schedule(self) -> tuple[float, ...]:
-        """Duration factors to try after the first solve, in order."""
+        """Duration factors to try after the first solve, in order (SCALING: its fallback list)."""
         if self.time_search is TimeSearch.PAPER:
             return tuple(self.growth ** (k + 1) for k in range(self.max_steps))
         return self.factors

@@ -12,6 +12,7 @@ from typing import Any
 import numpy as np
 
 from ._typing import Array
+from .attempt import Attempt, solve_at
 from .bounds import BoundReport, certify_spline
 from .config import PlannerConfig, PreImpactMode, Relaxation
 from .errors import (
@@ -25,18 +26,13 @@ from .errors import (
 )
 from .frames import MAX_CONTACT_ROLL, contact_frame_error
 from .platform import MovingTarget
-from .qp.assemble import ConstraintBlock, build_perching_qp
+from .qp.assemble import ConstraintBlock
 from .qp.layout import DecisionLayout, layout_for
 from .qp.perching import is_overhang
 from .request import check_request
-from .safety import (
-    SafetyReport,
-    certify_workspace,
-    check_endpoints,
-    refinement_blocks,
-    workspace_blocks,
-)
-from .solve import WARM_START_SOLVERS, QpOutcome, solve_perching_qp
+from .safety import SafetyReport, check_endpoints
+from .solve import WARM_START_SOLVERS, QpOutcome
+from .time_search import DurationSearch, scaled_excess
 from .timing import check_durations, initial_durations
 from .trajectory import Provenance, Trajectory
 from .types import PerchTarget, State
@@ -150,108 +146,27 @@ def _check_inputs(state: Any, target: Any, config: Any) -> PlannerConfig:
     return config
 
 
-@dataclass
-class _Attempt:
-    """One QP solve at fixed durations, with its workspace refinements (internal)."""
-
-    outcome: QpOutcome | None
-    trajectory: Trajectory | None
-    fov_dropped: bool
-    build: float
-    solve: float
-    certify: float = 0.0
-    safety: SafetyReport | None = None
-    relaxations: tuple[Relaxation, ...] = ()
-
-    @property
-    def safe(self) -> bool:
-        return self.safety is None or self.safety.certified
-
-
-def _solve_once(
-    state: State,
-    target: PerchTarget,
-    cfg: PlannerConfig,
-    T: Array,
-    log: list[str],
-    previous: Trajectory | None,
-    initvals: Array | None,
-    extra: tuple[ConstraintBlock, ...],
-) -> _Attempt:
-    """Build and solve the perching QP for durations ``T`` with the ``extra`` rows.
-
-    Field-of-view rows (8)-(9) and the fallback (16) plug in here: see :mod:`avp.perception`.
-    """
-    if cfg.fov.enabled:  # FoV rows (8)-(9), SQP step, fallback (16): avp.perception
-        from .perception import solve_with_fov
-        r = solve_with_fov(state, target, cfg, T, log, previous, initvals, extra)
-        return _Attempt(r.outcome, r.trajectory, r.fov_dropped, r.build, r.solve)
-    t0 = time.perf_counter()
-    qp = build_perching_qp(state, target, cfg, T)
-    if extra:
-        qp = qp.with_inequalities(*extra)
-    build = time.perf_counter() - t0
-    try:
-        outcome = solve_perching_qp(qp, cfg, initvals)
-    except InfeasibleError as exc:
-        log.append(str(exc))
-        return _Attempt(None, None, False, build, 0.0)
-    log.append(f"QP {cfg.solver}: {outcome.status.value} (max violation {outcome.max_violation:.1e})")
-    traj = qp.trajectory(outcome.c_hat, cfg.g) if outcome.ok and outcome.c_hat is not None else None
-    return _Attempt(outcome, traj, False, build + outcome.build_time, outcome.solve_time)
-
-
-def _solve_at(
-    state: State,
-    target: PerchTarget,
-    cfg: PlannerConfig,
-    T: Array,
-    log: list[str],
-    previous: Trajectory | None = None,
-    initvals: Array | None = None,
-) -> _Attempt:
-    """Solve at durations ``T`` with the workspace rows, certify the workspace limits, and
-    re-solve with refined rows around proven violations (``workspace.refinement_rounds``)."""
-    ws = cfg.workspace
-    if not ws.active:
-        return _solve_once(state, target, cfg, T, log, previous, initvals, ())
-    layout = layout_for(cfg.n_segments, cfg.degree)
-    knots_rel = np.concatenate([[0.0], np.cumsum(T)])
-    extra = workspace_blocks(layout, knots_rel, state, target, cfg)
-    build = solve = certify = 0.0
-    for round_index in range(ws.refinement_rounds + 1):
-        attempt = _solve_once(state, target, cfg, T, log, previous, initvals, extra)
-        build += attempt.build
-        solve += attempt.solve
-        attempt.build, attempt.solve = build, solve
-        if attempt.trajectory is None:
-            attempt.certify = certify
-            return attempt
-        t_cert = time.perf_counter()
-        report = certify_workspace(attempt.trajectory, target, ws)
-        certify += time.perf_counter() - t_cert
-        attempt.certify, attempt.safety = certify, report
-        if report.certified:
-            log.append("workspace certified (" + ", ".join(c.region.name for c in report.checks) + ")")
-            return attempt
-        log.append("workspace: " + "; ".join(str(c) for c in report.checks if not c.certified))
-        if round_index == ws.refinement_rounds:
-            return attempt
-        tb = time.perf_counter()
-        extra = extra + refinement_blocks(layout, knots_rel, attempt.trajectory, report, round_index + 1, cfg)
-        build += time.perf_counter() - tb
-    raise AssertionError("unreachable")  # pragma: no cover
-
-
 def _certify(traj: Trajectory, cfg: PlannerConfig) -> BoundReport:
-    """Algorithm 1 on every bound and segment (Rust), with the limits mass-normalised."""
+    """Algorithm 1 on every bound and segment (Rust), with the limits mass-normalised.
+
+    The floating-point path runs first: a proven violation already fails the plan, so the exact
+    fallback (up to :data:`~avp.bounds.EXACT_BUDGET` on near-tangent cells) runs only when that
+    path left cells undecided and proved nothing violated. A failed plan's report may then keep
+    UNKNOWN cells next to its proven violations; a certified one is decided everywhere."""
     lim = cfg.limits
-    return certify_spline(
-        traj.coefficients, traj.knots,
-        thrust_min=lim.accel_min, thrust_max=lim.accel_max,
-        thrust_rate_max=lim.thrust_rate_max / lim.mass,
-        tilt_rate_max=lim.tilt_rate_max, body_rate_max=lim.body_rate_max, g=cfg.g,
-    )
+
+    def run(exact: bool) -> BoundReport:
+        return certify_spline(
+            traj.coefficients, traj.knots,
+            thrust_min=lim.accel_min, thrust_max=lim.accel_max,
+            thrust_rate_max=lim.thrust_rate_max / lim.mass,
+            tilt_rate_max=lim.tilt_rate_max, body_rate_max=lim.body_rate_max, g=cfg.g, exact=exact,
+        )
+
+    fast = run(False)
+    if fast.certified or fast.violations or not fast.unknown:
+        return fast
+    return run(True)
 
 
 def _relax(cfg: PlannerConfig, relaxation: Relaxation, target: PerchTarget) -> PlannerConfig:
@@ -325,12 +240,12 @@ def plan_detailed(
     build = solve = certify = 0.0
     attempts = 0
     relaxed: list[Relaxation] = []
-    last: _Attempt | None = None
-    unsafe: _Attempt | None = None  # latest attempt whose bounds held but whose workspace did not
+    last: Attempt | None = None
+    unsafe: Attempt | None = None  # latest attempt whose bounds held but whose workspace did not
     unsafe_report: BoundReport | None = None  # its (certified) bound report
     report: BoundReport | None = None
 
-    def finish(status: PlanStatus, attempt: _Attempt | None, T: Array) -> PlanResult:
+    def finish(status: PlanStatus, attempt: Attempt | None, T: Array) -> PlanResult:
         traj = attempt.trajectory if attempt else None
         if traj is not None:
             traj.provenance = Provenance(
@@ -349,12 +264,20 @@ def plan_detailed(
             safety=attempt.safety if attempt else None,
         )
 
-    def solved(attempt: _Attempt) -> PlanStatus:
+    def solved(attempt: Attempt) -> PlanStatus:
         if relaxed:
             return PlanStatus.SOLVED_RELAXED
         return PlanStatus.SOLVED_WITHOUT_FOV if attempt.fov_dropped else PlanStatus.SOLVED
 
-    schedule = (1.0,) + (cfg.bounds.schedule() if cfg.bounds.certify else ())
+    def within_sampled(traj: Trajectory) -> bool:
+        # A sample beyond a limit is a proven violation of the certified quantity, so the SQP
+        # step of the first plan would be wasted: the time search starts without it.
+        return float(scaled_excess(traj, cfg.limits, cfg.g, np.ones(1), per_segment=4)[0]) <= 0.0
+
+    # The initial workspace rows depend on the durations, the start and the target only (never
+    # relaxed): built once per durations of this plan.
+    ws_rows: dict[bytes, tuple[ConstraintBlock, ...]] = {}
+
     # Stages: as asked; on an overhang, without the horizontal-thrust waypoint (a planner
     # heuristic, not a user constraint: a plan found without it is still SOLVED); then the
     # relaxations, cumulatively on the configuration as asked.
@@ -373,10 +296,13 @@ def plan_detailed(
             stage_cfg = _relax(cfg if not relaxed else stage_cfg, stage, target)
             relaxed.append(stage)
             log.append(f"relaxing: {stage.value} (the workspace limits stay)")
-        for factor in schedule:
+        search = DurationSearch(cfg.bounds, reach=not isinstance(stage, Relaxation))  # reach: nothing relaxed yet
+        search_cfg: PlannerConfig | None = None  # stage_cfg without FoV rows, built when first needed
+        factor: float | None = 1.0
+        while factor is not None:
             T = T0 * factor
             if factor != 1.0 or stage is not None:
-                log.append(f"durations x{factor:g}: total {T.sum():.3f} s")
+                log.append(f"durations x{factor:.4g}: total {T.sum():.3f} s")
             initvals = None
             if warm_start is not None and cfg.solver in WARM_START_SOLVERS:
                 knots = state.time + np.concatenate([[0.0], np.cumsum(T)])
@@ -384,9 +310,14 @@ def plan_detailed(
             # The search runs without the FoV rows after the first solve; the rows are added back
             # once a duration certifies (they change the plan little and cost 2-3 QPs each).
             first = stage is None and factor == 1.0
-            attempt_cfg = stage_cfg if first or not stage_cfg.fov.enabled else replace(
-                stage_cfg, fov=replace(stage_cfg.fov, enabled=False))
-            attempt = _solve_at(state, target, attempt_cfg, T, log, previous, initvals)
+            if not first and search_cfg is None:
+                search_cfg = stage_cfg if not stage_cfg.fov.enabled else replace(
+                    stage_cfg, fov=replace(stage_cfg.fov, enabled=False))
+            attempt_cfg = stage_cfg if first or search_cfg is None else search_cfg
+            attempt = solve_at(state, target, attempt_cfg, T, previous=previous, initvals=initvals,
+                               worth_fov=within_sampled if first and cfg.bounds.certify else None,
+                               ws_rows=ws_rows)
+            log.extend(attempt.log)
             attempt.relaxations = tuple(relaxed)
             attempts += 1
             build += attempt.build
@@ -398,6 +329,7 @@ def plan_detailed(
                 if not cfg.bounds.certify:
                     status = PlanStatus.INFEASIBLE if _infeasible(attempt) else PlanStatus.SOLVER_FAILED
                     return finish(status, attempt, T)
+                factor = search.next(None, True, cfg.limits, cfg.g)
                 continue
             last = attempt
             if not cfg.bounds.certify:
@@ -410,7 +342,8 @@ def plan_detailed(
             if report.certified and attempt.safe:
                 log.append("bounds certified (Algorithm 1, exact)")
                 if attempt_cfg is not stage_cfg:
-                    with_fov, fov_report = _with_fov(state, target, stage_cfg, T, log, previous, initvals)
+                    with_fov, fov_report = _with_fov(state, target, stage_cfg, T, log, previous, initvals, attempt,
+                                                     ws_rows)
                     with_fov.relaxations = attempt.relaxations
                     attempts += 1
                     build, solve, certify = (build + with_fov.build, solve + with_fov.solve,
@@ -423,9 +356,13 @@ def plan_detailed(
             if report.certified:
                 unsafe, unsafe_report = attempt, report
                 log.append("bounds certified, workspace not: trying other durations")
-                continue
-            log.append("bounds: " + "; ".join(str(x) for x in report.violations[:3])
-                       + ("; undecided: " + str(report.unknown) if report.unknown else ""))
+            else:
+                log.append("bounds: " + "; ".join(str(x) for x in report.violations[:3])
+                           + ("; undecided: " + str(report.unknown) if report.unknown else ""))
+            factor = search.next(attempt.trajectory, not report.certified, cfg.limits, cfg.g)
+            if factor is None and search.predicted and not report.certified:
+                log.append(f"time search: no total duration predicted to meet the bounds after {search.predicted} "
+                           f"step(s) (the violation does not scale away)")
     if last is None or last.trajectory is None:
         return finish(PlanStatus.INFEASIBLE if last is None or _infeasible(last) else PlanStatus.SOLVER_FAILED, last, T0)
     if unsafe is not None and unsafe.trajectory is not None:
@@ -456,11 +393,14 @@ def _measured(traj: Trajectory, target: PerchTarget, cfg: PlannerConfig) -> str:
 
 def _with_fov(
     state: State, target: PerchTarget, cfg: PlannerConfig, T: Array, log: list[str],
-    previous: Trajectory | None, initvals: Array | None,
-) -> tuple[_Attempt, tuple[BoundReport | None, float]]:
-    """Re-solve a certified search step with the FoV rows; ``(attempt, (report, seconds))`` with
-    ``report`` set only when that plan certifies too (bounds and workspace)."""
-    attempt = _solve_at(state, target, cfg, T, log, previous, initvals)
+    previous: Trajectory | None, initvals: Array | None, seed: Attempt,
+    ws_rows: dict[bytes, tuple[ConstraintBlock, ...]] | None = None,
+) -> tuple[Attempt, tuple[BoundReport | None, float]]:
+    """Re-solve a certified search step ``seed`` with the FoV rows (the SQP starts from the
+    seed's plan); ``(attempt, (report, seconds))`` with ``report`` set only when that plan
+    certifies too (bounds and workspace)."""
+    attempt = solve_at(state, target, cfg, T, previous=previous, initvals=initvals, seed=seed, ws_rows=ws_rows)
+    log.extend(attempt.log)
     if attempt.trajectory is None or not attempt.safe or attempt.fov_dropped:
         log.append("FoV rows dropped (16): the plan with them did not solve or certify")
         return attempt, (None, 0.0)
@@ -474,7 +414,7 @@ def _with_fov(
     return attempt, (report, seconds)
 
 
-def _infeasible(attempt: _Attempt) -> bool:
+def _infeasible(attempt: Attempt) -> bool:
     o = attempt.outcome
     return o is None or (o.solution is not None and not o.solution.found)
 

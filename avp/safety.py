@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 
@@ -27,7 +28,7 @@ from .bounds import Certificate
 from .config import PlannerConfig, Workspace
 from .errors import ConfigError
 from .qp.assemble import ConstraintBlock
-from .qp.layout import DecisionLayout
+from .qp.layout import DecisionLayout, layout_for
 from .qp.rows import vector_rows
 from .trajectory import Trajectory
 from .types import PerchTarget, State
@@ -215,12 +216,41 @@ def _sample_times(knots_rel: Array, per_segment: int) -> Array:
     return np.asarray(t[t < knots_rel[-1] - 1e-12], dtype=np.float64)
 
 
-def _plane_block(name: str, layout: DecisionLayout, knots_rel: Array, normal: Array, offset: Array | float,
-                 times: Array) -> ConstraintBlock:
-    P = vector_rows(layout, knots_rel, 0, times)  # (m, 3, n)
+@lru_cache(maxsize=32)
+def _grid_position_rows(n_segments: int, degree: int, per_segment: int) -> Array:
+    """Position rows ``(m, 3, n_variables)`` at the sample grid of :func:`_sample_times`: they
+    depend on the normalised time ``u`` alone, not on the durations (position is order 0). A
+    sample on an interior knot is taken at the start of the next segment (``u = 0``), where
+    :meth:`~avp.qp.layout.DecisionLayout.locate` puts a time equal to the knot; read-only."""
+    layout = layout_for(n_segments, degree)
+    seg_u = [(i + 1, 0.0) if j == per_segment else (i, j / per_segment)
+             for i in range(n_segments) for j in range(1, per_segment + 1)
+             if not (j == per_segment and i == n_segments - 1)]  # t_f: fixed by the contact rows
+    rows = np.zeros((len(seg_u), 3, layout.n_variables))
+    n_c = layout.n_coeffs
+    for k, (seg, u) in enumerate(seg_u):
+        local = layout.basis(0, u)
+        for axis in range(3):
+            start = layout.start(axis, seg)
+            rows[k, axis, start:start + n_c] = local
+    rows.setflags(write=False)
+    return rows
+
+
+def _position_rows(layout: DecisionLayout, knots_rel: Array, times: Array, per_segment: int | None) -> Array:
+    """Position rows at ``times``; from the cached grid rows when ``times`` is the
+    ``per_segment`` grid of :func:`_sample_times`."""
+    if per_segment is not None and times.size == layout.n_segments * per_segment - 1:
+        return _grid_position_rows(layout.n_segments, layout.degree, per_segment)
+    return vector_rows(layout, knots_rel, 0, times)
+
+
+def _plane_block(name: str, P: Array, normal: Array, offset: Array | float) -> ConstraintBlock:
+    """``normal . p(t_j) >= offset`` with ``P`` the position rows at the ``t_j``."""
     G = np.einsum("i,min->mn", normal, P)
-    lower = np.broadcast_to(np.asarray(offset, dtype=float), (times.size,)).copy()
-    return ConstraintBlock(name, G, lower, np.full(times.size, np.inf))
+    m = P.shape[0]
+    lower = np.broadcast_to(np.asarray(offset, dtype=float), (m,)).copy()
+    return ConstraintBlock(name, G, lower, np.full(m, np.inf))
 
 
 def workspace_blocks(
@@ -237,27 +267,27 @@ def workspace_blocks(
     if times.size == 0:
         return ()
     blocks = []
+    P = _position_rows(layout, knots_rel, times, ws.samples_per_segment)
     p0, p_c = state.position, contact_position(target, ws)
     frac = times / knots_rel[-1]
     line = p0[None, :] + frac[:, None] * (p_c - p0)[None, :]
     for r in regions_for(target, ws):
         if r.kind == "half-space":
-            blocks.append(_plane_block(f"workspace: {r.name}", layout, knots_rel, r.normal, r.offset, times))
+            blocks.append(_plane_block(f"workspace: {r.name}", P, r.normal, r.offset))
         elif r.kind == "sphere":
-            blocks.append(_sphere_block(f"workspace: {r.name}", layout, knots_rel, r, times, line, 0.0))
+            blocks.append(_sphere_block(f"workspace: {r.name}", P, r, line, 0.0))
     return tuple(blocks)
 
 
-def _sphere_block(name: str, layout: DecisionLayout, knots_rel: Array, r: Region, times: Array,
-                  points: Array, margin: float) -> ConstraintBlock:
-    """``n_j . p(t_j) >= n_j . c + radius + margin`` with ``n_j`` from the centre to ``points``."""
+def _sphere_block(name: str, P: Array, r: Region, points: Array, margin: float) -> ConstraintBlock:
+    """``n_j . p(t_j) >= n_j . c + radius + margin`` with ``n_j`` from the centre to ``points``
+    and ``P`` the position rows at the ``t_j``."""
     d = points - r.normal[None, :]
     norm = np.linalg.norm(d, axis=1)
     d = np.where(norm[:, None] > 1e-9, d / np.maximum(norm, 1e-300)[:, None], np.array([0.0, 0.0, 1.0]))
-    P = vector_rows(layout, knots_rel, 0, times)
     G = np.einsum("mi,min->mn", d, P)
     lower = d @ r.normal + r.offset + margin
-    return ConstraintBlock(name, G, lower, np.full(times.size, np.inf))
+    return ConstraintBlock(name, G, lower, np.full(P.shape[0], np.inf))
 
 
 def _around(check: RegionCheck, knots_rel: Array, t0: float) -> Array:
@@ -310,11 +340,11 @@ def refinement_blocks(
         elif r.kind == "sphere":
             times = np.unique(np.concatenate([_around(check, knots_rel, t0),
                                               _sample_times(knots_rel, 2 * ws.samples_per_segment)]))
-            out.append(_sphere_block(f"workspace refinement: {r.name}", layout, knots_rel, r, times,
-                                     traj(t0 + times), margin))
+            out.append(_sphere_block(f"workspace refinement: {r.name}",
+                                     _position_rows(layout, knots_rel, times, None), r, traj(t0 + times), margin))
         else:
             times = _around(check, knots_rel, t0)
             taper = np.minimum(1.0, (tf_rel - times) / max(config.t_k, 1e-3)) if r.touches else np.ones(times.size)
-            out.append(_plane_block(f"workspace refinement: {r.name}", layout, knots_rel, r.normal,
-                                    r.offset + margin * taper, times))
+            out.append(_plane_block(f"workspace refinement: {r.name}", _position_rows(layout, knots_rel, times, None),
+                                    r.normal, r.offset + margin * taper))
     return tuple(out)

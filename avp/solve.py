@@ -25,7 +25,7 @@ import scipy.sparse
 from ._typing import Array
 from .config import PlannerConfig, QpForm
 from .errors import SolverError
-from .qp.assemble import PerchingQp
+from .qp.assemble import PerchingQp, ReducedQp
 
 __all__ = [
     "BACKENDS",
@@ -61,6 +61,11 @@ class Backend:
         attempts (16) cap it (``FovConfig.fallback_max_iter``).
     max_iter:
         The iteration cap avp sets by default (``None``: the back-end's own).
+    two_sided:
+        avp calls the back-end's own API on the reduced QP with two-sided rows
+        ``lower <= G z <= upper`` (no one-sided stacking, no qpsolvers dispatch; DAQP's
+        ``daqp.solve``); the returned solution computes the same KKT residuals as the one-sided
+        problem qpsolvers would have built (:class:`TwoSidedSolution`).
     """
 
     name: str
@@ -68,6 +73,7 @@ class Backend:
     warm_start: bool = False
     iterative: bool = False
     max_iter: int | None = None
+    two_sided: bool = False
 
 
 def _backend(name: str, defaults: dict[str, Any] | None = None, **facts: Any) -> Backend:
@@ -76,7 +82,7 @@ def _backend(name: str, defaults: dict[str, Any] | None = None, **facts: Any) ->
 
 
 BACKENDS: MappingProxyType[str, Backend] = MappingProxyType({b.name: b for b in (
-    _backend("daqp"),
+    _backend("daqp", two_sided=True),
     # Tight tolerances: at ProxQP's/OSQP's defaults (1e-3) coefficient errors reach 3.5e-2, far
     # too coarse for contact.
     _backend("proxqp", {"eps_abs": 1e-9, "eps_rel": 0.0}, warm_start=True, iterative=True),
@@ -139,6 +145,70 @@ def available_solvers() -> list[str]:
     return list(qpsolvers.available_solvers)
 
 
+_INF = 1e30
+"""DAQP's infinity for a missing bound."""
+
+
+@dataclass(frozen=False)
+class TwoSidedSolution(qpsolvers.Solution):
+    """A ``qpsolvers.Solution`` of ``min 1/2 x^T P x + q^T x`` s.t. ``lower <= G x <= upper``
+    solved through a back-end's own two-sided API. ``problem`` holds the cost only; the rows and
+    the signed multipliers ``lam`` (``> 0``: upper bound active, ``< 0``: lower) are kept here,
+    and the residuals equal those of the one-sided problem ``[G; -G] x <= [upper; -lower]``
+    with ``z = [lam^+; lam^-]``."""
+
+    G: Array | None = None
+    lower: Array | None = None
+    upper: Array | None = None
+    lam: Array | None = None
+
+    def primal_residual(self) -> float:
+        if not self.found or self.x is None or self.G is None or self.lower is None or self.upper is None:
+            return math.inf
+        if not self.G.shape[0]:
+            return 0.0
+        Gx = self.G @ self.x
+        return float(max(0.0, float(np.max(Gx - self.upper)), float(np.max(self.lower - Gx))))
+
+    def dual_residual(self) -> float:
+        P, q = self.problem.P, self.problem.q
+        if not self.found or self.x is None or self.lam is None or self.G is None:
+            return math.inf
+        return float(np.max(np.abs(P @ self.x + q + self.G.T @ self.lam))) if self.x.size else 0.0
+
+    def duality_gap(self) -> float:
+        P, q = self.problem.P, self.problem.q
+        if not self.found or self.x is None or self.lam is None or self.lower is None or self.upper is None:
+            return math.inf
+        up = np.maximum(self.lam, 0.0)
+        lo = np.minimum(self.lam, 0.0)
+        # only active sides carry multipliers, so infinite bounds never multiply a nonzero one
+        bound = float(np.where(up > 0.0, self.upper, 0.0) @ up + np.where(lo < 0.0, self.lower, 0.0) @ lo)
+        return abs(float(self.x @ (P @ self.x)) + float(q @ self.x) + bound)
+
+
+def _solve_two_sided(H: Array, g: Array, G: Array, lower: Array, upper: Array,
+                     options: dict[str, Any]) -> TwoSidedSolution:
+    """``min 1/2 z^T H z + g^T z`` s.t. ``lower <= G z <= upper`` by ``daqp.solve`` directly."""
+    import daqp  # type: ignore[import-not-found]
+
+    options = {k: v for k, v in options.items() if k != "verbose"}  # a qpsolvers keyword
+    bu = np.where(np.isfinite(upper), upper, _INF)
+    bl = np.where(np.isfinite(lower), lower, -_INF)
+    sense = np.zeros(G.shape[0], dtype=np.intc)
+    t0 = time.perf_counter()
+    x, obj, exitflag, info = daqp.solve(np.array(H), g, np.ascontiguousarray(G), bu, bl, sense, **options)
+    solution = TwoSidedSolution(qpsolvers.Problem(P=H, q=g), G=G, lower=lower, upper=upper)
+    solution.found = exitflag > 0
+    if solution.found:
+        solution.x, solution.obj = x, obj
+        solution.lam = info["lam"]
+        solution.z = np.concatenate([np.maximum(solution.lam, 0.0), -np.minimum(solution.lam, 0.0)])
+    solution.solve_time = time.perf_counter() - t0
+    solution.extras = {"exitflag": exitflag, "iterations": info.get("iterations")}
+    return solution
+
+
 def _one_sided(G: Array, lower: Array, upper: Array) -> tuple[Array | None, Array | None]:
     up = np.isfinite(upper)
     lo = np.isfinite(lower)
@@ -197,6 +267,18 @@ def solve_perching_qp(qp: PerchingQp, config: PlannerConfig, initvals: Array | N
         )
     t_build = time.perf_counter()
     G_full, lo_full, hi_full = qp.stacked_inequalities()
+    facts = backend(config.solver)
+    if config.qp_form is QpForm.REDUCED and facts.two_sided:
+        two = qp.reduce()
+        build_time = time.perf_counter() - t_build
+        t_solve = time.perf_counter()
+        try:
+            solution: qpsolvers.Solution = _solve_two_sided(two.H, two.g, two.G, two.lower, two.upper, _options(config))
+        except Exception as exc:  # back-end errors must not leak (one hierarchy)
+            raise SolverError(f"QP back-end '{config.solver}' failed: {exc}") from exc
+        solve_time = time.perf_counter() - t_solve
+        return _outcome(qp, config, two, solution, G_full, lo_full, hi_full, build_time, solve_time)
+    red: ReducedQp | None = None
     if config.qp_form is QpForm.REDUCED:
         red = qp.reduce()
         Gs, hs = _one_sided(red.G, red.lower, red.upper)
@@ -205,7 +287,6 @@ def solve_perching_qp(qp: PerchingQp, config: PlannerConfig, initvals: Array | N
         if initvals is not None and initvals.shape == red.c_p.shape:
             init = red.Z.T @ (initvals - red.c_p)
     else:
-        red = None
         A, b = qp.stacked_equalities()
         Gs, hs = _one_sided(G_full, lo_full, hi_full)
         problem = qpsolvers.Problem(P=_writable(qp.P), q=np.zeros(qp.layout.n_variables), G=Gs, h=hs,
@@ -223,6 +304,12 @@ def solve_perching_qp(qp: PerchingQp, config: PlannerConfig, initvals: Array | N
     except Exception as exc:  # qpsolvers/back-end errors must not leak (one hierarchy)
         raise SolverError(f"QP back-end '{config.solver}' failed: {exc}") from exc
     solve_time = time.perf_counter() - t_solve
+    return _outcome(qp, config, red, solution, G_full, lo_full, hi_full, build_time, solve_time)
+
+
+def _outcome(qp: PerchingQp, config: PlannerConfig, red: ReducedQp | None, solution: qpsolvers.Solution,
+             G_full: Array, lo_full: Array, hi_full: Array, build_time: float, solve_time: float) -> QpOutcome:
+    """Judge a back-end's answer: finite, lifted to the coefficients, within the tolerances."""
     x = solution.x if solution.found else None
     if x is None or not np.all(np.isfinite(x)):
         return QpOutcome(status=QpStatus.NO_SOLUTION, c_hat=None, solver=config.solver, build_time=build_time, solve_time=solve_time, max_violation=np.inf, solution=solution)
@@ -233,12 +320,12 @@ def solve_perching_qp(qp: PerchingQp, config: PlannerConfig, initvals: Array | N
 
 
 def _max_violation(qp: PerchingQp, c_hat: Array, G: Array, lo: Array, hi: Array) -> float:
-    """Largest relative violation of the equalities and inequalities at ``c_hat``."""
+    """Largest relative violation of the equalities and inequalities at ``c_hat`` (each row's
+    residual over ``max(1, |bound|)``; an infinite bound is never violated)."""
     A, b = qp.stacked_equalities()
-    viol = [np.abs(A @ c_hat - b) / np.maximum(1.0, np.abs(b))]
+    inv_b, inv_lo, inv_hi = qp.violation_scales()
+    worst = float(np.max(np.abs(A @ c_hat - b) * inv_b)) if b.size else 0.0
     if G.shape[0]:
         Gc = G @ c_hat
-        with np.errstate(invalid="ignore"):
-            viol.append(np.where(np.isfinite(hi), (Gc - hi) / np.maximum(1.0, np.abs(hi)), 0.0))
-            viol.append(np.where(np.isfinite(lo), (lo - Gc) / np.maximum(1.0, np.abs(lo)), 0.0))
-    return float(max(0.0, max(float(np.max(v)) if v.size else 0.0 for v in viol)))
+        worst = max(worst, float(np.max((Gc - hi) * inv_hi)), float(np.max((lo - Gc) * inv_lo)))
+    return max(0.0, worst)

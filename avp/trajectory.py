@@ -116,6 +116,16 @@ class Trajectory:
         self.provenance: Provenance | None = None
         """Set by the planner: status, relaxations, certificates (``None`` for a bare spline)."""
 
+    @classmethod
+    def _trusted(cls, coefficients: Array, knots: Array, g: float) -> Trajectory:
+        """A trajectory from arrays the caller guarantees valid (the planner's QP solutions:
+        finite, shaped, increasing knots); they are taken over read-only, without copies."""
+        self = cls.__new__(cls)
+        coefficients.setflags(write=False)
+        knots.setflags(write=False)
+        self._c, self._k, self.g, self.provenance = coefficients, knots, float(g), None
+        return self
+
     # -- structure -------------------------------------------------------------------------
     @property
     def coefficients(self) -> Array:
@@ -158,6 +168,8 @@ class Trajectory:
 
     # -- evaluation ------------------------------------------------------------------------
     def _times(self, t: Any) -> tuple[Array, tuple[int, ...]]:
+        if isinstance(t, float) and self.t0 - TIME_TOL <= t <= self.tf + TIME_TOL:  # one time, in range
+            return np.array([min(max(t, self.t0), self.tf)]), ()
         arr = np.asarray(t, dtype=float)
         if not np.all(np.isfinite(arr)):
             raise ConfigError("t", "contains NaN or inf")

@@ -1,6 +1,6 @@
 """Where the time of a default ``avp.plan()`` goes, stage by stage, against a naive pipeline.
 
-    python benchmarks/bench_pipeline.py [--repeats 20]
+    python benchmarks/bench_pipeline.py [--repeats 20] [--fresh]
 
 For each standard scenario of ``bench_plan.py`` (wall and slope perches) and repeat, in this
 order, interleaved so both see the same machine load:
@@ -8,7 +8,8 @@ order, interleaved so both see the same machine load:
 * ``avp.plan`` with the defaults (FoV rows and SQP step, bound certificates), its wall time split
   into stages by wrapping the functions that do the work: **build** (QP assembly), **elimination**
   (``PerchingQp.reduce``: equality elimination and the reduced matrices), **FoV** (linearising the
-  rows (8)-(9) and scoring visibility), **solve** (the back-end call, ``qpsolvers.solve_problem``),
+  rows (8)-(9) and scoring visibility), **solve** (the back-end call: ``daqp.solve`` on the
+  two-sided rows for DAQP, ``qpsolvers.solve_problem`` for the others),
   **certify** (Algorithm 1, ``certify_spline``), **workspace** (the clearance/workspace
   certificates and rows of ``avp.safety``, when the planner has them) and **other** (the rest:
   Python glue, checks, trajectory objects);
@@ -27,6 +28,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import dataclasses
 import itertools
 import time
 from collections import defaultdict
@@ -41,6 +43,12 @@ from numpy.polynomial import polynomial as P
 import avp
 import avp.perception as perception
 import avp.planner as planner
+import avp.solve
+
+try:  # the one attempt path (absent before it was unified)
+    import avp.attempt as attempt
+except ImportError:  # pragma: no cover
+    attempt = None
 from avp.qp import assemble, boundary, perching
 from avp.qp.cost import gram
 from avp.qp.layout import N_AXES, YAW, layout_for
@@ -79,21 +87,26 @@ class StageTimer:
 def instrumented(timer: StageTimer) -> Iterator[None]:
     """Wraps the stage functions wherever the planner looks them up; restores them after."""
     targets: list[tuple[Any, str, str]] = [
-        (perception, "build_perching_qp", "build"),
+        (attempt, "build_perching_qp", "build"),  # the one attempt path (avp.attempt)
+        (perception, "build_perching_qp", "build"),  # before: FoV solves lived in avp.perception
         (planner, "build_perching_qp", "build"),
         (assemble.PerchingQp, "reduce", "elimination"),
         (perception, "linearise_on", "FoV"),
         (perception, "_scores", "FoV"),  # current: scoring several plans in one pass
         (perception, "_score", "FoV"),  # before: one plan at a time
-        (qpsolvers, "solve_problem", "solve"),
+        (qpsolvers, "solve_problem", "solve"),  # other back-ends (and DAQP before the direct call)
+        (avp.solve, "_solve_two_sided", "solve"),  # DAQP called directly on two-sided rows
         (planner, "certify_spline", "certify"),
         (planner, "certify_workspace", "workspace"),  # clearance/workspace certificates (avp.safety)
         (planner, "workspace_blocks", "workspace"),
         (planner, "refinement_blocks", "workspace"),
+        (attempt, "certify_workspace", "workspace"),
+        (attempt, "workspace_blocks", "workspace"),
+        (attempt, "refinement_blocks", "workspace"),
     ]
     saved = []
     for obj, name, stage in targets:
-        if hasattr(obj, name):
+        if obj is not None and hasattr(obj, name):
             saved.append((obj, name, getattr(obj, name)))
             setattr(obj, name, timer.wrap(stage, getattr(obj, name)))
     try:
@@ -181,6 +194,9 @@ def stats(v: np.ndarray) -> str:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeats", type=int, default=20)
+    ap.add_argument("--fresh", action="store_true",
+                    help="move every start by 1 mm per repeat: new durations, so no cached cost matrix "
+                         "or equality elimination is reused (the cost of a scenario never seen before)")
     args = ap.parse_args()
     cfg = avp.PlannerConfig()
     timer = StageTimer()
@@ -189,9 +205,13 @@ def main() -> None:
     for state, target in cases:  # first calls (imports, caches) are not measured
         avp.plan(state, target, cfg)
         naive_plan(state, target, cfg)
+    solves = [avp.plan_detailed(state, target, cfg).duration_scale_steps + 1 for state, target in cases]
     with instrumented(timer):
-        for _ in range(args.repeats):
-            for state, target in cases:
+        for repeat in range(args.repeats):
+            for state0, target in cases:
+                state = state0
+                if args.fresh:
+                    state = dataclasses.replace(state0, position=state0.position + np.array([1e-3 * (repeat + 1), 0.0, 0.0]))
                 timer.take()
                 t0, c0 = time.perf_counter(), time.thread_time()
                 avp.plan(state, target, cfg)
@@ -203,7 +223,9 @@ def main() -> None:
                 naive.append(time.perf_counter() - t0)
                 naive_cpu.append(time.thread_time() - c0)
     totals_a, naive_a = np.array(totals), np.array(naive)
-    print(f"avp {avp.__version__}: {len(cases)} scenarios x {args.repeats} repeats, interleaved")
+    print(f"avp {avp.__version__}: {len(cases)} scenarios x {args.repeats} repeats, interleaved"
+          + (" (fresh starts: no cache reuse)" if args.fresh else "")
+          + f"; durations tried per plan: mean {np.mean(solves):.2f}, max {max(solves)}")
     print(f"{'pipeline (ms)':<44} {'median':>8} {'p95':>8} {'p99':>8} {'max':>8}")
     print(f"{'avp.plan, defaults (FoV + certificates)':<44} {stats(totals_a)}")
     print(f"{'naive NumPy + DAQP + numpy Sturm, no FoV':<44} {stats(naive_a)}")

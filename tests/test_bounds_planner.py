@@ -91,10 +91,15 @@ def gao_case(incline_deg: float):
 def test_gao_90_deg_fails_with_the_paper_band_and_no_relaxation() -> None:
     """Reproduces Gao et al.'s claim: with band (14) active, no duration certifies at 90 deg."""
     state, target = gao_case(90)
-    config = avp.PlannerConfig(limits=GAO, alpha=5.5, bounds=avp.BoundsPolicy(relaxations=()))
+    policy = avp.BoundsPolicy(time_search=avp.TimeSearch.BIDIRECTIONAL, relaxations=())
+    config = avp.PlannerConfig(limits=GAO, alpha=5.5, bounds=policy)
     result = avp.plan_detailed(state, target, config)
     assert result.status is avp.PlanStatus.BOUNDS_NOT_CERTIFIED
     assert result.duration_scale_steps == len(config.bounds.schedule())
+    # the default (SCALING) search reaches the same verdict in fewer solves
+    scaling = avp.plan_detailed(state, target, avp.PlannerConfig(limits=GAO, alpha=5.5, bounds=avp.BoundsPolicy(relaxations=())))
+    assert scaling.status is avp.PlanStatus.BOUNDS_NOT_CERTIFIED
+    assert scaling.duration_scale_steps < result.duration_scale_steps
 
 
 @pytest.mark.parametrize("incline", [30, 60, 90])

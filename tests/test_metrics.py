@@ -86,3 +86,18 @@ def test_visibility_many_equals_one_at_a_time() -> None:
         assert visibility_many(trajs, target, cam, dt) == one[:3]
     assert any(v.time_fraction not in (0.0, 1.0) for v in one)  # the case is not trivial
     assert visibility_many([], target) == []
+
+
+@pytest.mark.parametrize("incline", [0, 45, 90, 120])
+def test_cone_only_fast_path_equals_the_camera_test(incline) -> None:
+    """A cone-only camera is scored by the Rust FoV kernel, a camera with a range by
+    Camera.sees on the attitude (11), (13): with a range no sample reaches, both agree."""
+    import avp
+
+    target = PerchTarget.from_incline([0.0, 0.0, 1.5], math.radians(incline))
+    state = avp.State.hover([-3.0, 0.5, 1.5 + (1.0 if incline < 45 else 0.0)])
+    traj = avp.plan(state, target, avp.PlannerConfig(bounds=avp.BoundsPolicy(certify=False)), allow_relaxed=True)
+    for half in (math.radians(20), math.radians(35), math.radians(60)):
+        cone = visibility(traj, target, Camera(half_fov=half), dt=2e-3)
+        generic = visibility(traj, target, Camera(half_fov=half, range=1e6), dt=2e-3)
+        assert cone == generic

@@ -99,3 +99,31 @@ def test_reduced_and_full_forms_agree() -> None:
     full = avp.plan(sc.state, sc.target, avp.PlannerConfig(solver="proxqp", qp_form=avp.QpForm.FULL))
     t = red.sample(0.01)
     assert np.max(np.abs(red(t) - full(t))) < 1e-4
+
+
+def test_incremental_reduction_equals_a_fresh_one() -> None:
+    """A copy with FoV blocks reuses its parent's stacked and reduced rows: the result equals
+    stacking and reducing the same blocks from scratch."""
+    import numpy as np
+    from scenarios import standard
+
+    import avp
+    from avp import perception
+    from avp.qp.assemble import PerchingQp, build_perching_qp
+    from avp.solve import solve_perching_qp
+    from avp.timing import initial_durations
+
+    sc = standard(60, 3.5)
+    cfg = avp.PlannerConfig()
+    T = initial_durations(sc.state, sc.target, cfg)
+    base = build_perching_qp(sc.state, sc.target, cfg, T)
+    out = solve_perching_qp(base, cfg)  # computes the parent's stacked rows and reduction
+    lin = perception.linearise_on(base, base.trajectory(out.c_hat, cfg.g), sc.target, cfg)
+    child = base.with_inequalities(*lin.blocks)
+    fresh = PerchingQp(layout=base.layout, durations=base.durations, t0=base.t0, P=base.P,
+                       equalities=base.equalities, inequalities=child.inequalities)
+    a, b = child.reduce(), fresh.reduce()
+    for name in ("H", "g", "G", "lower", "upper", "Z", "c_p"):
+        np.testing.assert_allclose(getattr(a, name), getattr(b, name), rtol=1e-13, atol=1e-13, err_msg=name)
+    for x, y in zip(child.stacked_inequalities(), fresh.stacked_inequalities(), strict=True):
+        assert np.array_equal(x, y)

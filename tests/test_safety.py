@@ -258,3 +258,33 @@ def test_body_offset_moves_contact_out_along_the_normal_and_keeps_the_distance()
     assert np.linalg.norm(traj(traj.tf) - (target.point + 0.08 * target.s3)) < 1e-9
     ts = np.arange(traj.t0, traj.tf, GRID)
     assert np.all((traj(ts) - target.point) @ target.s3 > 0.08)
+
+
+def test_grid_position_rows_equal_the_rows_at_the_sample_times() -> None:
+    """The cached workspace rows (independent of the durations) against rows evaluated at the
+    sample times of unequal segments: equal as polynomial values at every sample (a sample on an
+    interior knot may sit at the end of one segment or the start of the next: the same value
+    for a continuous spline), checked on random continuous splines."""
+    import numpy as np
+
+    from avp import safety
+    from avp.qp.layout import layout_for
+    from avp.qp.rows import vector_rows
+
+    layout = layout_for(3, 7)
+    rng = np.random.default_rng(2)
+    for per_segment in (2, 5):
+        knots = np.concatenate([[0.0], np.cumsum(rng.uniform(0.2, 1.5, 3))])
+        times = safety._sample_times(knots, per_segment)
+        cached = safety._grid_position_rows(3, 7, per_segment)
+        direct = vector_rows(layout, knots, 0, times)
+        assert cached.shape == direct.shape
+        # a random spline in the decision space, made C^3-continuous by least squares on the
+        # continuity rows' null space, evaluates the same through both row sets
+        from avp.qp.boundary import continuity_rows
+        C = continuity_rows(layout, np.diff(knots), 3, float(np.mean(np.diff(knots))))
+        _, _, Vt = np.linalg.svd(C)
+        Z = Vt[np.linalg.matrix_rank(C):].T
+        c = Z @ rng.normal(size=Z.shape[1])
+        np.testing.assert_allclose(np.einsum("min,n->mi", cached, c), np.einsum("min,n->mi", direct, c),
+                                   rtol=1e-9, atol=1e-9)

@@ -29,3 +29,35 @@ def test_unknown_solver_is_a_solver_error() -> None:
     sc = standard(90, 3.5)
     with pytest.raises(avp.SolverError, match="not installed"):
         avp.plan(sc.state, sc.target, avp.PlannerConfig(solver="no_such_solver"))
+
+
+@pytest.mark.parametrize("incline", [0, 60, 90])
+def test_direct_two_sided_daqp_matches_the_qpsolvers_path(incline) -> None:
+    """The reduced QP with FoV rows solved by ``daqp.solve`` on two-sided rows and by qpsolvers
+    on the one-sided stacking: the same minimiser, and the same KKT residuals (16) computed by
+    TwoSidedSolution and by qpsolvers' own Solution on its problem."""
+    import numpy as np
+    import qpsolvers
+
+    from avp.qp.layout import layout_for
+    from avp.safety import workspace_blocks
+    from avp.timing import initial_durations
+
+    sc = standard(incline, 3.5)
+    cfg = PlannerConfig()
+    T = initial_durations(sc.state, sc.target, cfg)
+    knots = np.concatenate([[0.0], np.cumsum(T)])
+    qp = avp.qp.build_perching_qp(sc.state, sc.target, cfg, T)
+    qp = qp.with_inequalities(*workspace_blocks(layout_for(cfg.n_segments, cfg.degree), knots, sc.state, sc.target, cfg))
+    first = solve.solve_perching_qp(qp, cfg)
+    lin = perception.linearise_on(qp, qp.trajectory(first.c_hat, cfg.g), sc.target, cfg)
+    red = qp.with_inequalities(*lin.blocks).reduce()
+    direct = solve._solve_two_sided(red.H, red.g, red.G, red.lower, red.upper, {})
+    Gs, hs = solve._one_sided(red.G, red.lower, red.upper)
+    reference = qpsolvers.solve_problem(qpsolvers.Problem(P=red.H.copy(), q=red.g, G=Gs, h=hs), solver="daqp")
+    assert direct.found and reference.found
+    np.testing.assert_allclose(direct.x, reference.x, rtol=1e-9, atol=1e-10)
+    assert direct.dual_residual() == pytest.approx(reference.dual_residual(), abs=1e-9)
+    assert direct.duality_gap() == pytest.approx(reference.duality_gap(), abs=1e-9)
+    assert direct.primal_residual() == pytest.approx(reference.primal_residual(), abs=1e-9)
+    assert direct.is_optimal(1e-6)

@@ -103,7 +103,7 @@ def _factor(A: Array, P: Array) -> _Factor:
     key = (A.shape, P.shape, f"{_fingerprint(A):.9e}", f"{_fingerprint(P):.9e}")
     with _FACTORS_LOCK:
         for hit in _FACTORS.get(key, ()):
-            if _close(hit.A, A) and _close(hit.P, P):
+            if (hit.P is P or _close(hit.P, P)) and _close(hit.A, A):
                 _FACTORS.move_to_end(key)
                 return hit
     Q, R, piv = scipy.linalg.qr(A.T, pivoting=True, check_finite=False)
@@ -116,7 +116,8 @@ def _factor(A: Array, P: Array) -> _Factor:
     # back-ends' absolute dual tolerances become meaningful (raw entries reach 1e7).
     scale = 1.0 / max(float(np.max(np.abs(np.diag(H)))) if H.size else 1.0, 1e-300)
     H = (0.5 * scale) * (H + H.T)
-    f = _Factor(A.copy(), P.copy(), Q[:, :rank], R[:rank, :rank], piv[:rank], Z, PZ, H, scale)
+    P_kept = P if not P.flags.writeable else P.copy()  # the cached cost matrices are read-only
+    f = _Factor(A.copy(), P_kept, Q[:, :rank], R[:rank, :rank], piv[:rank], Z, PZ, H, scale)
     for arr in (f.A, f.P, f.Q1, f.R1, f.piv, f.Z, f.PZ, f.H):
         arr.setflags(write=False)
     with _FACTORS_LOCK:
@@ -171,9 +172,9 @@ class PerchingQp:
     equalities: tuple[ConstraintBlock, ...]
     inequalities: tuple[ConstraintBlock, ...] = field(default=())
 
-    @property
+    @cached_property
     def knots_rel(self) -> Array:
-        return np.concatenate([[0.0], np.cumsum(self.durations)])
+        return _read_only(np.concatenate([[0.0], np.cumsum(self.durations)]))
 
     def stacked_equalities(self) -> tuple[Array, Array]:
         """``(A, b)`` of all equality blocks (stacked once per QP, read-only)."""
@@ -185,30 +186,61 @@ class PerchingQp:
 
     @cached_property
     def _stacked_equalities(self) -> tuple[Array, Array]:
-        A = np.vstack([b.matrix for b in self.equalities])
+        A = np.concatenate([b.matrix for b in self.equalities], axis=0)
         b = np.concatenate([b.lower for b in self.equalities])
         return _read_only(A), _read_only(b)
 
     @cached_property
     def _stacked_inequalities(self) -> tuple[Array, Array, Array]:
         n = self.layout.n_variables
+        parent = self.__dict__.get("_parent")
+        if parent is not None and "_stacked_inequalities" in parent.__dict__:
+            # a copy with more blocks: the parent's stacked rows, then the new blocks
+            G0, lo0, hi0 = parent._stacked_inequalities
+            new = self.inequalities[len(parent.inequalities):]
+            return (
+                _read_only(np.concatenate([G0, *(b.matrix for b in new)], axis=0)),
+                _read_only(np.concatenate([lo0, *(b.lower for b in new)])),
+                _read_only(np.concatenate([hi0, *(b.upper for b in new)])),
+            )
         if not self.inequalities:
             return _read_only(np.zeros((0, n))), _read_only(np.zeros(0)), _read_only(np.zeros(0))
         return (
-            _read_only(np.vstack([b.matrix for b in self.inequalities])),
+            _read_only(np.concatenate([b.matrix for b in self.inequalities], axis=0)),
             _read_only(np.concatenate([b.lower for b in self.inequalities])),
             _read_only(np.concatenate([b.upper for b in self.inequalities])),
         )
+
+    def violation_scales(self) -> tuple[Array, Array, Array]:
+        """``1 / max(1, |bound|)`` of the equality right-hand sides and of the inequality lower
+        and upper bounds (1 for an infinite bound), for the relative feasibility check."""
+        return self._violation_scales
+
+    @cached_property
+    def _violation_scales(self) -> tuple[Array, Array, Array]:
+        _, b = self.stacked_equalities()
+        _, lo, hi = self.stacked_inequalities()
+
+        def inv(x: Array) -> Array:
+            return _read_only(np.where(np.isfinite(x), 1.0 / np.maximum(1.0, np.abs(x)), 1.0))
+
+        return inv(b), inv(lo), inv(hi)
 
     def trajectory(self, c_hat: Array, g: float) -> Trajectory:
         """The :class:`~avp.trajectory.Trajectory` of normalised coefficients ``c_hat``, starting
         at ``t0`` with this QP's durations."""
         coeffs = self.layout.to_physical(c_hat, self.durations)
-        return Trajectory(coeffs, self.t0 + self.knots_rel, g=g)
+        knots = self.t0 + self.knots_rel
+        if not (np.isfinite(coeffs).all() and np.all(np.diff(knots) > 0.0)):
+            return Trajectory(coeffs, knots, g=g)  # raises the typed error
+        return Trajectory._trusted(coeffs, knots, g)
 
     def with_inequalities(self, *blocks: ConstraintBlock) -> PerchingQp:
-        """A copy with more inequality blocks (e.g. the FoV rows (8) and trust region (9))."""
-        return self._same_equalities(replace(self, inequalities=self.inequalities + tuple(blocks)))
+        """A copy with more inequality blocks (e.g. the FoV rows (8) and trust region (9)); its
+        stacked and reduced rows reuse this QP's when computed (only the new blocks are added)."""
+        other = self._same_equalities(replace(self, inequalities=self.inequalities + tuple(blocks)))
+        other.__dict__["_parent"] = self
+        return other
 
     def without(self, name_prefix: str) -> PerchingQp:
         """A copy without the inequality blocks whose name starts with ``name_prefix``."""
@@ -217,7 +249,7 @@ class PerchingQp:
 
     def _same_equalities(self, other: PerchingQp) -> PerchingQp:
         """``other`` has this QP's cost and equalities: hand over the elimination if computed."""
-        for name in ("elimination", "_stacked_equalities"):
+        for name in ("elimination", "_stacked_equalities", "knots_rel"):
             if name in self.__dict__:
                 other.__dict__[name] = self.__dict__[name]
         return other
@@ -250,8 +282,26 @@ class PerchingQp:
         return f.Z, c_p, f.H, g
 
     def reduce(self) -> ReducedQp:
-        """The QP in ``z`` (see :attr:`elimination`): only inequalities, positive-definite Hessian."""
+        """The QP in ``z`` (see :attr:`elimination`): only inequalities, positive-definite Hessian.
+        Computed once per QP; a copy made by :meth:`with_inequalities` reduces only its new rows
+        when this QP's reduction exists."""
+        return self._reduced
+
+    @cached_property
+    def _reduced(self) -> ReducedQp:
         Z, c_p, H, g = self.elimination
+        parent = self.__dict__.get("_parent")
+        if parent is not None and "_reduced" in parent.__dict__:
+            r0 = parent._reduced
+            new = self.inequalities[len(parent.inequalities):]
+            if new:
+                Gn = np.concatenate([b.matrix for b in new], axis=0)
+                Gc = Gn @ c_p
+                return ReducedQp(H=H, g=g, G=np.concatenate([r0.G, Gn @ Z], axis=0),
+                                 lower=np.concatenate([r0.lower, np.concatenate([b.lower for b in new]) - Gc]),
+                                 upper=np.concatenate([r0.upper, np.concatenate([b.upper for b in new]) - Gc]),
+                                 Z=Z, c_p=c_p)
+            return replace(r0)
         G, lo, hi = self.stacked_inequalities()
         Gc = G @ c_p
         return ReducedQp(H=H, g=g, G=G @ Z, lower=lo - Gc, upper=hi - Gc, Z=Z, c_p=c_p)

@@ -82,10 +82,14 @@ def fov_gradient(
     aa = np.atleast_2d(np.asarray(a, dtype=float))
     pp = np.atleast_1d(np.asarray(psi, dtype=float))
     m = max(xx.shape[0], aa.shape[0], pp.shape[0])
+
+    def rows(v: Array, shape: tuple[int, ...]) -> Array:
+        return np.ascontiguousarray(v if v.shape == shape else np.broadcast_to(v, shape))
+
     h, d_x, d_psi, d_a, dist = _avp_rust.fov_gradient(
-        np.ascontiguousarray(np.broadcast_to(xx, (m, 3))),
-        np.ascontiguousarray(np.broadcast_to(pp, (m,))),
-        np.ascontiguousarray(np.broadcast_to(aa, (m, 3))),
+        rows(xx, (m, 3)),
+        rows(pp, (m,)),
+        rows(aa, (m, 3)),
         np.ascontiguousarray(s, dtype=float),
         np.ascontiguousarray(camera.axis_B),
         math.cos(camera.half_fov),
@@ -161,20 +165,6 @@ def fov_blocks(
     if m == 0:
         return FovLinearisation((), t, empty, empty, np.zeros(0, bool), np.zeros(0, bool))
     grad = fov_gradient(x0, psi0, a0, target_point, fov.camera, g)
-    # One location, one column table and two basis evaluations serve the rows of x, a and yaw.
-    seg, u = layout.locate(knots_rel, t)
-    T = knots_rel[seg + 1] - knots_rel[seg]
-    b0 = layout.basis(0, u)  # (m, C)
-    b2 = layout.basis(2, u) / (T**2)[:, None]
-    cols = layout.columns(np.arange(4)[None, :], seg[:, None])  # (m, 4 axes, C)
-    mi = np.arange(m)[:, None, None]
-    ai = np.arange(3)[None, :, None]
-    Rx = np.zeros((m, 3, layout.n_variables))
-    Rx[mi, ai, cols[:, :3]] = b0[:, None, :]
-    Ra = np.zeros((m, 3, layout.n_variables))
-    Ra[mi, ai, cols[:, :3]] = b2[:, None, :]
-    Rpsi = np.zeros((m, layout.n_variables))
-    Rpsi[mi[:, 0], cols[:, YAW]] = b0
     ok = np.isfinite(grad.h) & np.all(np.isfinite(grad.d_a), axis=1) & np.isfinite(grad.d_psi) & (grad.distance > 1e-6)
     dist = np.where(ok, grad.distance, 1.0)
     gx = np.where(ok[:, None], grad.d_x, 0.0) / dist[:, None]
@@ -185,11 +175,26 @@ def fov_blocks(
     decrease = (np.abs(gx).sum(1) * fov.trust_position + np.abs(ga).sum(1) * fov.trust_acceleration
                 + np.abs(gp) * fov.trust_yaw)
     reachable = h0 - decrease
-    # Row: grad.z <= grad.z0 - h0 - margin, i.e. h0 + grad.(z - z0) <= -margin. Each point's
-    # row touches only its segment's columns: x/a columns get gx_i b0 + ga_i b2, yaw gp b0.
-    G = np.zeros((m, layout.n_variables))
-    G[mi, cols[:, :3]] = gx[:, :, None] * b0[:, None, :] + ga[:, :, None] * b2[:, None, :]
-    G[mi[:, 0], cols[:, YAW]] = gp[:, None] * b0
+    # Every row of a point touches only its segment's columns. Per point, the local coefficients
+    # of row kind r (0: the FoV row (8); 1-3: x, y, z; 4-6: a_x, a_y, a_z; 7: yaw, the trust
+    # region (9)) on axis j are L[:, r, j, :], scattered once into the decision columns.
+    # Row (8): grad.z <= grad.z0 - h0 - margin, i.e. h0 + grad.(z - z0) <= -margin, with
+    # x/a columns gx_j b0 + ga_j b2 and yaw columns gp b0.
+    seg, u = layout.locate(knots_rel, t)
+    T = knots_rel[seg + 1] - knots_rel[seg]
+    b0 = layout.basis(0, u)  # (m, C)
+    b2 = layout.basis(2, u) / (T**2)[:, None]
+    n_c = layout.n_coeffs
+    L = np.zeros((m, 8, 4, n_c))
+    L[:, 0, :3] = gx[:, :, None] * b0[:, None, :] + ga[:, :, None] * b2[:, None, :]
+    L[:, 0, YAW] = gp[:, None] * b0
+    eye = np.eye(3)[None, :, :, None]
+    L[:, 1:4, :3] = eye * b0[:, None, None, :]
+    L[:, 4:7, :3] = eye * b2[:, None, None, :]
+    L[:, 7, YAW] = b0
+    scatter = np.zeros((m, 8, 4, layout.n_segments, n_c))
+    scatter[np.arange(m), :, :, seg, :] = L
+    rows: Array = scatter.reshape(m, 8, layout.n_variables)
     lin0 = np.sum(gx * x0, 1) + np.sum(ga * a0, 1) + gp * psi0
     rhs = lin0 - h0 - fov.margin
     placed = ok.copy()
@@ -205,13 +210,13 @@ def fov_blocks(
         progress = hopeless.copy()
     blocks = []
     if placed.any():
-        blocks.append(ConstraintBlock(
-            f"{FOV_PREFIX} rows (8)", G[placed], np.full(int(placed.sum()), -np.inf), rhs[placed]))
-        sel = placed
+        sel = rows[placed]
+        k = int(placed.sum())
+        blocks.append(ConstraintBlock(f"{FOV_PREFIX} rows (8)", sel[:, 0], np.full(k, -np.inf), rhs[placed]))
         for label, R, z0, r in (
-            ("x", Rx[sel].reshape(-1, layout.n_variables), np.asarray(x0)[sel].reshape(-1), fov.trust_position),
-            ("a", Ra[sel].reshape(-1, layout.n_variables), np.asarray(a0)[sel].reshape(-1), fov.trust_acceleration),
-            ("yaw", Rpsi[sel], np.asarray(psi0)[sel], fov.trust_yaw),
+            ("x", sel[:, 1:4].reshape(-1, layout.n_variables), np.asarray(x0)[placed].reshape(-1), fov.trust_position),
+            ("a", sel[:, 4:7].reshape(-1, layout.n_variables), np.asarray(a0)[placed].reshape(-1), fov.trust_acceleration),
+            ("yaw", sel[:, 7], np.asarray(psi0)[placed], fov.trust_yaw),
         ):
             if math.isfinite(r):
                 blocks.append(ConstraintBlock(f"{FOV_PREFIX} trust region (9) {label}", R, z0 - r, z0 + r))

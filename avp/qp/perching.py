@@ -4,6 +4,7 @@ yaw (13), and the pre-impact band (14) in the paper's componentwise form or as a
 from __future__ import annotations
 
 import math
+from functools import lru_cache
 
 import numpy as np
 
@@ -11,8 +12,8 @@ from .._typing import Array
 from ..config import PlannerConfig, PreImpactMode
 from ..frames import contact_yaw
 from ..types import PerchTarget
-from .layout import YAW, DecisionLayout
-from .rows import derivative_rows, vector_rows
+from .layout import YAW, DecisionLayout, layout_for
+from .rows import vector_rows
 
 E3 = np.array([0.0, 0.0, 1.0])
 
@@ -40,11 +41,10 @@ def terminal_rows(
 ) -> tuple[Array, Array, list[str]]:
     """Equalities at ``t_f``: position, acceleration (12), requested velocity components in S,
     yaw (13). Returns rows, right-hand side and a name per row."""
-    tf = float(knots_rel[-1])
     rows, rhs, names = [], [], []
-    P = vector_rows(layout, knots_rel, 0, tf)[0]
-    V = vector_rows(layout, knots_rel, 1, tf)[0]
-    A = vector_rows(layout, knots_rel, 2, tf)[0]
+    # position, t_scale * velocity, t_scale^2 * acceleration and yaw rows at t_f: they depend on
+    # T_last / t_scale alone (cached)
+    P, V, A, Y = _end_rows(layout.n_segments, layout.degree, float(knots_rel[-1] - knots_rel[-2]) / t_scale)
     p_contact = target.point + config.workspace.body_offset * target.s3  # centre of mass at contact
     for axis in range(3):
         rows.append(P[axis])
@@ -53,12 +53,12 @@ def terminal_rows(
     if config.alpha_range is None:
         c0 = terminal_acceleration(target, config.contact_alpha(target.incline), config.g)
         for axis in range(3):
-            rows.append(A[axis] * t_scale**2)
+            rows.append(A[axis])
             rhs.append(c0[axis] * t_scale**2)
             names.append(f"terminal acceleration (12) {'xyz'[axis]}")
     else:  # (12) with alpha free: a(tf) + g e3 has no component along s1, s2
         for label, direction in (("s1", target.s1), ("s2", target.s2)):
-            rows.append((direction @ A) * t_scale**2)
+            rows.append(direction @ A)
             rhs.append(-config.g * direction[2] * t_scale**2)
             names.append(f"terminal thrust along s3 (12): no {label} component")
     for label, direction, value in zip(
@@ -66,13 +66,34 @@ def terminal_rows(
     ):
         if value is None:
             continue
-        rows.append((direction @ V) * t_scale)
+        rows.append(direction @ V)
         rhs.append(value * t_scale)
         names.append(f"contact velocity v.{label}")
-    rows.append(derivative_rows(layout, knots_rel, YAW, 0, tf)[0])
+    rows.append(Y)
     rhs.append(terminal_yaw(target, yaw_start))
     names.append("terminal yaw (13)")
     return np.array(rows), np.array(rhs), names
+
+
+@lru_cache(maxsize=256)
+def _end_rows(n_segments: int, degree: int, T_last_over_scale: float) -> tuple[Array, Array, Array, Array]:
+    """Rows at the end of the plan in units of ``t_scale``: position (3, n), velocity x
+    ``t_scale`` (3, n), acceleration x ``t_scale^2`` (3, n) and yaw (n,), read-only."""
+    layout = layout_for(n_segments, degree)
+    _, B1 = layout.endpoint_basis
+    n_c = layout.n_coeffs
+    out = np.zeros((3, 3, layout.n_variables))
+    for order in range(3):
+        local = B1[order] / T_last_over_scale**order
+        for axis in range(3):
+            start = layout.start(axis, n_segments - 1)
+            out[order, axis, start:start + n_c] = local
+    Y = np.zeros(layout.n_variables)
+    start = layout.start(YAW, n_segments - 1)
+    Y[start:start + n_c] = B1[0]
+    for arr in (out, Y):
+        arr.setflags(write=False)
+    return out[0], out[1], out[2], Y
 
 
 def terminal_thrust_rows(
@@ -169,16 +190,12 @@ def pre_impact_rows(
     kappa = math.tan(config.cone_half_angle) * math.cos(math.pi / config.cone_facets)
     dirs = [math.cos(th) * s1 + math.sin(th) * s2
             for th in 2 * math.pi * np.arange(config.cone_facets) / config.cone_facets]
-    rows: list[Array] = []
-    lower: list[float] = []
-    upper: list[float] = []
-    for k in range(times.size):
-        rows.append(s3 @ A[k])
-        lower.append(float(alpha_lo - s3 @ gz))
-        upper.append(float((1.0 + config.q) * alpha_hi - s3 @ gz))
-        for d in dirs:
-            w = d - kappa * s3
-            rows.append(w @ A[k])
-            lower.append(-np.inf)
-            upper.append(float(-(w @ gz)))
-    return np.array(rows), np.array(lower), np.array(upper)
+    # per sample: the thrust row along s3, then one facet row per direction (the order of the
+    # rows is sample-major, as the diagnostics read them)
+    W = np.vstack([s3[None, :], np.asarray(dirs) - kappa * s3[None, :]])  # (1 + facets, 3)
+    G = np.einsum("fi,kin->kfn", W, A).reshape(-1, n)
+    lower_k = np.full(W.shape[0], -np.inf)
+    lower_k[0] = alpha_lo - s3 @ gz
+    upper_k = -(W @ gz)
+    upper_k[0] = (1.0 + config.q) * alpha_hi - s3 @ gz
+    return G, np.tile(lower_k, times.size), np.tile(upper_k, times.size)

@@ -13,6 +13,9 @@ import numpy as np
 from .._typing import Array
 from .layout import DecisionLayout
 
+_LOOP_ROWS = 24
+"""Up to this many rows are filled by slices, more by one fancy-index assignment."""
+
 
 def point_rows(
     layout: DecisionLayout,
@@ -23,14 +26,26 @@ def point_rows(
 ) -> Array:
     """Rows of shape ``(len(times), len(axes), n_variables)`` for derivative ``order``."""
     t = np.atleast_1d(np.asarray(times, dtype=float))
-    seg, u = layout.locate(knots_rel, t)
-    T = knots_rel[seg + 1] - knots_rel[seg]
-    local = layout.basis(order, u) / (T**order)[:, None]  # (m, C)
-    ax = np.asarray(axes)
-    rows = np.zeros((t.size, ax.size, layout.n_variables))
-    cols = layout.columns(ax[None, :], seg[:, None])  # (m, A, C)
-    m_idx = np.arange(t.size)[:, None, None]
-    a_idx = np.arange(ax.size)[None, :, None]
+    if t.size == 1 and float(t[0]) == float(knots_rel[-1]):  # the end of the plan: u = 1
+        seg = np.array([layout.n_segments - 1])
+        T_end = float(knots_rel[-1] - knots_rel[-2])
+        local = (layout.endpoint_basis[1][order] / T_end**order)[None, :]
+    else:
+        seg, u = layout.locate(knots_rel, t)
+        T = knots_rel[seg + 1] - knots_rel[seg]
+        local = layout.basis(order, u) / (T**order)[:, None]  # (m, C)
+    ax = tuple(int(a) for a in axes)
+    m, n_c, n_s = t.size, layout.n_coeffs, layout.n_segments
+    rows = np.zeros((m, len(ax), layout.n_variables))
+    if m * len(ax) <= _LOOP_ROWS:  # a few rows: slices beat the fancy-index machinery
+        for i, s in enumerate(seg.tolist()):
+            for j, a in enumerate(ax):
+                start = (a * n_s + s) * n_c
+                rows[i, j, start:start + n_c] = local[i]
+        return rows
+    cols = layout.columns(np.asarray(ax)[None, :], seg[:, None])  # (m, A, C)
+    m_idx = np.arange(m)[:, None, None]
+    a_idx = np.arange(len(ax))[None, :, None]
     rows[m_idx, a_idx, cols] = local[:, None, :]
     return rows
 
@@ -45,3 +60,4 @@ def derivative_rows(
 def vector_rows(layout: DecisionLayout, knots_rel: Array, order: int, times: Array | float) -> Array:
     """Rows for the position vector's derivative: shape ``(len(times), 3, n_variables)``."""
     return point_rows(layout, knots_rel, order, times)
+

@@ -1,0 +1,356 @@
+"""One attempt of the planner: the perching QP (5) solved at fixed segment durations.
+
+:func:`solve_at` is the one home of "solve one QP at fixed durations": it builds the QP with
+the workspace rows (:mod:`avp.safety`), solves it, optionally with the field-of-view rows as a
+stage (below), certifies the workspace limits and re-solves with refined rows around proven
+violations (``workspace.refinement_rounds``). It returns an :class:`Attempt` that carries its
+own log lines and timings; the planner (:mod:`avp.planner`) keeps only the time search and the
+relaxations.
+
+FoV stage (``config.fov.enabled``; rows (8)-(9), SQP steps, fallback (16)), at the given
+durations:
+
+* **Replanning** (a ``previous`` plan is given): linearise the cone (7) at ``n_p`` points of the
+  previous plan (mapped by the fraction of the remaining time, which is the same absolute time when
+  the final time did not change), solve the QP with the FoV rows; if that is incompatible (16),
+  solve again without them.
+* **First plan** (no previous plan): solve without FoV rows, linearise around that solution and
+  solve again (an SQP step); repeat, at most ``fov.sqp_iterations`` times, while the visibility
+  (:func:`avp.metrics.visibility` on a 200-sample grid, time + path fraction) improves; a step
+  that does not improve it is discarded (so FoV on never lowers the visibility of a first plan).
+  If the first FoV step is incompatible, the FoV-free solution is returned and the result says
+  the rows were dropped.
+
+Incompatibility (16) is declared when the back-end reports no solution, raises, or returns a point
+whose KKT residuals are out of tolerance (:func:`avp.solve.incompatibility`, next to the back-end
+table :data:`avp.solve.BACKENDS`). The FoV rows themselves are built by :mod:`avp.perception`.
+"""
+
+from __future__ import annotations
+
+import time
+import warnings
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from . import perception
+from ._typing import Array
+from .config import PlannerConfig, Relaxation
+from .errors import InfeasibleError, SolverError
+from .qp.assemble import ConstraintBlock, PerchingQp, build_perching_qp
+from .qp.fov import FovLinearisation, fov_times
+from .qp.layout import layout_for
+from .safety import SafetyReport, certify_workspace, refinement_blocks, workspace_blocks
+from .solve import QpOutcome, incompatibility, solve_perching_qp
+from .trajectory import Trajectory
+from .types import PerchTarget, State
+
+__all__ = ["Attempt", "solve_at", "solve_rows"]
+
+
+@dataclass
+class Attempt:
+    """What one attempt at fixed durations produced.
+
+    Attributes
+    ----------
+    outcome, trajectory:
+        The last QP solve of the returned plan and its trajectory (``None``: no solution).
+    fov_dropped:
+        The plan was solved without FoV rows because they were incompatible (16).
+    build, solve, certify:
+        Seconds spent assembling, in the back-end and in the workspace certificates.
+    log:
+        What happened, one line per step, in order.
+    safety:
+        The workspace certificates of the trajectory (``None``: no workspace limit active or no
+        trajectory).
+    relaxations:
+        Set by the planner: what was relaxed for this attempt.
+    refined:
+        Solved with workspace refinement rows, not the initial rows only.
+    qp:
+        The QP solved when it had no FoV rows (a later FoV stage at the same durations starts
+        from it).
+    sqp_steps, linearisation:
+        FoV steps kept and the linearisation of the returned plan's rows.
+    """
+
+    outcome: QpOutcome | None
+    trajectory: Trajectory | None
+    fov_dropped: bool = False
+    build: float = 0.0
+    solve: float = 0.0
+    certify: float = 0.0
+    log: tuple[str, ...] = ()
+    safety: SafetyReport | None = None
+    relaxations: tuple[Relaxation, ...] = ()
+    refined: bool = False
+    qp: PerchingQp | None = None
+    sqp_steps: int = 0
+    linearisation: FovLinearisation | None = None
+
+    @property
+    def safe(self) -> bool:
+        return self.safety is None or self.safety.certified
+
+
+@dataclass
+class _Ledger:
+    """The log lines and seconds an attempt accumulates (returned with it)."""
+
+    log: list[str] = field(default_factory=list)
+    build: float = 0.0
+    solve: float = 0.0
+
+    def attempt(self, outcome: QpOutcome | None, trajectory: Trajectory | None, **kw: object) -> Attempt:
+        return Attempt(outcome, trajectory, build=self.build, solve=self.solve, log=tuple(self.log), **kw)  # type: ignore[arg-type]
+
+    def run(self, qp: PerchingQp, cfg: PlannerConfig, label: str, strict: bool,
+            initvals: Array | None) -> tuple[QpOutcome | None, str | None]:
+        """Solve ``qp``; ``(outcome, None)`` or ``(None, reason)``. ``strict``: back-end errors
+        raise and warnings are re-emitted; otherwise (an FoV QP, where they are expected on an
+        incompatible problem (16)) both are logged."""
+        try:
+            with warnings.catch_warnings(record=True) as caught:
+                warnings.simplefilter("always" if not strict else "default")
+                out = solve_perching_qp(qp, cfg, initvals)
+            if not strict:
+                self.log.extend(f"{label}: {w.category.__name__}: {w.message}" for w in caught)
+            else:
+                for w in caught:
+                    warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+        except InfeasibleError as exc:
+            self.log.append(f"{label}: {exc}")
+            return None, str(exc)
+        except SolverError as exc:
+            if strict:
+                raise
+            self.log.append(f"{label}: {exc}")
+            return None, str(exc)
+        self.build += out.build_time
+        self.solve += out.solve_time
+        return out, None
+
+
+def _trajectory(qp: PerchingQp, outcome: QpOutcome, g: float) -> Trajectory | None:
+    if not outcome.ok or outcome.c_hat is None:
+        return None
+    return qp.trajectory(outcome.c_hat, g)
+
+
+def solve_at(
+    state: State,
+    target: PerchTarget,
+    cfg: PlannerConfig,
+    T: Array,
+    *,
+    previous: Trajectory | None = None,
+    initvals: Array | None = None,
+    seed: Attempt | None = None,
+    worth_fov: Callable[[Trajectory], bool] | None = None,
+    ws_rows: dict[bytes, tuple[ConstraintBlock, ...]] | None = None,
+) -> Attempt:
+    """Solve at durations ``T`` with the workspace rows, certify the workspace limits, and
+    re-solve with refined rows around proven violations (``workspace.refinement_rounds``).
+
+    ``previous``: the committed plan when replanning (linearisation point of the FoV rows (8)).
+    ``initvals``: normalised coefficients that warm-start back-ends taking a guess. ``seed``: an
+    attempt at the same durations without FoV rows, solved with the initial rows only; a first
+    plan's FoV stage starts from its QP and solution. ``worth_fov``: a test of a first plan's
+    FoV-free solution; ``False`` skips the SQP step (the planner: a sampled limit is already
+    broken, a time search follows). ``ws_rows``: initial workspace rows by durations, shared by
+    the attempts of one plan.
+    """
+    ws = cfg.workspace
+    if seed is not None and seed.refined:
+        seed = None
+    if not ws.active:
+        return solve_rows(state, target, cfg, T, (), previous=previous, initvals=initvals, seed=seed,
+                          worth_fov=worth_fov)
+    t0 = time.perf_counter()
+    layout = layout_for(cfg.n_segments, cfg.degree)
+    knots_rel = np.concatenate([[0.0], np.cumsum(T)])
+    key = T.tobytes()
+    if ws_rows is not None and key in ws_rows:  # the same durations in another stage of the plan
+        extra = ws_rows[key]
+    else:
+        extra = workspace_blocks(layout, knots_rel, state, target, cfg)
+        if ws_rows is not None:
+            ws_rows[key] = extra
+    build, solve, certify = time.perf_counter() - t0, 0.0, 0.0
+    log: list[str] = []
+    for round_index in range(ws.refinement_rounds + 1):
+        attempt = solve_rows(state, target, cfg, T, extra, previous=previous, initvals=initvals,
+                             seed=seed if round_index == 0 else None, worth_fov=worth_fov)
+        attempt.refined = round_index > 0
+        log.extend(attempt.log)
+        build += attempt.build
+        solve += attempt.solve
+        attempt.build, attempt.solve = build, solve
+        if attempt.trajectory is None:
+            attempt.certify, attempt.log = certify, tuple(log)
+            return attempt
+        t_cert = time.perf_counter()
+        report = certify_workspace(attempt.trajectory, target, ws)
+        certify += time.perf_counter() - t_cert
+        attempt.certify, attempt.safety = certify, report
+        if report.certified:
+            log.append("workspace certified (" + ", ".join(c.region.name for c in report.checks) + ")")
+            attempt.log = tuple(log)
+            return attempt
+        log.append("workspace: " + "; ".join(str(c) for c in report.checks if not c.certified))
+        if round_index == ws.refinement_rounds:
+            attempt.log = tuple(log)
+            return attempt
+        tb = time.perf_counter()
+        extra = extra + refinement_blocks(layout, knots_rel, attempt.trajectory, report, round_index + 1, cfg)
+        build += time.perf_counter() - tb
+    raise AssertionError("unreachable")  # pragma: no cover
+
+
+def solve_rows(
+    state: State,
+    target: PerchTarget,
+    cfg: PlannerConfig,
+    T: Array,
+    extra: tuple[ConstraintBlock, ...],
+    *,
+    previous: Trajectory | None = None,
+    initvals: Array | None = None,
+    seed: Attempt | None = None,
+    worth_fov: Callable[[Trajectory], bool] | None = None,
+) -> Attempt:
+    """Build and solve the perching QP at durations ``T`` with the ``extra`` inequality rows,
+    through the FoV stage when ``cfg.fov.enabled`` (module docs); no workspace certificate."""
+    if cfg.fov.enabled:
+        return solve_fov(state, target, cfg, T, extra, previous=previous, initvals=initvals, seed=seed,
+                         worth_fov=worth_fov)
+    ledger = _Ledger()
+    t0 = time.perf_counter()
+    qp = build_perching_qp(state, target, cfg, T)
+    if extra:
+        qp = qp.with_inequalities(*extra)
+    ledger.build = time.perf_counter() - t0
+    try:
+        outcome = solve_perching_qp(qp, cfg, initvals)
+    except InfeasibleError as exc:
+        ledger.log.append(str(exc))
+        return ledger.attempt(None, None)
+    ledger.build += outcome.build_time
+    ledger.solve += outcome.solve_time
+    ledger.log.append(f"QP {cfg.solver}: {outcome.status.value} (max violation {outcome.max_violation:.1e})")
+    return ledger.attempt(outcome, _trajectory(qp, outcome, cfg.g), qp=qp)
+
+
+def solve_fov(
+    state: State,
+    target: PerchTarget,
+    cfg: PlannerConfig,
+    T: Array,
+    extra: tuple[ConstraintBlock, ...] = (),
+    *,
+    previous: Trajectory | None = None,
+    initvals: Array | None = None,
+    seed: Attempt | None = None,
+    worth_fov: Callable[[Trajectory], bool] | None = None,
+) -> Attempt:
+    """The FoV stage (module docs): the QP at durations ``T`` with FoV rows (8)-(9) and the
+    fallback (16). ``fov_dropped`` is ``True`` when the returned plan was solved without FoV rows
+    because the rows were incompatible. ``extra`` rows are part of every QP, with or without FoV.
+
+    Raises
+    ------
+    SolverError
+        The back-end is missing or failed on the FoV-free QP.
+    """
+    ledger = _Ledger()
+    first = None
+    if (previous is None and seed is not None and seed.qp is not None and seed.outcome is not None
+            and seed.trajectory is not None):
+        first = (seed.qp, seed.outcome, seed.trajectory)
+    t0 = time.perf_counter()
+    if first is not None:
+        base = first[0]
+    else:
+        base = build_perching_qp(state, target, cfg, T)
+        if extra:
+            base = base.with_inequalities(*extra)
+    ledger.build = time.perf_counter() - t0
+    fov_cfg = perception._fov_config(cfg)
+    log = ledger.log
+
+    def plain(label: str) -> tuple[QpOutcome | None, Trajectory | None]:
+        out, _err = ledger.run(base, cfg, label, True, initvals)
+        if out is None:
+            return None, None
+        log.append(f"{label} {cfg.solver}: {out.status.value} (max violation {out.max_violation:.1e})")
+        return out, _trajectory(base, out, cfg.g)
+
+    def with_rows(reference: Trajectory, label: str) -> tuple[QpOutcome | None, Trajectory | None, str | None, FovLinearisation]:
+        tb = time.perf_counter()
+        lin = perception.linearise_on(base, reference, target, cfg)
+        qp = base.with_inequalities(*lin.blocks)
+        ledger.build += time.perf_counter() - tb
+        n_vis = int(np.sum(lin.h0 <= 0.0))
+        desc = (f"{label}: {int(lin.placed.sum())}/{lin.times.size} FoV points placed "
+                f"({int(lin.progress.sum())} progress-only, {n_vis} visible at linearisation)")
+        out, err = ledger.run(qp, fov_cfg, label, False, initvals)
+        why = err if out is None else incompatibility(out)
+        if why is not None or out is None:
+            log.append(f"{desc}; incompatible (16): {why}")
+            return out, None, why, lin
+        log.append(f"{desc}; {fov_cfg.solver}: solved (max violation {out.max_violation:.1e})")
+        return out, _trajectory(qp, out, cfg.g), None, lin
+
+    if previous is not None:
+        probe = fov_times(0.0, float(np.sum(T)), cfg.fov)
+        if probe.size == 0:
+            out, traj = plain("QP (no FoV rows: inside the gate)")
+            return ledger.attempt(out, traj, qp=base)
+        out, traj, why, lin = with_rows(previous, "QP + FoV (linearised on the previous plan)")
+        if why is None:
+            return ledger.attempt(out, traj, sqp_steps=1, linearisation=lin)
+        out, traj = plain("QP without FoV rows (fallback (16))")
+        return ledger.attempt(out, traj, fov_dropped=True, sqp_steps=1, linearisation=lin)
+
+    out0: QpOutcome | None
+    traj0: Trajectory | None
+    if first is not None:
+        _qp, out0, traj0 = first
+        log.append("QP (first plan, before FoV): the search step's solution at these durations")
+    else:
+        out0, traj0 = plain("QP (first plan, before FoV)")
+    if traj0 is None or out0 is None:
+        return ledger.attempt(out0, None)
+    if fov_times(0.0, float(np.sum(T)), cfg.fov).size == 0:
+        log.append("no FoV points: the gate covers the whole plan")
+        return ledger.attempt(out0, traj0, qp=base)
+    if worth_fov is not None and not worth_fov(traj0):
+        log.append("no SQP step: the plan without FoV rows already violates a vehicle limit")
+        return ledger.attempt(out0, traj0, qp=base)
+    best_out, best_traj = out0, traj0
+    best_score: float | None = None  # scored with the first step's plan, in one pass
+    best_lin: FovLinearisation | None = None
+    steps = 0
+    for k in range(cfg.fov.sqp_iterations):
+        out, traj, why, lin = with_rows(best_traj, f"SQP step {k + 1}")
+        if why is not None or traj is None or out is None:
+            if k == 0:
+                log.append("FoV rows dropped (16): returning the plan without them")
+                return ledger.attempt(out0, traj0, fov_dropped=True, linearisation=lin, qp=base)
+            break
+        if best_score is None:
+            best_score, score = perception._scores((traj0, traj), target, cfg)
+        else:
+            (score,) = perception._scores((traj,), target, cfg)
+        log.append(f"SQP step {k + 1}: visibility time+path {score / 2:.3f} (was {best_score / 2:.3f})")
+        if score <= best_score + 1e-4:
+            if k == 0 and score < best_score - 1e-4:
+                log.append("SQP step 1 lowered the visibility: keeping the first solution")
+            break
+        best_out, best_traj, best_score, best_lin, steps = out, traj, score, lin, k + 1
+    return ledger.attempt(best_out, best_traj, sqp_steps=steps, linearisation=best_lin,
+                          qp=base if steps == 0 else None)

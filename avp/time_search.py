@@ -1,0 +1,216 @@
+"""The time search (Sec. V-C): which total duration the planner tries next when a bound fails.
+
+A plan ``p(t)`` time-scaled by ``s`` (``q(t) = p(t / s)``, every duration times ``s``) has its
+``r``-th derivative scaled by ``s^-r``: acceleration by ``s^-2``, jerk by ``s^-3``, yaw rate by
+``s^-1``. The mass-normalised thrust ``f = a + g e3``, the tilt-rate quantity ``|j| / |f|`` of
+(22), the thrust-rate quantity ``|j|`` of (21) and the body-rate quantity of (24)-(29) of the
+scaled plan are therefore known for every ``s`` from one sampling of the plan
+(:func:`scaled_excess`). The SCALING search (:class:`~avp.config.TimeSearch`) moves the total
+duration to the factor closest to the current one at which the scaled plan meets every bound
+with a margin (:func:`predicted_factor`), re-solves there and certifies again.
+
+The re-solved plan is not exactly the scaled one: the contact velocity, the contact thrust and
+the pre-impact band are fixed in physical units, so they do not scale. The next steps are
+therefore a secant on the measured excess (:class:`DurationSearch`); when the secant barely
+improves (:data:`STALL`), the remaining violation is held by those fixed conditions rather than
+by the time scale, and the search of that relaxation stage ends (the planner then relaxes, see
+:class:`~avp.config.Relaxation`). Certificates stay as they were: the prediction only chooses
+the next duration; every returned plan is certified.
+"""
+
+from __future__ import annotations
+
+import math
+from functools import lru_cache
+
+import numpy as np
+
+from . import _avp_rust
+from ._typing import Array
+from .config import BoundsPolicy, TimeSearch, VehicleLimits
+from .trajectory import Trajectory
+
+__all__ = ["MARGIN", "STALL", "DurationSearch", "predicted_factor", "scaled_excess"]
+
+SCALES = np.exp(np.linspace(math.log(0.25), math.log(4.0), 97))
+"""Relative time-scale factors considered by :func:`predicted_factor` (3 % apart)."""
+
+MARGIN = 0.1
+"""Relative margin the predicted plan keeps from every limit. The re-solved plan keeps less
+(its contact conditions do not scale), and a plan that ends up touching a limit sends the
+certificate to its slow exact path: 0.03 gave plans at 99.98 % of the Gao tilt-rate limit and
+2.5 ms certificates; 0.1 certifies on the fast path (``benchmarks/bench_gao_perch.py``)."""
+
+STALL = 0.9
+"""The secant step must be predicted to bring the best worst-relative-excess below this
+fraction of itself inside the factor range, or the stage's search ends (after the reach step
+of :class:`DurationSearch`)."""
+
+SAMPLES_PER_SEGMENT = 16
+"""Samples per segment of the plan whose scaling is predicted (midpoints)."""
+
+_BODY_RATE_A, _BODY_RATE_B = 3.0, 4.0  # the roll-level constants of (25), docs/bounds.md
+_ONE = np.ones(1)
+
+
+@lru_cache(maxsize=8)
+def _midpoints(per_segment: int) -> Array:
+    """Midpoints of ``per_segment`` equal parts of the unit interval (read-only)."""
+    u = (np.arange(per_segment) + 0.5) / per_segment
+    u.setflags(write=False)
+    return u
+
+
+def _samples(traj: Trajectory, per_segment: int) -> tuple[Array, Array, Array, Array]:
+    """``|a|^2``, ``a_z``, ``|j|^2`` and the yaw rate of ``traj`` at ``per_segment`` midpoints
+    of equal parts of every segment."""
+    knots = traj.knots
+    t = (knots[:-1, None] + _midpoints(per_segment)[None, :] * (knots[1:] - knots[:-1])[:, None]).reshape(-1)
+    # interior times of valid knots: the kernel directly, without the public range checks
+    d = _avp_rust.eval_spline(traj.coefficients, knots, t, [1, 2, 3]).reshape(3, t.size, 4)
+    a, j = d[1, :, :3], d[2, :, :3]
+    return (a * a).sum(axis=1), a[:, 2].copy(), (j * j).sum(axis=1), d[0, :, 3]
+
+
+def scaled_excess(traj: Trajectory, limits: VehicleLimits, g: float, scales: Array = SCALES,
+                  per_segment: int = SAMPLES_PER_SEGMENT) -> Array:
+    """``excess[k]``: worst relative excess, ``max(value / limit) - 1`` over the checked bounds
+    (thrust range (15), thrust rate (21), tilt rate (22), body rate (24)), of ``traj``
+    time-scaled by ``scales[k]``, on ``per_segment`` samples per segment (negative: every
+    sample within). A positive excess at scale 1 is a proven violation of the certified
+    polynomial at a sample (the tilt and body rates as the certificate bounds them)."""
+    return _excess(_samples(traj, per_segment), limits, g, np.asarray(scales, dtype=float))
+
+
+def _excess(samples: tuple[Array, Array, Array, Array], limits: VehicleLimits, g: float, scales: Array) -> Array:
+    a2, a_z, j2, yaw_rate = samples
+    s2 = scales[:, None] ** -2.0
+    # |a/s^2 + g e3|^2 = |a|^2 s^-4 + 2 g a_z s^-2 + g^2;  |j/s^3|^2 = |j|^2 s^-6
+    f2 = np.maximum(a2[None, :] * s2 * s2 + (2.0 * g) * a_z[None, :] * s2 + g * g, 1e-24)
+    ratios = [np.sqrt(f2.max(axis=1)) / limits.accel_max]
+    if limits.accel_min > 0.0:
+        ratios.append(limits.accel_min / np.sqrt(f2.min(axis=1)))
+    if math.isfinite(limits.thrust_rate_max) or math.isfinite(limits.tilt_rate_max) or math.isfinite(limits.body_rate_max):
+        jj = j2[None, :] * (s2 * s2 * s2)
+        if math.isfinite(limits.thrust_rate_max):
+            ratios.append(np.sqrt(jj.max(axis=1)) * limits.mass / limits.thrust_rate_max)
+        tilt2 = jj / f2
+        if math.isfinite(limits.tilt_rate_max):
+            ratios.append(np.sqrt(tilt2.max(axis=1)) / limits.tilt_rate_max)
+        if math.isfinite(limits.body_rate_max):
+            w2 = _BODY_RATE_A * tilt2 + _BODY_RATE_B * (yaw_rate[None, :] ** 2) * s2
+            ratios.append(np.sqrt(w2.max(axis=1)) / limits.body_rate_max)
+    return np.max(ratios, axis=0) - 1.0
+
+
+def predicted_factor(traj: Trajectory, limits: VehicleLimits, g: float, lo: float, hi: float) -> float | None:
+    """The relative time-scale factor in ``[lo, hi]`` closest to 1 (in ratio) at which ``traj``,
+    scaled, meets every bound with :data:`MARGIN` on the samples; ``None`` when there is none."""
+    return _predict(_samples(traj, SAMPLES_PER_SEGMENT), limits, g, lo, hi)
+
+
+def _predict(samples: tuple[Array, Array, Array, Array], limits: VehicleLimits, g: float,
+             lo: float, hi: float) -> float | None:
+    scales = SCALES[(SCALES >= lo) & (SCALES <= hi)]
+    if scales.size == 0:
+        return None
+    ok = scales[_excess(samples, limits, g, scales) < -MARGIN]
+    if ok.size == 0:
+        return None
+    return float(ok[np.argmin(np.abs(np.log(ok)))])
+
+
+class DurationSearch:
+    """The total-duration factors of one relaxation stage, chosen one at a time.
+
+    Call :meth:`next` after each attempt; it returns the next factor of the initial durations,
+    or ``None`` when the stage's search is over. PAPER and BIDIRECTIONAL walk
+    ``policy.schedule()``. SCALING predicts: its first step from the scaling law of the plan
+    (:func:`predicted_factor`, which also fixes the direction, longer or shorter), the next ones
+    by a secant on the measured excess against the log of the factor through the two best plans,
+    in that direction only, and it stops when the secant line does not bring the best excess
+    below :data:`STALL` of itself inside the factor range. With ``reach`` (the first stage,
+    before anything is relaxed) it then tries the end of the range in that direction once: the
+    measured excess can stay flat over small changes and fall later, when the fixed contact
+    conditions weigh less. After a QP without a solution it tries the longest and the shortest
+    total once each; after a plan whose bounds hold but whose workspace does not it walks
+    ``policy.schedule()``.
+    """
+
+    def __init__(self, policy: BoundsPolicy, *, reach: bool = False) -> None:
+        self.policy = policy
+        self.reach = reach
+        self.fixed = policy.schedule() if policy.certify else ()
+        self.lo = min((1.0, *self.fixed))
+        self.hi = max((1.0, *self.fixed))
+        self.tried = [1.0]
+        self.predicted = 0
+        self.direction = 0  # +1 longer, -1 shorter: the scaling law's first step
+        self.measured: list[tuple[float, float]] = []  # (log factor, sampled excess)
+
+    @property
+    def current(self) -> float:
+        return self.tried[-1]
+
+    def _untried(self, k: float) -> bool:
+        return all(abs(math.log(k / t)) > 0.01 for t in self.tried)
+
+    def _next_fixed(self) -> float | None:
+        for k in self.fixed:
+            if self._untried(k):
+                self.tried.append(k)
+                return k
+        return None
+
+    def next(self, traj: Trajectory | None, bounds_failed: bool, limits: VehicleLimits, g: float) -> float | None:
+        """The next factor after an attempt that gave ``traj`` (``None``: no solution) whose
+        bound certificate failed (``bounds_failed``) or held (the workspace did not)."""
+        if not self.fixed:
+            return None
+        if self.policy.time_search is not TimeSearch.SCALING or not bounds_failed:
+            return self._next_fixed()
+        if traj is None:  # no solution: the longest and the shortest total once each, then stop
+            return next((self._step(k) for k in (self.hi, self.lo) if self._untried(k)), None)
+        if self.predicted >= self.policy.max_steps:
+            return None
+        current = self.current
+        samples = _samples(traj, SAMPLES_PER_SEGMENT)
+        self.measured.append((math.log(current), float(_excess(samples, limits, g, _ONE)[0])))
+        if len(self.measured) == 1:  # the scaling law of this plan
+            s = _predict(samples, limits, g, self.lo / current, self.hi / current)
+            if s is None:
+                return None
+            if abs(math.log(s)) < 0.02:  # the samples miss what the certificate found: nudge
+                s = 1.03 if s >= 1.0 else 1.0 / 1.03
+            self.direction = 1 if s > 1.0 else -1
+            return self._step(current * s)
+        k = self._secant()
+        return k if k is not None else self._reach()
+
+    def _secant(self) -> float | None:
+        """Secant on the measured excess against log(factor), through the two best points."""
+        (x1, e1), (x2, e2) = sorted(self.measured, key=lambda m: m[1])[:2]
+        if x1 == x2 or e1 == e2:
+            return None
+        slope = (e2 - e1) / (x2 - x1)
+        x = x1 + (-MARGIN - e1) / slope
+        if (x - x1) * self.direction <= 0.0:
+            return None  # back against the scaling law
+        k = min(max(math.exp(x), self.lo), self.hi)
+        if e1 > 0.0 and e1 + slope * (math.log(k) - x1) > STALL * e1:
+            return None  # the line barely improves inside the range: held by fixed conditions
+        return self._step(k)
+
+    def _reach(self) -> float | None:
+        if not self.reach or self.direction == 0:
+            return None
+        end = self.hi if self.direction > 0 else self.lo
+        return self._step(end)
+
+    def _step(self, k: float) -> float | None:
+        k = min(max(k, self.lo), self.hi)
+        if not self._untried(k):
+            return None
+        self.predicted += 1
+        self.tried.append(k)
+        return k
