@@ -2,9 +2,8 @@
 
 :func:`fly` runs the controller (2) at ``1/dt`` Hz (default 500 Hz) on odometry (optionally noisy)
 and advances the dynamics (1) by one RK4 step per control step with the command held (or another
-back-end's plant, :mod:`~avp.sim.backend`). A ``stop``
-hook, called after each step with the previous and new true states, ends the stretch early (e.g.
-:func:`~avp.sim.contact.detect_contact`). A closed-loop runner then only has to call :func:`fly`
+back-end's plant, :mod:`~avp.sim.backend`). A ``stop`` hook, called after each step with the
+previous and new true states, ends the stretch early (e.g. :func:`~avp.sim.contact.detect_contact`). A closed-loop runner then only has to call :func:`fly`
 once per camera frame or replanning period, feed the camera and estimator, and replan.
 """
 
