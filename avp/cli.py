@@ -45,6 +45,11 @@ EXIT_CODES = {
     EXIT_RELAXED: "solved after relaxing a soft constraint (slide, band or alpha)",
 }
 
+EXECUTION_BACKENDS = ("auto", "serial", "pool", "ray")
+"""``--backend`` values: where the trials run."""
+SIMULATORS = ("avp", "rotorpy")
+"""``--simulator`` values (:class:`avp.sim.backend.Backend`); ``--backend`` takes them too."""
+
 PLOT_HINT = "matplotlib is not installed: pip install \"avp[plot]\" (or pip install matplotlib) for plots"
 
 log = logging.getLogger("avp.cli")
@@ -431,11 +436,33 @@ def _sweep_flags(p: argparse.ArgumentParser, distances: Sequence[float]) -> None
     p.add_argument("--height", type=_free_float, nargs="+", default=["none"], metavar="H|none",
                    help="start height(s) above the pad, m; none: 1 below 45 deg, else 0")
     p.add_argument("--seed", type=int, default=0, help="first seed")
-    p.add_argument("--backend", choices=("auto", "serial", "pool", "ray"), default="serial",
-                   help="where trials run: serial, a local process pool, or Ray (auto: Ray if installed, else the pool)")
+    p.add_argument("--backend", choices=(*EXECUTION_BACKENDS, *SIMULATORS), default="serial",
+                   help="where trials run: serial, a local process pool, or Ray (auto: Ray if installed, else the "
+                        "pool); or, short for --simulator, avp / rotorpy")
+    p.add_argument("--simulator", choices=SIMULATORS, default=None,
+                   help="what integrates the vehicle: avp's model (default) or rotorpy's Multirotor "
+                        "(pip install \"avp[rotorpy]\"; avp's controller feeds rotorpy's rotor drag forward)")
     p.add_argument("--workers", type=int, default=None, help="parallel workers (default: the CPU count)")
     p.add_argument("--address", default=None,
                    help="Ray cluster address (e.g. ray://head:10001 or auto); default: a local Ray instance")
+
+
+def _simulator_settings(args: argparse.Namespace) -> dict[str, Any]:
+    """Resolve ``--backend avp|rotorpy`` (short for ``--simulator``; the trials then run
+    serially, or on ``auto`` for ``avp campaign``) and return the simulator's ``defaults``
+    mapping, ``{"scenario": {"backend": ...}}`` (``{}`` without the flag)."""
+    if args.backend in SIMULATORS:
+        if args.simulator is not None and args.simulator != args.backend:
+            raise ConfigError("--backend", f"{args.backend!r} contradicts --simulator {args.simulator!r}")
+        args.simulator = args.backend
+        args.backend = "auto" if args.command == "campaign" else "serial"
+    if args.simulator is None:
+        return {}
+    if args.simulator == "rotorpy":
+        from .sim.backend import require_rotorpy
+
+        require_rotorpy("--simulator")
+    return {"scenario": {"backend": args.simulator}}
 
 
 def _simulate_parser(sub: Any, common: argparse.ArgumentParser) -> None:
@@ -479,8 +506,11 @@ def simulate(args: argparse.Namespace) -> int:
 
     if args.trials < 1:
         raise ConfigError("--trials", f"must be >= 1, got {args.trials}")
-    settings = load_settings(args.config, merge(_flag_overrides(args), _platform_overrides(args)))
+    settings = load_settings(args.config, merge(_flag_overrides(args), _platform_overrides(args)),
+                             _simulator_settings(args))
     if args.line_pitch_deg is not None:  # closed-loop line perches (avp/cli_line.py)
+        if args.simulator not in (None, "avp"):
+            raise ConfigError("--simulator", "line perches fly on avp's simulator only; drop --simulator/--backend rotorpy")
         doc = line_simulate(args, settings.planner)
         if args.json:
             _emit_json(doc)
@@ -558,7 +588,7 @@ def run_campaign(args: argparse.Namespace) -> int:
 
     if args.seeds < 1:
         raise ConfigError("--seeds", f"must be >= 1, got {args.seeds}")
-    settings = _settings(args)
+    settings = _settings(args, _simulator_settings(args))
     trials = campaign.grid(args.incline_deg, args.distance, args.lateral, _heights(args.height), args.modes,
                            range(args.seed, args.seed + args.seeds))
     stats = campaign.run(trials, settings.data, args.results, backend=args.backend, workers=args.workers,

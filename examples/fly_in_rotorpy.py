@@ -11,6 +11,8 @@ at the plan's contact time with the plan (position, thrust axis ``b3`` against t
 ``b3`` lags the fast pitch-up before contact, and it builds the attitude from the heading
 ``b1 = (cos yaw, sin yaw, 0)``, which is singular when the thrust axis is horizontal along the
 heading, as on a wall (avp's own construction (11), (13) uses ``b2`` and is regular there).
+``avp simulate --backend rotorpy`` flies the closed loop (replanning, camera, odometry) on
+rotorpy's vehicle with avp's feed-forward controller instead (docs/simulation.md).
 """
 
 from __future__ import annotations

@@ -10,6 +10,8 @@ off-able:
 - :mod:`~avp.sim.controller`: geometric SE(3) controller (2) with body-rate (22) and
   angular-acceleration feed-forward;
 - :mod:`~avp.sim.flight`: :func:`fly`, vehicle + controller over a stretch of time;
+- :mod:`~avp.sim.backend`: what integrates the vehicle, avp's model (1) or rotorpy's
+  ``Multirotor`` (optional: ``pip install "avp[rotorpy]"``, imported only when asked for);
 - :mod:`~avp.sim.odometry`: odometry at its own rate with white noise and drift;
 - :mod:`~avp.sim.camera`: detections in the FoV at 10 Hz with latency, dropouts, range-growing
   noise, scale bias and a tilted normal;

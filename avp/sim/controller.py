@@ -22,12 +22,15 @@ the reference: a central difference of ``body_rates`` on the curve
 derivative at ``h = 0`` is exactly ``Omega'`` (it only needs the reference up to snap);
 ``h = 1e-4 s`` makes the truncation error ``O(h^2)`` negligible. Without this feed-forward the
 attitude lags the reference by roughly ``(k_W / k_R) |Omega|`` (the design notes measured
-12-50 deg at contact on perching plans).
+12-50 deg at contact on perching plans). On a vehicle with rotor drag (rotorpy's,
+:mod:`~avp.sim.backend`) ``ControllerGains.rotor_drag`` adds the drag at the reference velocity
+to the commanded acceleration (:func:`drag_acceleration`).
 """
 
 from __future__ import annotations
 
 import logging
+import math
 from dataclasses import dataclass
 from typing import Any, Protocol
 
@@ -43,6 +46,7 @@ __all__ = [
     "FlatReference",
     "angular_acceleration",
     "control",
+    "drag_acceleration",
 ]
 
 logger = logging.getLogger(__name__)
@@ -96,7 +100,12 @@ class ControllerGains:
 
     Each is a scalar or a 3-vector (diagonal). Units: ``k_x`` 1/s^2, ``k_v`` 1/s, ``k_R`` 1/s^2,
     ``k_omega`` 1/s. ``feedforward`` switches ``Omega_C`` and ``Omega_C'`` (set both to zero
-    when False, for ablations).
+    when False, for ablations). ``rotor_drag``: the per-rotor drag coefficients ``(k_d, k_d,
+    k_z)`` (N per rad/s per m/s) fed forward by :func:`drag_acceleration` (a calibrated drag
+    model, as a flight stack would have), or ``None``: :func:`control` feeds no drag forward and
+    :func:`avp.sim.run.simulate` uses its back-end's drag model (none for avp's model (1),
+    rotorpy's for rotorpy: :func:`avp.sim.backend.rotorpy_gains`); ``(0, 0, 0)`` switches the
+    feed-forward off everywhere.
     """
 
     k_x: Any = 25.0
@@ -104,6 +113,7 @@ class ControllerGains:
     k_R: Any = 400.0
     k_omega: Any = 36.0
     feedforward: bool = True
+    rotor_drag: Any = None
 
 
 @dataclass(frozen=True, eq=False)
@@ -135,6 +145,20 @@ def angular_acceleration(
     with np.errstate(divide="ignore", invalid="ignore"):  # singular references give NaN
         W = body_rates(acc, jerk, yaw, yaw_rate, g)
     return W[1], (W[2] - W[0]) / (2.0 * h)
+
+
+def drag_acceleration(R: Array, v_W: Array, ref: FlatReferenceLike, params: VehicleParams, rotor_drag: Any) -> Array:
+    """Acceleration (m/s^2, W) that cancels linear rotor drag at velocity ``v_W`` (Faessler,
+    Franchi, Scaramuzza, "Differential Flatness of Quadrotor Dynamics Subject to Rotor Drag"):
+    ``R D R^T v_W`` with ``D = diag(rotor_drag) * sum_i w_i / m``, the rotor speeds ``w_i`` of
+    the reference's thrust ``m |a + g e3|`` shared by four rotors (``T = k_f w^2``).
+    ``rotor_drag``: per-rotor drag coefficients along ``b1, b2, b3`` (N per rad/s per m/s;
+    rotorpy's ``k_d, k_d, k_z``)."""
+    a_ref = np.asarray(ref.acceleration, dtype=float) + np.array([0.0, 0.0, params.g])
+    thrust = params.clip_thrust(params.mass * float(np.linalg.norm(a_ref)))
+    w_sum = 4.0 * math.sqrt(thrust / 4.0 / params.thrust_coefficient)
+    D = np.asarray(rotor_drag, dtype=float) * w_sum / params.mass
+    return R @ (D * (R.T @ v_W))
 
 
 def control(
@@ -170,6 +194,8 @@ def control(
     e_v = state.v_W - np.asarray(ref.velocity, dtype=float)
     k_x, k_v = np.asarray(gains.k_x), np.asarray(gains.k_v)
     a_cmd = -k_x * e_x - k_v * e_v + np.asarray(ref.acceleration, dtype=float)
+    if gains.rotor_drag is not None:
+        a_cmd = a_cmd + drag_acceleration(R, np.asarray(ref.velocity, dtype=float), ref, params, gains.rotor_drag)
     f_W = m * (a_cmd + np.array([0.0, 0.0, g]))
     thrust = params.clip_thrust(float(f_W @ R[:, 2]))
 

@@ -27,7 +27,9 @@ import numpy as np
 from ..config import PlannerConfig
 from ..errors import ConfigError
 from ..replan import ReplanConfig
+from .backend import Backend
 from .camera import CameraParams
+from .controller import ControllerGains
 from .odometry import OdometryNoise
 from .run import Mode, SimResult, SimScenario, simulate
 from .vehicle import VehicleParams
@@ -355,6 +357,12 @@ class SimConfig:
         The user-side target filter (:class:`~avp.sim.estimator.TargetEstimator`): assumed scale
         error (the prior's std), the range window (None: fuse every detection) and whether to
         estimate the scale error from the approach.
+    backend:
+        Simulator back-end (:class:`~avp.sim.backend.Backend` name): ``"avp"`` or ``"rotorpy"``.
+    drag_feedforward:
+        Feed the back-end's rotor drag forward in the controller (rotorpy's:
+        :func:`~avp.sim.backend.rotorpy_gains`; avp's model has none). False:
+        ``ControllerGains(rotor_drag=(0, 0, 0))``.
     """
 
     n_trials: int = 100
@@ -381,8 +389,11 @@ class SimConfig:
     filter_scale_error: float = 0.03
     filter_range_ratio: float | None = None
     filter_estimate_scale: bool = True
+    backend: str = "avp"
+    drag_feedforward: bool = True
 
     def __post_init__(self) -> None:
+        Backend.parse(self.backend, "sim.backend")
         if isinstance(self.n_trials, bool) or not isinstance(self.n_trials, int) or self.n_trials < 1:
             raise ConfigError("sim.n_trials", f"must be an integer >= 1, got {self.n_trials!r}")
         for m in self.modes:
@@ -412,7 +423,10 @@ class SimConfig:
             sigma_att=math.radians(self.odometry_sigma_att_deg), sigma_omega=0.01,
             drift_p=float(self.odometry_drift), rate_hz=float(self.odometry_rate_hz))
         vehicle = VehicleParams(motor_time_constant=float(self.motor_time_constant), mixer=bool(self.mixer))
-        return SimScenario(incline=math.radians(incline_deg), distance=float(distance), camera=cam,
+        backend = Backend.parse(self.backend, "sim.backend")
+        gains = ControllerGains(rotor_drag=None if self.drag_feedforward else (0.0, 0.0, 0.0))
+        return SimScenario(incline=math.radians(incline_deg), distance=float(distance), camera=cam, backend=backend,
+                           gains=gains,
                            odometry=odo, vehicle=vehicle, initial_frames=int(self.initial_frames),
                            filter_scale_error=float(self.filter_scale_error),
                            filter_range_ratio=self.filter_range_ratio,
@@ -528,6 +542,9 @@ class SweepResult:
         return written
 
 
+_NOT_NUMERIC = ("modes", "inclines_deg", "distances", "backend")
+
+
 def sweep(
     config: SimConfig | None = None,
     vary: dict[str, Iterable[float]] | None = None,
@@ -569,9 +586,9 @@ def sweep(
     cfg = config if config is not None else SimConfig()
     runs: list[tuple[str, float, SimConfig]] = [("base", 0.0, cfg)] if include_base else []
     for name, values in (vary or {}).items():
-        if name not in SimConfig.__dataclass_fields__ or name in ("modes", "inclines_deg", "distances"):
+        if name not in SimConfig.__dataclass_fields__ or name in _NOT_NUMERIC:
             raise ConfigError(f"vary.{name}", f"not a numeric SimConfig field; choose from "
-                              f"{sorted(f for f in SimConfig.__dataclass_fields__ if f not in ('modes', 'inclines_deg', 'distances'))}")
+                              f"{sorted(f for f in SimConfig.__dataclass_fields__ if f not in _NOT_NUMERIC)}")
         for val in values:
             current = getattr(cfg, name)
             cast: Any = int(val) if isinstance(current, int) and not isinstance(current, bool) else float(val)

@@ -1,9 +1,9 @@
 """Vehicle + controller in closed loop for one stretch of time: the inner loop of a simulation.
 
 :func:`fly` runs the controller (2) at ``1/dt`` Hz (default 500 Hz) on odometry (optionally noisy)
-and advances the dynamics (1) by one RK4 step per control step with the command held. A ``stop``
-hook, called after each step with the previous and new true states, ends the stretch early (e.g.
-:func:`~avp.sim.contact.detect_contact`). A closed-loop runner then only has to call :func:`fly`
+and advances the dynamics (1) by one RK4 step per control step with the command held (or another
+back-end's plant, :mod:`~avp.sim.backend`). A ``stop`` hook, called after each step with the
+previous and new true states, ends the stretch early (e.g. :func:`~avp.sim.contact.detect_contact`). A closed-loop runner then only has to call :func:`fly`
 once per camera frame or replanning period, feed the camera and estimator, and replan.
 """
 
@@ -17,6 +17,7 @@ import numpy as np
 
 from ..errors import ConfigError
 from ..frames import Array
+from .backend import Plant
 from .controller import ControllerGains, FlatReferenceLike, control
 from .odometry import Odometry, OdometryNoise, noisy_odometry
 from .vehicle import RigidBodyState, VehicleParams, step
@@ -67,6 +68,7 @@ def fly(
     rng: np.random.Generator | None = None,
     stop: StopHook | None = None,
     record: bool = False,
+    plant: Plant | None = None,
 ) -> FlightResult:
     """Fly ``reference`` from ``state`` at ``t0`` for ``duration`` s (rounded to steps of ``dt``).
 
@@ -90,6 +92,9 @@ def fly(
         is returned as ``event``.
     record:
         Keep a :class:`Trace` of every step.
+    plant:
+        What advances the true state over a step (:mod:`~avp.sim.backend`, e.g. rotorpy's
+        vehicle); default :func:`~avp.sim.vehicle.step` with ``params``.
     """
     if params is None:
         params = VehicleParams()
@@ -108,7 +113,10 @@ def fly(
         else:
             seen = noisy_odometry(state, odometry, rng)  # type: ignore[arg-type]
         cmd = control(seen, reference(t), params, gains)
-        new = step(state, cmd.thrust, cmd.moment_B, dt, params)
+        if plant is None:
+            new = step(state, cmd.thrust, cmd.moment_B, dt, params)
+        else:
+            new = plant(state, cmd.thrust, cmd.moment_B, dt)
         t_new = float(t0) + (k + 1) * dt
         if record:
             for key, val in (

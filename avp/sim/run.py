@@ -13,7 +13,8 @@ measure. One run:
    :meth:`~avp.replan.Replanner.step` every ``1 / replan_rate_hz`` s (30 Hz) with the odometry
    estimate and the current fused target; the camera keeps detecting while the pad is in view.
 3. The SE(3) controller tracks the reference at 500 Hz on odometry; its commands go through the
-   vehicle's mixer and motor lag (:mod:`~avp.sim.vehicle`). After the end of the committed plan
+   vehicle's mixer and motor lag (:mod:`~avp.sim.vehicle`), or drive rotorpy's vehicle with
+   ``SimScenario(backend="rotorpy")`` (:mod:`~avp.sim.backend`). After the end of the committed plan
    the reference continues from its final flat state (:class:`AfterPlan`) until the pad plane is
    reached or ``timeout`` s have passed.
 
@@ -58,6 +59,7 @@ from ..qp.moving import TerminalYaw
 from ..replan import ReplanAction, ReplanConfig, Replanner, ReplanStep
 from ..trajectory import Trajectory
 from ..types import PerchTarget, State
+from .backend import Backend, Plant, plant, require_rotorpy, rotorpy_gains
 from .camera import CameraMeasurement, CameraParams, CameraSensor
 from .contact import (
     Contact,
@@ -226,6 +228,12 @@ class SimScenario:
         rate); in a file the table ``[scenario.platform]`` with its fields ``speed`` (m/s),
         ``heading`` (rad), ``turn_rate`` (rad/s), ``vertical_speed`` (m/s), ``tracking_time``
         and ``window`` (s); ``None``: a static pad.
+    backend:
+        :class:`~avp.sim.backend.Backend` (or its name): what integrates the vehicle, ``"avp"``
+        (model (1), default) or ``"rotorpy"`` (rotorpy's ``Multirotor`` with parameters from
+        ``vehicle``; needs ``pip install "avp[rotorpy]"``, else a ``ConfigError`` here). The rest
+        of the loop, avp's feed-forward controller included, is the same; with
+        ``gains.rotor_drag=None`` :func:`simulate` feeds rotorpy's rotor drag forward.
     """
 
     incline: float = math.pi / 2
@@ -248,8 +256,12 @@ class SimScenario:
     timeout: float = 0.5
     after_plan: AfterPlan = AfterPlan.HOLD_ACCELERATION
     platform: PlatformMotion | None = None
+    backend: Backend = Backend.AVP
 
     def __post_init__(self) -> None:
+        object.__setattr__(self, "backend", Backend.parse(self.backend))
+        if self.backend is Backend.ROTORPY:
+            require_rotorpy()
         if not 0.0 <= self.incline <= math.pi:
             raise ConfigError("scenario.incline", f"must be in [0, pi] rad, got {self.incline}")
         if not (math.isfinite(self.distance) and self.distance > 0):
@@ -463,12 +475,14 @@ def closed_loop(
     hook: Callable[[RigidBodyState, RigidBodyState, float, float], Any],
     odometry: Odometry | OdometryNoise | None,
     rng: np.random.Generator | None = None,
+    plant: Plant | None = None,
 ) -> tuple[RigidBodyState, Any]:
     """The replanning loop shared by the simulators: every ``period`` s (from ``t0``) call
     ``tick(t, state)`` (not at ``t0``: the first plan is made before), then fly the reference
     for one period at ``1 / dt`` Hz (:func:`~avp.sim.flight.fly` with ``hook``), until the hook
-    reports an event, ``t > t_end()`` or ``t - t0 > max_time``. Returns the final true state and
-    the event (None without one)."""
+    reports an event, ``t > t_end()`` or ``t - t0 > max_time``. ``plant``: the back-end's
+    integrator (:mod:`~avp.sim.backend`; default avp's). Returns the final true state and the
+    event (None without one)."""
     k = n = 0  # control steps flown since t0, replanning ticks
     while True:
         t = t0 + k * dt
@@ -478,14 +492,15 @@ def closed_loop(
             tick(t, state)
         n += 1
         k_next = max(int(round(n * period / dt)), k + 1)
-        res = fly(state, reference, t, (k_next - k) * dt, vehicle, gains, dt=dt, odometry=odometry, rng=rng, stop=hook)
+        res = fly(state, reference, t, (k_next - k) * dt, vehicle, gains, dt=dt, odometry=odometry, rng=rng, stop=hook,
+                  plant=plant)
         state, k = res.state, k_next
         if res.event is not None:
             return state, res.event
 
 
 def _track(state: RigidBodyState, platform: MovingTarget, sc: SimScenario, detect: Callable[[float, RigidBodyState], None],
-           odo: Odometry | None, dt: float) -> tuple[RigidBodyState, float]:
+           odo: Odometry | None, dt: float, plant: Plant | None = None) -> tuple[RigidBodyState, float]:
     """Fly ``sc.platform.tracking_time`` s from ``state`` (given the pad's velocity) keeping the
     start's offset from the moving pad in the platform's frame (turning with it, yaw too),
     detecting at every control step."""
@@ -507,7 +522,8 @@ def _track(state: RigidBodyState, platform: MovingTarget, sc: SimScenario, detec
 
     start = RigidBodyState(state.p_W, track(0.0).velocity, state.R_WB)
     detect(0.0, start)
-    res = fly(start, track, 0.0, sc.platform.tracking_time, sc.vehicle, sc.gains, dt=dt, odometry=odo, stop=hook)
+    res = fly(start, track, 0.0, sc.platform.tracking_time, sc.vehicle, sc.gains, dt=dt, odometry=odo, stop=hook,
+              plant=plant)
     return res.state, res.t
 
 
@@ -547,6 +563,8 @@ def simulate(
         the noisy heading of the fitted velocity).
     """
     sc, cfg = _shared(scenario if scenario is not None else SimScenario(), config)
+    if sc.backend is Backend.ROTORPY and sc.gains.rotor_drag is None:  # the back-end's drag model
+        sc = dataclasses.replace(sc, gains=rotorpy_gains(sc.gains))
     mode = Mode.parse(mode)
     rcfg = replan if replan is not None else ReplanConfig()
     streams = np.random.SeedSequence(int(seed)).spawn(4)
@@ -560,6 +578,7 @@ def simulate(
         return truth if platform is None else platform.at(tt)
 
     idle = sc.vehicle.thrust_min / sc.vehicle.mass if sc.after_plan is AfterPlan.IDLE_THRUST else None
+    vehicle_plant = plant(sc.backend, sc.vehicle)
     camera = CameraSensor(sc.camera, rng_bias)
     estimator: TargetEstimator | PlatformEstimator
     if sc.platform is None:
@@ -605,7 +624,7 @@ def simulate(
             k += 1
     else:
         assert sc.platform is not None
-        state, t = _track(state, platform, sc, detect, odo, dt)
+        state, t = _track(state, platform, sc, detect, odo, dt, vehicle_plant)
     t_plan = t
     initial = estimate_target()
     empty = np.zeros((0, 3))
@@ -709,7 +728,7 @@ def simulate(
 
     state, contact = closed_loop(
         state, reference, t_plan, lambda: committed().tf + sc.timeout, max_time, 1.0 / sc.replan_rate_hz, dt,
-        sc.vehicle, sc.gains, tick if replanner is not None else None, hook, odo)
+        sc.vehicle, sc.gains, tick if replanner is not None else None, hook, odo, plant=vehicle_plant)
 
     final = committed()
     pt, pp, pR = np.array(path_t), np.array(path_p).reshape(-1, 3), np.array(path_R).reshape(-1, 3, 3)
