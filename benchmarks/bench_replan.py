@@ -1,7 +1,8 @@
 """Cost of every ``Replanner.step`` inside the simulated 30 Hz closed loop, in CPU time.
 
     python benchmarks/bench_replan.py [--seeds 40] [--distances 1.5 4.5 7.5] [--inclines 90 45]
-                                      [--previous] [--gc-freeze] [--save FILE] [--compare FILE]
+                                      [--previous] [--gc-freeze] [--stages] [--save FILE]
+                                      [--compare FILE]
 
 Runs ``avp.sim.run.simulate`` in ``Mode.AVP`` for every seed, distance and incline, with the
 ``Replanner`` the loop builds replaced by a subclass that times each :meth:`step` call with
@@ -67,9 +68,11 @@ class TimedReplanner(Replanner):
 
     def step(self, t: float, odometry: Any, target_estimate: Any = None) -> Any:
         gc0, gc2 = _GC[0], _GC[1]
+        _STAGE_ON[0] = True
         w0, c0 = time.perf_counter(), time.thread_time()
         s = super().step(t, odometry, target_estimate)
         c1, w1 = time.thread_time(), time.perf_counter()
+        _STAGE_ON[0] = False
         traj = self.trajectory
         TimedReplanner.records.append(dict(
             cpu=c1 - c0, wall=w1 - w0, gc=_GC[0] - gc0, gc2=_GC[1] - gc2, action=s.action.name, n_solves=s.n_solves,
@@ -82,6 +85,43 @@ class TimedReplanner(Replanner):
     def _plan(self, state: Any, target: Any, durations: Any, previous: Any, config: Any) -> Any:
         TimedReplanner.calls.append((len(TimedReplanner.records), (state, target, durations, previous, config)))
         return super()._plan(state, target, durations, previous, config)
+
+
+STAGES = (  # (module, function, label): CPU inside Replanner.step, per planning call
+    ("avp.replan", "plan_detailed", "plan_detailed (all of the below but the snap certificate and blend)"),
+    ("avp.attempt", "build_perching_qp", "  build the QP"),
+    ("avp.attempt", "workspace_blocks", "  workspace rows"),
+    ("avp.perception", "linearise_on", "  FoV linearisation (8)-(9)"),
+    ("avp.attempt", "solve_perching_qp", "  reduce and solve the QPs"),
+    ("avp.qp.assemble", "_factor", "    of which: elimination QR (cache lookups and misses)"),
+    ("avp.solve", "_solve_two_sided", "    of which: DAQP"),
+    ("avp.planner", "_certify", "  bound certificate (Algorithm 1)"),
+    ("avp.attempt", "certify_workspace", "  workspace certificate"),
+    ("avp.replan", "certify_snap", "snap certificate"),
+    ("avp.replan", "_blend", "partial target blend"),
+)
+_STAGE_CPU: dict[str, float] = defaultdict(float)
+_STAGE_ON = [False]
+
+
+def instrument_stages() -> None:
+    """Wrap the functions of :data:`STAGES` to add their CPU time inside the steps (only)."""
+    import importlib
+
+    for mod_name, fn_name, label in STAGES:
+        mod = importlib.import_module(mod_name)
+        fn = getattr(mod, fn_name)
+
+        def timed(*a: Any, _fn: Any = fn, _label: str = label, **kw: Any) -> Any:
+            if not _STAGE_ON[0]:
+                return _fn(*a, **kw)
+            c0 = time.thread_time()
+            try:
+                return _fn(*a, **kw)
+            finally:
+                _STAGE_CPU[_label] += time.thread_time() - c0
+
+        setattr(mod, fn_name, timed)
 
 
 def use_previous_paths() -> None:
@@ -140,6 +180,8 @@ def main() -> None:
                     help="gc.freeze() after the imports and a first run, as a real-time loop would after its setup")
     ap.add_argument("--previous", action="store_true",
                     help="the previous code paths: Fraction snap coefficients, threaded BLAS in the step")
+    ap.add_argument("--stages", action="store_true",
+                    help="also print where the steps' CPU goes, per planning call (wrappers add a little)")
     ap.add_argument("--save", help="write the decisions and committed-plan digests to this JSON file")
     ap.add_argument("--compare", help="compare the decisions and plans with this JSON file")
     args = ap.parse_args()
@@ -148,6 +190,8 @@ def main() -> None:
     sim_run.Replanner = TimedReplanner  # type: ignore[misc]  # the loop builds this class
     if args.previous:
         use_previous_paths()
+    if args.stages:
+        instrument_stages()
     if args.gc_freeze:
         simulate(SimScenario(distance=args.distances[0]), Mode.AVP, seed=10**6)  # not counted
         gc.collect()
@@ -206,6 +250,13 @@ def main() -> None:
         groups[(x["action"], x["n_solves"])].append(c)
     for (act, n), v in sorted(groups.items()):
         print(f"{act + f' ({n})':<34} {stats(np.array(v))}")
+    if args.stages:
+        n_calls = int(n_solves.sum())
+        solving_cpu = float(cpu[solving].sum())
+        print(f"\nwhere the solving steps' CPU goes, ms per planning call ({n_calls} calls, "
+              f"{solving_cpu / max(n_calls, 1):.3f} ms of step per call):")
+        for _, _, label in STAGES:
+            print(f"  {label:<70} {_STAGE_CPU[label] * 1e3 / max(n_calls, 1):7.3f}")
     outcomes = Counter(v["outcome"].split(":")[0] for v in decisions.values())
     print("\noutcomes:", dict(outcomes))
 
