@@ -134,3 +134,23 @@ def test_motor_lag_is_first_order_with_the_documented_time_constant():
     np.testing.assert_allclose(s.rotor_speeds, expected, rtol=1e-12)
     v_instant = (cmd / params.mass - GRAVITY) * 0.02  # climb rate after 20 ms without lag
     assert 0.2 * v_instant < s.v_W[2] < 0.6 * v_instant  # e^-1 of the step still missing at the end
+
+
+def test_rotor_floor_is_the_motors_idle_not_a_higher_planner_floor():
+    """The planner may certify a thrust floor above the motors' idle to keep authority for
+    feedback; the simulated rotors still reach down to idle. The default vehicle's floor is
+    unchanged (its planner floor is below idle)."""
+    default = VehicleParams()
+    assert default.thrust_floor == default.thrust_min
+    assert default.rotor_thrust_limits[0] == default.thrust_min / 4.0
+    gao = VehicleParams(limits=VehicleLimits(mass=1.0, thrust_min=5.0, thrust_max=17.0, tilt_rate_max=3.0))
+    assert gao.thrust_min == 5.0  # the planner's floor, as certified
+    assert gao.thrust_floor == pytest.approx(0.05 * 17.0)
+    assert gao.rotor_thrust_limits == pytest.approx((0.05 * 17.0 / 4.0, 17.0 / 4.0))
+    assert gao.clip_thrust(1.0) == 1.0 and gao.clip_thrust(0.1) == pytest.approx(0.85)
+    lo, hi = gao.rotor_thrust_limits
+    T = gao.mix(1.0, np.zeros(3))
+    assert np.all(T >= lo - 1e-12) and np.all(T <= hi + 1e-12) and np.isclose(T.sum(), 1.0)
+    for bad in (-0.1, 1.0, float("nan")):
+        with pytest.raises(ConfigError, match="rotor_idle_fraction"):
+            VehicleParams(rotor_idle_fraction=bad)

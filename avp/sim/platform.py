@@ -225,7 +225,7 @@ def simulate_moving(
         assert rp.trajectory is not None
         return rp.trajectory.tf + sc.timeout
 
-    idle = sc.vehicle.thrust_min / sc.vehicle.mass if sc.idle_after_plan else None
+    idle = sc.vehicle.thrust_floor / sc.vehicle.mass if sc.idle_after_plan else None
     state, contact = closed_loop(state, reference, 0.0, t_end, max_time, 1.0 / sc.replan_rate_hz, dt, sc.vehicle,
                                  sc.gains, tick, hook, odo, rng_ctrl if odo is not None else None)
     if contact is None:

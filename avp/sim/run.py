@@ -221,7 +221,7 @@ class SimScenario:
         :class:`AfterPlan`. ``HOLD_ACCELERATION`` keeps ``a(t_f) = alpha s3 - g e3``, whose
         ``alpha s3`` part pushes away from the pad: a vehicle whose plan ends short of the true pad
         plane turns back after ``v_n^2 / (2 alpha)`` (1.1 cm at 0.3 m/s and 4 m/s^2) and misses.
-        ``IDLE_THRUST`` keeps ``b3`` and drops the thrust to ``vehicle.thrust_min`` (the motors at
+        ``IDLE_THRUST`` keeps ``b3`` and drops the thrust to ``vehicle.thrust_floor`` (the motors at
         idle), so the vehicle coasts on into the pad.
     platform:
         :class:`PlatformMotion`: the pad rides a platform (constant velocity, or CTRV with a turn
@@ -577,7 +577,7 @@ def simulate(
     def truth_at(tt: float) -> PerchTarget:
         return truth if platform is None else platform.at(tt)
 
-    idle = sc.vehicle.thrust_min / sc.vehicle.mass if sc.after_plan is AfterPlan.IDLE_THRUST else None
+    idle = sc.vehicle.thrust_floor / sc.vehicle.mass if sc.after_plan is AfterPlan.IDLE_THRUST else None
     vehicle_plant = plant(sc.backend, sc.vehicle)
     camera = CameraSensor(sc.camera, rng_bias)
     estimator: TargetEstimator | PlatformEstimator

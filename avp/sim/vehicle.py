@@ -73,6 +73,15 @@ class VehicleParams:
     mixer:
         Allocate to four rotors with per-rotor limits (module docstring); False: collective clip
         and a per-axis moment box.
+    rotor_idle_fraction:
+        A rotor's least thrust (motors at idle) as a fraction of its most, ``thrust_max / 4``.
+        The rotors reach down to :attr:`thrust_floor` ``= min(limits.thrust_min, rotor_idle_fraction
+        x limits.thrust_max)``: a planner may certify a higher floor than the motors' idle to keep
+        authority for feedback (Gao et al. plan at >= 5 N of 17 N), and the vehicle is not limited
+        to the planner's choice. 0.05 leaves the default vehicle's floor at the planner's 0.25 N;
+        with Gao et al.'s limits the rotors reach 0.85 N instead of 5 N. With the rotors floored at
+        the planned 5 N, odometry noise alone left the vehicle 4-5 cm short of a moving plane at
+        contact: the plans ride 0.1-0.6 m/s^2 above that floor and feedback could only add thrust.
     g:
         Gravity (m/s^2).
     """
@@ -84,6 +93,7 @@ class VehicleParams:
     drag_coefficient: float = 1.36e-7
     motor_time_constant: float = 0.02
     mixer: bool = True
+    rotor_idle_fraction: float = 0.05
     g: float = GRAVITY
     J: Array = field(init=False, repr=False)
     J_inv: Array = field(init=False, repr=False)
@@ -107,6 +117,9 @@ class VehicleParams:
             raise ConfigError("vehicle.motor_time_constant", f"must be >= 0 s (0: no lag), got {tau}")
         if not math.isfinite(self.limits.thrust_max):
             raise ConfigError("vehicle.limits", "thrust_max must be finite for a simulated vehicle")
+        idle = v.finite_float("vehicle.rotor_idle_fraction", self.rotor_idle_fraction)
+        if not 0.0 <= idle < 1.0:
+            raise ConfigError("vehicle.rotor_idle_fraction", f"must be in [0, 1) (a fraction of a rotor's maximum), got {idle}")
         theta = np.deg2rad(45.0 + 90.0 * np.arange(4))
         x, y = self.arm_length * np.cos(theta), self.arm_length * np.sin(theta)
         spin = np.array([1.0, -1.0, 1.0, -1.0])
@@ -139,9 +152,15 @@ class VehicleParams:
         return float(self.limits.thrust_max)
 
     @property
+    def thrust_floor(self) -> float:
+        """Least collective thrust the rotors deliver (N): the planner's floor or the motors' idle,
+        whichever is lower (:attr:`rotor_idle_fraction`)."""
+        return float(min(self.limits.thrust_min, self.rotor_idle_fraction * self.limits.thrust_max))
+
+    @property
     def rotor_thrust_limits(self) -> tuple[float, float]:
-        """Per-rotor thrust range ``(T_min, T_max)`` (N): the collective limits / 4."""
-        return self.thrust_min / 4.0, self.thrust_max / 4.0
+        """Per-rotor thrust range ``(T_min, T_max)`` (N): ``(thrust_floor, thrust_max) / 4``."""
+        return self.thrust_floor / 4.0, self.thrust_max / 4.0
 
     @property
     def drag_ratio(self) -> float:
@@ -166,8 +185,8 @@ class VehicleParams:
         return np.sqrt(np.maximum(thrust, 0.0) / self.thrust_coefficient)
 
     def clip_thrust(self, thrust: float) -> float:
-        """``thrust`` clipped to ``[thrust_min, thrust_max]`` (N)."""
-        return float(min(max(thrust, self.thrust_min), self.thrust_max))
+        """``thrust`` clipped to ``[thrust_floor, thrust_max]`` (N)."""
+        return float(min(max(thrust, self.thrust_floor), self.thrust_max))
 
     def clip_moment(self, moment_B: Array) -> Array:
         """``moment_B`` clipped per axis to ``+-moment_max`` (N m)."""
