@@ -96,6 +96,10 @@ class TargetEstimator:
         self.estimate_scale = bool(estimate_scale) and self.scale_error > 0
         self.reset()
 
+    def _position_std(self, m: CameraMeasurement) -> float:
+        """Per-axis position std (m) of detection ``m``, floored at :attr:`pose_sigma`."""
+        return max(m.sigma_pos, self.pose_sigma)
+
     def reset(self) -> None:
         """Drop every measurement."""
         self._meas: list[CameraMeasurement] = []
@@ -121,7 +125,7 @@ class TargetEstimator:
         if self.range_ratio is not None:
             d_min = min(m.distance for m in ms)
             ms = [m for m in ms if m.distance <= self.range_ratio * d_min]
-        w_pos = np.array([1.0 / (max(m.sigma_pos, self.pose_sigma) ** 2 + (self.scale_error * m.distance) ** 2) for m in ms])
+        w_pos = np.array([1.0 / (self._position_std(m) ** 2 + (self.scale_error * m.distance) ** 2) for m in ms])
         w_ang = np.array([1.0 / max(m.sigma_ang, 1e-9) ** 2 for m in ms])
         P = np.array([m.p_W for m in ms], dtype=float)
         Rs = np.array([m.R_WS for m in ms], dtype=float)
@@ -129,7 +133,7 @@ class TargetEstimator:
         if self.estimate_scale and all(m.p_cam_W is not None for m in ms):
             # the scale error is a parameter of this fit, not noise: weight by the detector's
             # noise alone (inflating by (scale_error d)^2 as well would count it twice)
-            w_noise = np.array([1.0 / max(m.sigma_pos, self.pose_sigma) ** 2 for m in ms])
+            w_noise = np.array([1.0 / self._position_std(m) ** 2 for m in ms])
             p_W = self._scale_corrected(ms, w_noise, P)
         return TargetEstimate(
             p_W=p_W,
@@ -210,7 +214,7 @@ class PlatformEstimator(TargetEstimator):
         dt = np.array([m.t - t_ref for m in ms])
         scale = self.estimate_scale and all(m.p_cam_W is not None for m in ms)
         inflate = 0.0 if scale else self.scale_error  # a fitted scale error is modelled, not noise
-        w = np.array([1.0 / (max(m.sigma_pos, self.pose_sigma) ** 2 + (inflate * m.distance) ** 2) for m in ms])
+        w = np.array([1.0 / (self._position_std(m) ** 2 + (inflate * m.distance) ** 2) for m in ms])
         P = np.array([m.p_W for m in ms], dtype=float)
         Rs = np.array([m.R_WS for m in ms], dtype=float)
         u = np.array([1.0 / max(m.sigma_ang, 1e-9) ** 2 for m in ms])

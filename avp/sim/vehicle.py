@@ -143,7 +143,8 @@ class VehicleParams:
 
     @property
     def thrust_min(self) -> float:
-        """Collective thrust floor (N), from :attr:`limits`."""
+        """The planner's certified collective thrust floor (N), from :attr:`limits`; the rotors
+        themselves reach down to :attr:`thrust_floor`."""
         return float(self.limits.thrust_min)
 
     @property
