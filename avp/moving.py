@@ -50,7 +50,7 @@ from .planner import PlanStatus, planning_error
 from .platform import MovingTarget
 from .qp.moving import MovingQpBuilder, TerminalYaw, contact_point, objective
 from .replan import ReplanConfig, Replanner, ReplanStep
-from .safety import RESIDUAL_TOL, SafetyReport, certify_workspace
+from .safety import RESIDUAL_TOL, SafetyReport, certify_workspace, refinement_blocks
 from .solve import solve_perching_qp
 from .trajectory import Trajectory
 from .types import PerchTarget, State
@@ -261,6 +261,8 @@ class _Eval:
             return frozenset()
         if self.report is None:
             return frozenset({"qp"})
+        if self.safety is not None and not self.safety.certified:
+            return frozenset(f"workspace: {name}" for name in self.safety.failed)
         return frozenset(x.bound.value for x in self.report.violations) or frozenset({"undecided"})
 
 
@@ -304,30 +306,51 @@ def plan_moving_detailed(
     builder = MovingQpBuilder(state, cfg, mcfg.normal_speed, mcfg.slip_max, mcfg.slip_weight, mcfg.zero_jerk,
                               mcfg.yaw, cfg.workspace.body_offset)
 
+    ws = cfg.workspace
+    static_cfg = replace(cfg, workspace=replace(ws, perch_clearance=False))
+    check_static = static_cfg.workspace.active
+
     def evaluate(T: float) -> _Eval:
         nonlocal solve_time
         pad = target.at(state.time + T)
         t0 = time.perf_counter()
         qp = builder.build(pad, T)
-        try:
-            out = solve_perching_qp(qp, cfg)
-        except InfeasibleError as exc:
+        safety: SafetyReport | None = None
+        for round_index in range(ws.refinement_rounds + 1 if check_static else 1):
+            try:
+                out = solve_perching_qp(qp, cfg)
+            except InfeasibleError as exc:
+                solve_time += time.perf_counter() - t0
+                return _Eval(T, pad, None, None, math.inf, math.inf, f"infeasible: {exc}")
             solve_time += time.perf_counter() - t0
-            return _Eval(T, pad, None, None, math.inf, math.inf, f"infeasible: {exc}")
-        solve_time += time.perf_counter() - t0
-        if not out.ok or out.c_hat is None:
-            return _Eval(T, pad, None, None, math.inf, math.inf, f"QP {out.status.value}")
-        traj = qp.trajectory(out.c_hat, cfg.g)
-        report = certify_spline(
-            traj.coefficients, traj.knots, thrust_min=lim.accel_min, thrust_max=lim.accel_max,
-            thrust_rate_max=lim.thrust_rate_max / lim.mass, tilt_rate_max=lim.tilt_rate_max,
-            body_rate_max=lim.body_rate_max, g=cfg.g,
-        )
-        J = objective(qp, out.c_hat, cfg)
-        if not report.certified:
-            note = "; ".join(str(x) for x in report.violations[:2]) or "bounds undecided"
-            return _Eval(T, pad, traj, report, J, math.inf, note)
-        return _Eval(T, pad, traj, report, J, J + mcfg.time_weight * T, "bounds certified")
+            if not out.ok or out.c_hat is None:
+                return _Eval(T, pad, None, None, math.inf, math.inf, f"QP {out.status.value}")
+            traj = qp.trajectory(out.c_hat, cfg.g)
+            report = certify_spline(
+                traj.coefficients, traj.knots, thrust_min=lim.accel_min, thrust_max=lim.accel_max,
+                thrust_rate_max=lim.thrust_rate_max / lim.mass, tilt_rate_max=lim.tilt_rate_max,
+                body_rate_max=lim.body_rate_max, g=cfg.g,
+            )
+            J = objective(qp, out.c_hat, cfg)
+            if not report.certified:
+                note = "; ".join(str(x) for x in report.violations[:2]) or "bounds undecided"
+                return _Eval(T, pad, traj, report, J, math.inf, note)
+            if not check_static:
+                break
+            # the static limits (ground, half-spaces, spheres, speed) as the static planner
+            # does (avp.attempt): certify, and re-solve with refined rows around violations
+            safety = certify_workspace(traj, pad.static(), static_cfg.workspace)
+            if safety.certified or round_index == ws.refinement_rounds:
+                break
+            log.append(f"T = {T:.4f} s: workspace refinement round {round_index + 1}: "
+                       + "; ".join(str(c) for c in safety.checks if not c.certified))
+            t0 = time.perf_counter()
+            qp = qp.with_inequalities(*refinement_blocks(qp.layout, qp.knots_rel, traj, safety, round_index + 1,
+                                                         static_cfg))
+        if safety is not None and not safety.certified:
+            return _Eval(T, pad, traj, report, J, math.inf, "workspace NOT certified: " + "; ".join(safety.failed),
+                         safety=safety)
+        return _Eval(T, pad, traj, report, J, J + mcfg.time_weight * T, "bounds certified", safety=safety)
 
     def run(T: float) -> _Eval:
         e = evaluate(T)
@@ -438,7 +461,8 @@ def _pick(evals: list[_Eval], target: MovingTarget, cfg: PlannerConfig, log: lis
             if not e.clearance.certified:
                 continue
         if check_static:
-            e.safety = certify_workspace(e.traj, e.pad.static(), static_ws)
+            if e.safety is None:
+                e.safety = certify_workspace(e.traj, e.pad.static(), static_ws)
             log.append(f"T = {e.T:.4f} s: workspace {'certified' if e.safety.certified else 'NOT certified'}")
             if not e.safety.certified:
                 continue

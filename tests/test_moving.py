@@ -320,20 +320,23 @@ def test_replanner_follows_platform_estimates():
 
 
 def test_static_workspace_regions_are_certified_on_moving_plans():
-    """The 1.5 rad perch swings about 1 m below the pad: a ground 0.5 m below the pad rejects it
-    (honest status, the report names the region); a ground far below certifies."""
+    """Without a ground the 1.5 rad perch swings metres below the pad. A ground 0.5 m below the
+    pad gets QP rows and refinement around proven violations, as on a static pad: the plan is
+    certified and stays above it on a dense grid. With the rows on 2 samples per segment and no
+    refinement they do not keep the ground: an honest WORKSPACE_NOT_CERTIFIED naming it."""
     from dataclasses import replace
     tgt = platform(1.5, 2.0, 0.2)
-    low = replace(CONFIG, workspace=avp.Workspace(ground_z=0.5))
-    res = plan_moving_detailed(behind(tgt), tgt, low)
-    assert res.status is avp.PlanStatus.WORKSPACE_NOT_CERTIFIED and res.trajectory is None
-    assert res.safety is not None and not res.safety.certified
+    free = plan_moving_detailed(behind(tgt), tgt, CONFIG)
+    assert free.ok and free.trajectory(free.trajectory.sample(1e-3))[:, 2].min() < 0.5
+    res = plan_moving_detailed(behind(tgt), tgt, replace(CONFIG, workspace=avp.Workspace(ground_z=0.5)))
+    assert res.ok and res.safety is not None and res.safety.certified
+    assert res.trajectory(res.trajectory.sample(1e-4))[:, 2].min() >= 0.5 - 1e-9
+    sparse = replace(CONFIG, workspace=avp.Workspace(ground_z=0.0, refinement_rounds=0, samples_per_segment=2))
+    bad = plan_moving_detailed(behind(tgt), tgt, sparse)
+    assert bad.status is avp.PlanStatus.WORKSPACE_NOT_CERTIFIED and bad.trajectory is None
+    assert bad.safety is not None and "ground" in bad.safety.failed
     with pytest.raises(avp.WorkspaceNotCertifiedError):
-        plan_moving(behind(tgt), tgt, low)
-    ok = plan_moving_detailed(behind(tgt), tgt, replace(CONFIG, workspace=avp.Workspace(ground_z=-5.0)))
-    assert ok.ok and ok.safety is not None and ok.safety.certified
-    z = ok.trajectory(ok.trajectory.sample(1e-3))[:, 2]
-    assert z.min() > -5.0 and z.min() < 0.5  # the swing that the first ground rejects
+        plan_moving(behind(tgt), tgt, sparse)
 
 
 def test_the_static_planner_refuses_a_moving_pad():

@@ -24,7 +24,7 @@ The slip cost ``w |S_t^T (V c - v_pad)|^2`` has a constant ``v_pad``; the QP of
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from enum import Enum
 from functools import lru_cache
 
@@ -35,6 +35,7 @@ from .._typing import Array
 from ..config import PlannerConfig
 from ..errors import ConfigError, InfeasibleError
 from ..platform import MovingTarget
+from ..safety import workspace_blocks
 from ..types import PerchTarget, State
 from .assemble import RANK_TOL, ConstraintBlock, PerchingQp
 from .boundary import continuity_rows, initial_state_rows
@@ -148,6 +149,7 @@ class MovingQpBuilder:
         self.P, self.continuity, self.end, self.end_yaw, self.Z0, self.L0, self.G0 = fixed
         self.peak = _physical_scale(np.ones(cfg.n_segments), cfg.degree, cfg) * float(cfg.n_segments) ** (
             2 * cfg.position_cost_order - 1)  # largest raw diagonal of the cost matrix
+        self._static_config = replace(cfg, workspace=replace(cfg.workspace, perch_clearance=False))
 
     def build(self, pad: MovingTarget, total: float) -> PerchingQp:
         """The QP for duration ``total`` toward ``pad`` predicted at ``state.time + total``."""
@@ -195,6 +197,7 @@ class MovingQpBuilder:
             gs3 = cfg.g * s3[2]
             ineq += (ConstraintBlock("contact thrust range (12)", (s3 @ A_)[None, :] / Ti**2,
                                      np.array([a_lo - gs3]), np.array([a_hi - gs3])),)
+        ineq += self._workspace_blocks(pad, knots_rel)
         P = self.P
         M: Array | None = None  # slip cost P = P0 + M^T M
         if self.slip_max > 0.0:
@@ -211,6 +214,17 @@ class MovingQpBuilder:
         qp = PerchingQp(layout=self.layout, durations=T, t0=st.time, P=P, equalities=eq, inequalities=ineq)
         qp.__dict__["elimination"] = self._eliminate(b0, A_t, b_t, M)  # as _same_equalities does
         return qp
+
+    def _workspace_blocks(self, pad: MovingTarget, knots_rel: Array) -> tuple[ConstraintBlock, ...]:
+        """Rows of the static limits of ``config.workspace`` (ground, half-spaces, spheres) on
+        its samples, as for a static pad (:func:`avp.safety.workspace_blocks`). The perch plane
+        moves: it gets no rows here and is certified on the plan
+        (:func:`avp.moving_clearance.certify_moving_clearance`); rows for it, measured on the
+        moving grid, changed no outcome and cost 0.7 ms per plan."""
+        static_cfg = self._static_config
+        if not static_cfg.workspace.active:
+            return ()
+        return workspace_blocks(self.layout, knots_rel, self.state, pad.static(), static_cfg)
 
     def _eliminate(self, b0: Array, A_t: Array, b_t: Array, M: Array | None) -> tuple[Array, Array, Array, Array]:
         """:attr:`PerchingQp.elimination` (same contract: ``c = c_p + Z z`` spans the solutions of
