@@ -75,3 +75,41 @@ def test_fly_stops_at_contact_on_a_floor_pad():
     assert c.t == pytest.approx(1.0, abs=1e-3)
     assert c.normal_speed == pytest.approx(0.5, abs=1e-3) and c.attitude_error < 1e-6
     assert c.success
+
+
+def test_ground_crossing_is_a_crash_at_the_interpolated_time():
+    from avp.sim.contact import GROUND, ground_contact
+    prev = RigidBodyState([1.0, 2.0, 0.01], [1.0, 0.0, -3.0], np.eye(3))
+    new = RigidBodyState([1.0, 2.0, -0.02], [1.0, 0.0, -3.0], np.eye(3))
+    c = ground_contact(prev, new, 1.0, 1.003, ground_z=0.0)
+    assert c is not None and c.failures == (GROUND,) and not c.success and not c.inside
+    assert c.t == pytest.approx(1.001)
+    np.testing.assert_allclose(c.p_W, [1.0, 2.0, 0.0], atol=1e-12)
+    assert c.normal_speed == pytest.approx(3.0)
+    assert ground_contact(prev, prev, 1.0, 1.003, ground_z=0.0) is None  # still above
+    assert ground_contact(new, prev, 1.0, 1.003, ground_z=0.0) is None  # climbing out
+    assert ground_contact(prev, new, 1.0, 1.003, ground_z=-0.05) is None  # a lower ground
+
+
+def test_a_plan_through_the_ground_crashes_and_the_default_planner_keeps_clear():
+    """A 150 deg overhang 2 m up: the flip costs more height than there is. A planner told of no
+    ground dives through it and the simulated world ends the run (the committed plan itself goes
+    below z = 0: checked on the plan, not on the sim's verdict); the default configuration keeps
+    GROUND_CLEARANCE above the ground and honestly finds no plan."""
+    import math
+
+    from avp.sim.run import GROUND_CLEARANCE, SimScenario, _shared, sim_config, simulate
+
+    sc = SimScenario(incline=math.radians(150), distance=3.0, pad_height=2.0, odometry=None)
+    free = sim_config(limits=sc.vehicle.limits, camera=sc.camera.camera)
+    assert free.workspace.ground_z is None
+    r = simulate(sc, "one_shot", seed=0, config=free)
+    assert r.outcome == "crash: ground" and not r.success and r.contact is None
+    plan = r.first_plan
+    assert plan(plan.sample(1e-3))[:, 2].min() < 0.0
+    assert r.path_p[:, 2].min() > -0.02  # the run ended at the crash
+    assert _shared(sc, None)[1].workspace.ground_z == pytest.approx(sc.ground_z + GROUND_CLEARANCE)
+    d = simulate(sc, "one_shot", seed=0)
+    assert d.outcome.startswith("no plan")
+    with pytest.raises(ConfigError, match="scenario.ground_z"):
+        SimScenario(pad_height=0.5, ground_z=1.0)

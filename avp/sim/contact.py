@@ -28,7 +28,11 @@ from ..errors import ConfigError
 from ..frames import Array, project_so3
 from .vehicle import RigidBodyState
 
-__all__ = ["Contact", "PerchCriteria", "PerchOutcome", "PerchPad", "SuccessCriteria", "detect_contact", "judge_perch"]
+__all__ = ["GROUND", "Contact", "PerchCriteria", "PerchOutcome", "PerchPad", "SuccessCriteria", "detect_contact",
+           "ground_contact", "judge_perch"]
+
+GROUND = "ground"
+"""The failure a :class:`Contact` with the ground carries (:func:`ground_contact`)."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -108,6 +112,32 @@ class Contact:
     def success(self) -> bool:
         """True when every success criterion holds."""
         return not self.failures
+
+
+def ground_contact(prev: RigidBodyState, new: RigidBodyState, t_prev: float, t_new: float,
+                   ground_z: float) -> Contact | None:
+    """The crash if the centre of mass went below the ground ``z = ground_z`` between ``prev``
+    and ``new``: a :class:`Contact` with the ground plane (``S = W`` shifted to the ground,
+    ``inside`` False) whose only failure is :data:`GROUND`."""
+    d0, d1 = float(prev.p_W[2]) - ground_z, float(new.p_W[2]) - ground_z
+    if not (d0 > 0.0 >= d1):
+        return None
+    lam = d0 / (d0 - d1)
+    p_W = prev.p_W + lam * (new.p_W - prev.p_W)
+    v_W = prev.v_W + lam * (new.v_W - prev.v_W)
+    R_WB = project_so3(prev.R_WB + lam * (new.R_WB - prev.R_WB))
+    return Contact(
+        t=float(t_prev + lam * (t_new - t_prev)),
+        p_S=np.array([p_W[0], p_W[1], 0.0]),
+        p_W=p_W,
+        v_W=v_W,
+        R_WB=R_WB,
+        attitude_error=float(np.arccos(np.clip(R_WB[2, 2], -1.0, 1.0))),
+        normal_speed=float(-v_W[2]),
+        v_tangential_S=v_W[:2].copy(),
+        inside=False,
+        failures=(GROUND,),
+    )
 
 
 def detect_contact(
