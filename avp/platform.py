@@ -192,4 +192,8 @@ class MovingTarget(PerchTarget):
 
     def static(self) -> PerchTarget:
         """The pad pose at ``time`` as a plain (static) :class:`~avp.types.PerchTarget`."""
-        return PerchTarget(point=self.point, R_WS=self.R_WS)
+        # The fields are validated (read-only) already: skip re-validating the rotation.
+        out = object.__new__(PerchTarget)
+        object.__setattr__(out, "point", self.point)
+        object.__setattr__(out, "R_WS", self.R_WS)
+        return out

@@ -150,6 +150,7 @@ class MovingQpBuilder:
         self.peak = _physical_scale(np.ones(cfg.n_segments), cfg.degree, cfg) * float(cfg.n_segments) ** (
             2 * cfg.position_cost_order - 1)  # largest raw diagonal of the cost matrix
         self._static_config = replace(cfg, workspace=replace(cfg.workspace, perch_clearance=False))
+        self._plane_rows: tuple[ConstraintBlock, ...] | None = None
 
     def build(self, pad: MovingTarget, total: float) -> PerchingQp:
         """The QP for duration ``total`` toward ``pad`` predicted at ``state.time + total``."""
@@ -224,7 +225,11 @@ class MovingQpBuilder:
         static_cfg = self._static_config
         if not static_cfg.workspace.active:
             return ()
-        return workspace_blocks(self.layout, knots_rel, self.state, pad.static(), static_cfg)
+        if static_cfg.workspace.spheres:  # linearised on the line to the contact point: per pad
+            return workspace_blocks(self.layout, knots_rel, self.state, pad.static(), static_cfg)
+        if self._plane_rows is None:  # half-spaces on the sample grid: the same normalised rows for every T
+            self._plane_rows = workspace_blocks(self.layout, knots_rel, self.state, pad.static(), static_cfg)
+        return self._plane_rows
 
     def _eliminate(self, b0: Array, A_t: Array, b_t: Array, M: Array | None) -> tuple[Array, Array, Array, Array]:
         """:attr:`PerchingQp.elimination` (same contract: ``c = c_p + Z z`` spans the solutions of
