@@ -6,7 +6,9 @@ Quadrotor in Dynamic Scenarios" (T-RO 2023), under its limits (mass-normalised t
 Grid: inclined planes of 0.5 and 1.0 rad carried at 0, 1, 2 m/s (their Table VIII), the roof
 (0 rad) at 4, 6, 8.3 m/s from a tracking position 3 m behind and 1.5 m above (their Table VII),
 and CTRV platforms turning at 0.2 rad/s at 1.5-3.0 m/s with 0.5 and 1.5 rad planes (their
-Fig. 14). Each start moves with the platform, 3 m behind the pad.
+Fig. 14). Each start moves with the platform, 3 m behind the pad. The road is at z = 0 and
+the planner keeps the centre of mass ``avp.sim.run.GROUND_CLEARANCE`` above it (a workspace
+limit, certified).
 
 Per case: status, arrival time, QP solves, contact errors against the predicted pad (position,
 b3 vs s3, normal relative velocity vs the asked -v_n, tangential slip), the drone's max/mean
