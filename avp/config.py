@@ -68,6 +68,16 @@ class VehicleLimits:
     term, conservatively, with the roll bound it needs (25) certified too. The rate limits may be ``inf`` (not
     checked). Defaults: 0.5 kg, thrust in [0.5, 2 g] m/s^2 mass-normalised, tilt rate 10 rad/s
     (without a rate limit a relaxed plan can be "certified" while flipping at 100+ rad/s).
+
+    ``rotor_drag`` (1/s, default 0) is the mass-normalised linear rotor drag ``d`` of Faessler,
+    Franchi and Scaramuzza, "Differential Flatness of Quadrotor Dynamics Subject to Rotor Drag":
+    the rotors' drag force is ``-m d v`` in the rotor plane (``diag(d, d, d_z)`` in B), so the
+    thrust axis is ``b3 || a + g e3 + d v``. The perching constraints use it: at contact the
+    *thrust* is along ``s3`` (12) and the pre-impact band (14) bounds ``a + d v`` instead of
+    ``a`` (on a wall with a 2 m/s slide and ``d = 0.29 /s`` the drag-free condition leaves the
+    thrust 8 deg off the normal). The bound certificates, the FoV rows and
+    :class:`~avp.trajectory.Trajectory`'s attitude keep the drag-free flatness map (11): along
+    the path the true attitude differs by up to ``atan(d |v| / |a + g e3|)``.
     """
 
     mass: float = 0.5
@@ -76,9 +86,12 @@ class VehicleLimits:
     thrust_rate_max: float = math.inf  # N/s
     tilt_rate_max: float = 10.0  # rad/s, on sqrt(w1^2 + w2^2)
     body_rate_max: float = math.inf  # rad/s, on |w| including yaw (roll level certified)
+    rotor_drag: float = 0.0  # 1/s, mass-normalised linear rotor drag d (docstring)
 
     def __post_init__(self) -> None:
         v.positive_float("limits.mass", self.mass)
+        if not (math.isfinite(self.rotor_drag) and self.rotor_drag >= 0.0):
+            raise ConfigError("limits.rotor_drag", f"must be finite and >= 0 1/s, got {self.rotor_drag}")
         if not (math.isfinite(self.thrust_min) and self.thrust_min >= 0.0):
             raise ConfigError("limits.thrust_min", f"must be finite and >= 0 N, got {self.thrust_min}")
         v.positive_float("limits.thrust_max", self.thrust_max)

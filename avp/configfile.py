@@ -240,7 +240,7 @@ UNITS: dict[str, str] = {
     # VehicleLimits
     "VehicleLimits.mass": "kg", "VehicleLimits.thrust_min": "N", "VehicleLimits.thrust_max": "N",
     "VehicleLimits.thrust_rate_max": "N/s", "VehicleLimits.tilt_rate_max": "rad/s",
-    "VehicleLimits.body_rate_max": "rad/s",
+    "VehicleLimits.body_rate_max": "rad/s", "VehicleLimits.rotor_drag": "1/s",
     # ContactVelocity
     "ContactVelocity.normal": "m/s", "ContactVelocity.slope": "m/s", "ContactVelocity.lateral": "m/s",
     # TimeAllocation
@@ -267,6 +267,9 @@ MEANINGS: dict[str, str] = {
     "VehicleLimits.thrust_rate_max": "Bound on |d tau/dt| through m |j| (21); inf: not checked.",
     "VehicleLimits.tilt_rate_max": "Bound on sqrt(w1^2 + w2^2), certified exactly through (22); inf: not checked.",
     "VehicleLimits.body_rate_max": "Bound on |w| including the yaw term (22)-(29); inf: not checked.",
+    "VehicleLimits.rotor_drag": ("Mass-normalised linear rotor drag d (Faessler et al.): the thrust axis is a + g e3 + d v, "
+                                 "so at contact the thrust, not the acceleration, is along s3 (12) and the band (14) bounds "
+                                 "a + d v. Certificates, FoV rows and Trajectory.attitude stay drag-free (11)."),
     "ContactVelocity.normal": "v . s3 at contact (negative: into the pad); none: free.",
     "ContactVelocity.slope": "v . s1 at contact (negative: down the slope); none: free.",
     "ContactVelocity.lateral": "v . s2 at contact; none: free.",

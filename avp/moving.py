@@ -196,14 +196,16 @@ class MovingPlanResult:
 
 
 def contact_errors(
-    traj: Trajectory, target: MovingTarget, moving: MovingConfig | None = None, body_offset: float = 0.0
+    traj: Trajectory, target: MovingTarget, moving: MovingConfig | None = None, body_offset: float = 0.0,
+    rotor_drag: float = 0.0,
 ) -> ContactErrors:
     """Contact state of ``traj`` against ``target`` predicted at ``traj.tf`` (``body_offset`` as
-    ``config.workspace.body_offset``)."""
+    ``config.workspace.body_offset``; the thrust ``a + g e3 + d v`` with ``d = rotor_drag`` as
+    ``config.limits.rotor_drag``)."""
     moving = moving if moving is not None else MovingConfig()
     pad = target.at(traj.tf)
     p, vel, acc = (traj(traj.tf, order) for order in (0, 1, 2))
-    f = acc + np.array([0.0, 0.0, traj.g])
+    f = acc + np.array([0.0, 0.0, traj.g]) + rotor_drag * vel
     b3 = f / np.linalg.norm(f)
     rel = vel - pad.velocity
     return ContactErrors(
@@ -369,7 +371,7 @@ def plan_moving_detailed(
     total = time.perf_counter() - t_start
     candidates = tuple(Candidate(e.T, e.score, e.objective, math.isfinite(e.score), e.note) for e in evals)
     if best is not None and best.traj is not None:
-        return MovingPlanResult(status=PlanStatus.SOLVED, trajectory=best.traj, pad=best.pad, durations=best.traj.durations, bounds=best.report, clearance=best.clearance, score=best.score, candidates=candidates, log=tuple(log), solve_time=solve_time, total_time=total, contact=contact_errors(best.traj, target, mcfg, cfg.workspace.body_offset), safety=best.safety)
+        return MovingPlanResult(status=PlanStatus.SOLVED, trajectory=best.traj, pad=best.pad, durations=best.traj.durations, bounds=best.report, clearance=best.clearance, score=best.score, candidates=candidates, log=tuple(log), solve_time=solve_time, total_time=total, contact=contact_errors(best.traj, target, mcfg, cfg.workspace.body_offset, cfg.limits.rotor_drag), safety=best.safety)
     last = evals[-1]
     if any(e.clearance is not None or e.safety is not None for e in evals):
         status = PlanStatus.WORKSPACE_NOT_CERTIFIED

@@ -160,15 +160,17 @@ class MovingQpBuilder:
         T = np.full(S, Ti)
         A0, b0 = initial_state_rows(self.layout, T, st, Ti)
         P_, V_, A_, J_ = self.end  # scaled by Ti^r: rows in normalised units
+        drag = cfg.limits.rotor_drag
+        F_ = A_ + (drag * Ti) * V_ if drag else A_  # a + d v: the thrust direction minus g e3
         s1, s2, s3 = _tangents(pad)
         v_pad = pad.velocity
         R: list[Array] = list(P_)
         b: list[float] = list(contact_point(pad, self.body_offset))  # (43)
         if cfg.alpha_range is None:
-            R.extend(A_)
+            R.extend(F_)
             b.extend((cfg.contact_alpha(pad.incline) * s3 - np.array([0.0, 0.0, cfg.g])) * Ti**2)
-        else:  # (12) with alpha free: no s1, s2 component of a + g e3
-            R.extend([s1 @ A_, s2 @ A_])
+        else:  # (12) with alpha free: no s1, s2 component of the thrust a + d v + g e3
+            R.extend([s1 @ F_, s2 @ F_])
             b.extend([-cfg.g * s1[2] * Ti**2, -cfg.g * s2[2] * Ti**2])
         R.append(s3 @ V_)
         b.append((float(s3 @ v_pad) - self.normal_speed) * Ti)
@@ -196,7 +198,7 @@ class MovingQpBuilder:
         if cfg.alpha_range is not None:
             a_lo, a_hi = cfg.alpha_range
             gs3 = cfg.g * s3[2]
-            ineq += (ConstraintBlock("contact thrust range (12)", (s3 @ A_)[None, :] / Ti**2,
+            ineq += (ConstraintBlock("contact thrust range (12)", (s3 @ F_)[None, :] / Ti**2,
                                      np.array([a_lo - gs3]), np.array([a_hi - gs3])),)
         ineq += self._workspace_blocks(pad, knots_rel)
         P = self.P

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import math
 from functools import lru_cache
+from typing import Any
 
 import numpy as np
 
@@ -45,6 +46,9 @@ def terminal_rows(
     # position, t_scale * velocity, t_scale^2 * acceleration and yaw rows at t_f: they depend on
     # T_last / t_scale alone (cached)
     P, V, A, Y = _end_rows(layout.n_segments, layout.degree, float(knots_rel[-1] - knots_rel[-2]) / t_scale)
+    drag = config.limits.rotor_drag
+    if drag:  # the thrust direction is a + g e3 + d v (VehicleLimits.rotor_drag): rows on a + d v
+        A = A + (drag * t_scale) * V
     p_contact = target.point + config.workspace.body_offset * target.s3  # centre of mass at contact
     for axis in range(3):
         rows.append(P[axis])
@@ -99,14 +103,24 @@ def _end_rows(n_segments: int, degree: int, T_last_over_scale: float) -> tuple[A
 def terminal_thrust_rows(
     layout: DecisionLayout, knots_rel: Array, target: PerchTarget, config: PlannerConfig
 ) -> tuple[Array, Array, Array]:
-    """With ``alpha_range = (lo, hi)``: ``lo <= s3 . (a(t_f) + g e3) <= hi`` (empty otherwise)."""
+    """With ``alpha_range = (lo, hi)``: ``lo <= s3 . (a(t_f) + d v(t_f) + g e3) <= hi`` (empty
+    otherwise; ``d`` the rotor drag, :func:`thrust_rows`)."""
     if config.alpha_range is None:
         n = layout.n_variables
         return np.zeros((0, n)), np.zeros(0), np.zeros(0)
-    A = vector_rows(layout, knots_rel, 2, float(knots_rel[-1]))[0]
+    A = thrust_rows(layout, knots_rel, float(knots_rel[-1]), config)[0]
     lo, hi = config.alpha_range
     gs3 = config.g * target.s3[2]
     return (target.s3 @ A)[None, :], np.array([lo - gs3]), np.array([hi - gs3])
+
+
+def thrust_rows(layout: DecisionLayout, knots_rel: Array, times: Any, config: PlannerConfig) -> Array:
+    """Rows of ``a + d v`` at ``times`` (``(m, 3, n)``): the thrust direction minus ``g e3`` with
+    the rotor drag ``d = config.limits.rotor_drag`` (``b3 || a + g e3 + d v``,
+    :class:`~avp.config.VehicleLimits`); the acceleration rows when ``d = 0``."""
+    A = vector_rows(layout, knots_rel, 2, times)
+    drag = config.limits.rotor_drag
+    return A + drag * vector_rows(layout, knots_rel, 1, times) if drag else A
 
 
 def is_overhang(target: PerchTarget, config: PlannerConfig) -> bool:
@@ -136,7 +150,7 @@ def flip_rows(
     s1h = np.array([target.s1[0], target.s1[1], 0.0])
     u = s1h / np.linalg.norm(s1h)  # nonzero: s1 is vertical only when s3 is horizontal
     side = np.cross(E3, u)
-    A = vector_rows(layout, knots_rel, 2, t_w)[0]
+    A = thrust_rows(layout, knots_rel, t_w, config)[0]
     G = np.vstack([A[2], side @ A, u @ A])
     thrust = config.flip.horizontal_thrust(config.limits)
     return G, np.array([-config.g, 0.0, thrust]), np.array([-config.g, 0.0, np.inf])
@@ -172,7 +186,7 @@ def pre_impact_rows(
     times = band_times(config, float(knots_rel[-1]))
     if times.size == 0:
         return np.zeros((0, n)), np.zeros(0), np.zeros(0)
-    A = vector_rows(layout, knots_rel, 2, times)  # (m, 3, n)
+    A = thrust_rows(layout, knots_rel, times, config)  # (m, 3, n)
     alpha = config.contact_alpha(target.incline)
     alpha_lo, alpha_hi = config.alpha_range if config.alpha_range is not None else (alpha, alpha)
     if mode is PreImpactMode.PAPER:

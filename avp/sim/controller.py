@@ -37,6 +37,7 @@ from typing import Any, Protocol
 import numpy as np
 
 from .. import _validate as v
+from ..errors import ConfigError
 from ..frames import Array, attitude, body_rates, cross, hat, vee
 from .vehicle import RigidBodyState, VehicleParams
 
@@ -47,6 +48,7 @@ __all__ = [
     "angular_acceleration",
     "control",
     "drag_acceleration",
+    "planar_drag",
 ]
 
 logger = logging.getLogger(__name__)
@@ -159,6 +161,20 @@ def drag_acceleration(R: Array, v_W: Array, ref: FlatReferenceLike, params: Vehi
     w_sum = 4.0 * math.sqrt(thrust / 4.0 / params.thrust_coefficient)
     D = np.asarray(rotor_drag, dtype=float) * w_sum / params.mass
     return R @ (D * (R.T @ v_W))
+
+
+def planar_drag(params: VehicleParams, rotor_drag: Any, accel: float) -> float:
+    """The planner's mass-normalised rotor drag ``d`` (1/s, :class:`avp.VehicleLimits`
+    ``rotor_drag``) of the drag model :func:`drag_acceleration` feeds forward, at the
+    mass-normalised thrust ``accel`` (m/s^2): ``rotor_drag[0] * sum_i w_i / m``, the drag in the
+    rotor plane (``b1``; ``b2`` must match). At a perch's contact thrust this makes the
+    planner's contact condition (thrust along the normal) the controller's."""
+    k = np.asarray(rotor_drag, dtype=float)
+    if k.shape != (3,) or k[0] != k[1]:
+        raise ConfigError("gains.rotor_drag", f"needs equal b1 and b2 coefficients for a planar drag, got {rotor_drag}")
+    thrust = params.clip_thrust(params.mass * float(accel))
+    w_sum = 4.0 * math.sqrt(thrust / 4.0 / params.thrust_coefficient)
+    return float(k[0] * w_sum / params.mass)
 
 
 def control(

@@ -72,7 +72,7 @@ from .contact import (
     ground_contact,
     judge_perch,
 )
-from .controller import ControllerGains, FlatReference
+from .controller import ControllerGains, FlatReference, planar_drag
 from .estimator import PlatformEstimator, TargetEstimator
 from .flight import DT_CONTROL, fly
 from .odometry import Odometry, OdometryNoise
@@ -579,8 +579,10 @@ def simulate(
     seed:
         Seed of every random stream of the run.
     config:
-        Planner configuration (default :func:`sim_config` with the scenario's vehicle and camera);
-        its ``limits`` and ``fov.camera`` are what the simulator flies.
+        Planner configuration (default :func:`sim_config` with the scenario's vehicle and camera;
+        on rotorpy with the drag fed forward, also the drag's planar coefficient at the contact
+        thrust, ``limits.rotor_drag``, :func:`~avp.sim.controller.planar_drag`); its ``limits``
+        and ``fov.camera`` are what the simulator flies.
     replan:
         Replanning policy (default ``ReplanConfig()``: deterministic).
     dt:
@@ -595,6 +597,13 @@ def simulate(
     sc, cfg = _shared(scenario if scenario is not None else SimScenario(), config)
     if sc.backend is Backend.ROTORPY and sc.gains.rotor_drag is None:  # the back-end's drag model
         sc = dataclasses.replace(sc, gains=rotorpy_gains(sc.gains))
+        if config is None:
+            # the default planner knows the drag the controller feeds forward, at the contact
+            # thrust: at contact the thrust, not the acceleration, is along the normal
+            drag = planar_drag(sc.vehicle, sc.gains.rotor_drag, cfg.contact_alpha(sc.incline))
+            limits = dataclasses.replace(cfg.limits, rotor_drag=drag)
+            cfg = dataclasses.replace(cfg, limits=limits)
+            sc = dataclasses.replace(sc, vehicle=dataclasses.replace(sc.vehicle, limits=limits))
     mode = Mode.parse(mode)
     rcfg = replan if replan is not None else ReplanConfig()
     streams = np.random.SeedSequence(int(seed)).spawn(4)
