@@ -130,7 +130,10 @@ class Runner:
         scenario = s.scenario(incline=trial.incline, distance=trial.distance, lateral=trial.lateral,
                               height=trial.height)
         t0 = time.perf_counter()
-        res = simulate(scenario, trial.mode, seed=trial.seed, config=s.planner, replan=s.replan)
+        # the planner gets the back-end's drag unless the configuration sets its own
+        own_drag = "rotor_drag" in self.data.get("planner", {}).get("limits", {})
+        res = simulate(scenario, trial.mode, seed=trial.seed, config=s.planner, replan=s.replan,
+                       plan_drag=not own_drag)
         row = trial_row(trial, res, self.config_id, time.perf_counter() - t0)
         return (row, res) if self.keep_result else row
 

@@ -231,3 +231,17 @@ def test_drag_aware_contact_condition_on_rotorpys_wall(rotorpy: object) -> None:
     assert aware.perch is not None and free.perch is not None
     att_aware, att_free = (math.degrees(r.perch.attitude_error) for r in (aware, free))
     assert att_aware < 4.0 and att_free > att_aware + 4.0, (att_aware, att_free)
+
+
+def test_campaign_runner_gives_the_planner_rotorpys_drag_unless_configured(rotorpy: object) -> None:
+    """``avp simulate|campaign --backend rotorpy`` build their planner configuration from the TOML
+    data: the runner still hands the planner the drag it flies (limits.rotor_drag), unless
+    ``[planner.limits] rotor_drag`` is set, which is kept (0 for an ablation)."""
+    from avp import campaign
+
+    trial = campaign.grid([90.0], [4.5], [0.0], [None], ["one_shot"], [0])[0]
+    _, aware = campaign.Runner({"scenario": {"backend": "rotorpy"}}, keep_result=True)(trial)
+    assert 0.2 < aware.scenario.vehicle.limits.rotor_drag < 0.4
+    data = {"scenario": {"backend": "rotorpy"}, "planner": {"limits": {"rotor_drag": 0.0}}}
+    _, ablated = campaign.Runner(data, keep_result=True)(trial)
+    assert ablated.scenario.vehicle.limits.rotor_drag == 0.0

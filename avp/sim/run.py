@@ -567,6 +567,7 @@ def simulate(
     dt: float = DT_CONTROL,
     max_time: float = 20.0,
     moving: MovingConfig | None = None,
+    plan_drag: bool | None = None,
 ) -> SimResult:
     """Fly one perch of ``scenario`` in ``mode`` (module docstring) and record it.
 
@@ -579,10 +580,8 @@ def simulate(
     seed:
         Seed of every random stream of the run.
     config:
-        Planner configuration (default :func:`sim_config` with the scenario's vehicle and camera;
-        on rotorpy with the drag fed forward, also the drag's planar coefficient at the contact
-        thrust, ``limits.rotor_drag``, :func:`~avp.sim.controller.planar_drag`); its ``limits``
-        and ``fov.camera`` are what the simulator flies.
+        Planner configuration (default :func:`sim_config` with the scenario's vehicle and camera);
+        its ``limits`` and ``fov.camera`` are what the simulator flies.
     replan:
         Replanning policy (default ``ReplanConfig()``: deterministic).
     dt:
@@ -593,12 +592,18 @@ def simulate(
         Terminal map and arrival-time search on a moving pad (``scenario.platform``; default
         ``MovingConfig(yaw=TerminalYaw.PAD)``: the yaw at contact follows the detected pad, not
         the noisy heading of the fitted velocity).
+    plan_drag:
+        On rotorpy with the drag fed forward (``gains.rotor_drag=None``), give the planner that
+        drag's planar coefficient at the pad's contact thrust (``limits.rotor_drag``,
+        :func:`~avp.sim.controller.planar_drag`), so that it plans the thrust along the normal
+        at contact, as the controller will fly it. Default: when ``config`` is None (the
+        campaign runner and ``avp simulate``: unless the configuration sets ``rotor_drag``).
     """
     sc, cfg = _shared(scenario if scenario is not None else SimScenario(), config)
     if sc.backend is Backend.ROTORPY and sc.gains.rotor_drag is None:  # the back-end's drag model
         sc = dataclasses.replace(sc, gains=rotorpy_gains(sc.gains))
-        if config is None:
-            # the default planner knows the drag the controller feeds forward, at the contact
+        if plan_drag if plan_drag is not None else config is None:
+            # the planner knows the drag the controller feeds forward, at the contact
             # thrust: at contact the thrust, not the acceleration, is along the normal
             drag = planar_drag(sc.vehicle, sc.gains.rotor_drag, cfg.contact_alpha(sc.incline))
             limits = dataclasses.replace(cfg.limits, rotor_drag=drag)
