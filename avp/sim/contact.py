@@ -114,20 +114,30 @@ class Contact:
         return not self.failures
 
 
-def ground_contact(prev: RigidBodyState, new: RigidBodyState, t_prev: float, t_new: float,
-                   ground_z: float) -> Contact | None:
-    """The crash if the centre of mass went below the ground ``z = ground_z`` between ``prev``
-    and ``new``: a :class:`Contact` with the ground plane (``S = W`` shifted to the ground,
-    ``inside`` False) whose only failure is :data:`GROUND`."""
-    d0, d1 = float(prev.p_W[2]) - ground_z, float(new.p_W[2]) - ground_z
+def _crossing(prev: RigidBodyState, new: RigidBodyState, d0: float, d1: float, t_prev: float,
+              t_new: float) -> tuple[float, Array, Array, Array] | None:
+    """Time, position, velocity and attitude where a signed distance going from ``d0 > 0`` to
+    ``d1 <= 0`` over the step crosses zero (linear interpolation), or None without a crossing."""
     if not (d0 > 0.0 >= d1):
         return None
     lam = d0 / (d0 - d1)
     p_W = prev.p_W + lam * (new.p_W - prev.p_W)
     v_W = prev.v_W + lam * (new.v_W - prev.v_W)
     R_WB = project_so3(prev.R_WB + lam * (new.R_WB - prev.R_WB))
+    return float(t_prev + lam * (t_new - t_prev)), p_W, v_W, R_WB
+
+
+def ground_contact(prev: RigidBodyState, new: RigidBodyState, t_prev: float, t_new: float,
+                   ground_z: float) -> Contact | None:
+    """The crash if the centre of mass went below the ground ``z = ground_z`` between ``prev``
+    and ``new``: a :class:`Contact` with the ground plane (``S = W`` shifted to the ground,
+    ``inside`` False) whose only failure is :data:`GROUND`."""
+    crossing = _crossing(prev, new, float(prev.p_W[2]) - ground_z, float(new.p_W[2]) - ground_z, t_prev, t_new)
+    if crossing is None:
+        return None
+    t, p_W, v_W, R_WB = crossing
     return Contact(
-        t=float(t_prev + lam * (t_new - t_prev)),
+        t=t,
         p_S=np.array([p_W[0], p_W[1], 0.0]),
         p_W=p_W,
         v_W=v_W,
@@ -152,13 +162,10 @@ def detect_contact(
 
     Returns None unless the signed distance goes from ``> 0`` to ``<= 0`` in this step.
     """
-    d0, d1 = pad.signed_distance(prev.p_W), pad.signed_distance(new.p_W)
-    if not (d0 > 0.0 >= d1):
+    crossing = _crossing(prev, new, pad.signed_distance(prev.p_W), pad.signed_distance(new.p_W), t_prev, t_new)
+    if crossing is None:
         return None
-    lam = d0 / (d0 - d1)
-    p_W = prev.p_W + lam * (new.p_W - prev.p_W)
-    v_W = prev.v_W + lam * (new.v_W - prev.v_W)
-    R_WB = project_so3(prev.R_WB + lam * (new.R_WB - prev.R_WB))
+    t, p_W, v_W, R_WB = crossing
     R_WS = pad.R_WS
     p_S = R_WS.T @ (p_W - pad.p_W)
     v_S = R_WS.T @ v_W
@@ -176,7 +183,7 @@ def detect_contact(
     if float(np.hypot(v_t[0], v_t[1])) > criteria.max_tangential_speed:
         failures.append("tangential_speed")
     return Contact(
-        t=float(t_prev + lam * (t_new - t_prev)),
+        t=t,
         p_S=p_S,
         p_W=p_W,
         v_W=v_W,
