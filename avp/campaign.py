@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import concurrent.futures as cf
 import csv
+import dataclasses
 import hashlib
 import json
 import logging
@@ -122,7 +123,7 @@ class Runner:
         return {"data": self.data, "keep_result": self.keep_result, "config_id": self.config_id, "_settings": None}
 
     def __call__(self, trial: Trial) -> Any:
-        from .sim.run import simulate
+        from .sim.run import GROUND_CLEARANCE, simulate
 
         if self._settings is None:
             self._settings = load_settings(overrides=self.data)
@@ -130,9 +131,15 @@ class Runner:
         scenario = s.scenario(incline=trial.incline, distance=trial.distance, lateral=trial.lateral,
                               height=trial.height)
         t0 = time.perf_counter()
-        # the planner gets the back-end's drag unless the configuration sets its own
-        own_drag = "rotor_drag" in self.data.get("planner", {}).get("limits", {})
-        res = simulate(scenario, trial.mode, seed=trial.seed, config=s.planner, replan=s.replan,
+        # as simulate()'s own default configuration: the planner keeps GROUND_CLEARANCE above
+        # the world's ground and gets the back-end's drag, unless the configuration sets them
+        planner_data = self.data.get("planner", {})
+        config = s.planner
+        if "ground_z" not in planner_data.get("workspace", {}) and scenario.ground_z is not None:
+            config = dataclasses.replace(config, workspace=dataclasses.replace(
+                config.workspace, ground_z=scenario.ground_z + GROUND_CLEARANCE))
+        own_drag = "rotor_drag" in planner_data.get("limits", {})
+        res = simulate(scenario, trial.mode, seed=trial.seed, config=config, replan=s.replan,
                        plan_drag=not own_drag)
         row = trial_row(trial, res, self.config_id, time.perf_counter() - t0)
         return (row, res) if self.keep_result else row

@@ -472,7 +472,7 @@ def _simulate_parser(sub: Any, common: argparse.ArgumentParser) -> None:
                                    "the paired tables of success, interception and anticipation error. "
                                    "The simulated world has a ground at z = 0 (a run below it ends as "
                                    "'crash: ground'); the planner keeps avp.sim.run.GROUND_CLEARANCE above it unless the config "
-                                   "file sets [planner.workspace] ground_z.")
+                                   "file sets [planner.workspace] ground_z (line perches: no ground unless set).")
     p.add_argument("--trials", type=int, default=5, help="seeded trials per condition and mode")
     _sweep_flags(p, (4.5, 7.5))
     p.add_argument("--output-dir", default="avp_simulation", help="directory for the plots")
@@ -509,13 +509,8 @@ def simulate(args: argparse.Namespace) -> int:
 
     if args.trials < 1:
         raise ConfigError("--trials", f"must be >= 1, got {args.trials}")
-    from .sim.run import GROUND_CLEARANCE
-
-    # the simulated world's ground is at z = 0: the planner keeps GROUND_CLEARANCE above it, as
-    # simulate()'s default configuration does (unless the config file sets a ground)
-    ground = {"planner": {"workspace": {"ground_z": GROUND_CLEARANCE}}}
     settings = load_settings(args.config, merge(_flag_overrides(args), _platform_overrides(args)),
-                             merge(ground, _simulator_settings(args)))
+                             _simulator_settings(args))
     if args.line_pitch_deg is not None:  # closed-loop line perches (avp/cli_line.py)
         if args.simulator not in (None, "avp"):
             raise ConfigError("--simulator", "line perches fly on avp's simulator only; drop --simulator/--backend rotorpy")

@@ -39,8 +39,8 @@ CONFIG = avp.PlannerConfig(limits=LIMITS, alpha=5.5, pre_impact=avp.PreImpactMod
                            workspace=avp.Workspace(ground_z=GROUND_CLEARANCE))
 """The road is at z = 0 (the pads are 1-1.5 m up), and the planner keeps the centre of mass
 GROUND_CLEARANCE above it, as the simulator's default configuration does. Without a ground the
-1.5 rad plans swung 4-5 m below the road and the 1.0 rad ones 0.13 m."""
-"""Gao et al. have no pre-impact band; its zero terminal jerk (MovingConfig.zero_jerk) takes that role."""
+1.5 rad plans swung 4-5 m below the road and the 1.0 rad ones 0.13 m. Gao et al. have no
+pre-impact band; its zero terminal jerk (MovingConfig.zero_jerk) takes that role."""
 STATIC = avp.PlannerConfig(limits=LIMITS, alpha=5.5, fov=avp.FovConfig(enabled=False))
 SEED_MS = {"30 deg": 3.76, "60 deg": 4.31, "90 deg": 16.68}
 """Gao et al.'s own planner, static perches (their Table IV, i5-9400F desktop)."""

@@ -141,3 +141,17 @@ def test_wilson_interval_against_the_closed_form() -> None:
         assert (lo - float(centre)) ** 2 == pytest.approx(float(rad2), rel=1e-12, abs=1e-15) or lo == 0.0
         assert (hi - float(centre)) ** 2 == pytest.approx(float(rad2), rel=1e-12, abs=1e-15) or hi == 1.0
         assert 0.0 <= lo <= k / n <= hi <= 1.0
+
+
+def test_runner_plans_above_the_simulated_ground_unless_configured() -> None:
+    """The runner behind ``avp simulate|campaign`` builds its planner from the TOML data; as
+    simulate()'s default it keeps GROUND_CLEARANCE above the world's ground. A 150 deg overhang
+    2 m up needs a dive its ground does not allow: no plan. With the file's own ground far
+    below, the plan dives and the world ends the run."""
+    trial = campaign.grid([150.0], [3.0], [0.0], [None], ["one_shot"], [0])[0]
+    scenario = {"pad_height": 2.0, "odometry": "none"}
+    _, kept = campaign.Runner({"scenario": scenario}, keep_result=True)(trial)
+    assert kept.outcome.startswith("no plan"), kept.outcome
+    data = {"scenario": scenario, "planner": {"workspace": {"ground_z": -100.0}}}
+    _, dived = campaign.Runner(data, keep_result=True)(trial)
+    assert dived.outcome == "crash: ground", dived.outcome

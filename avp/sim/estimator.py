@@ -208,8 +208,8 @@ class PlatformEstimator(TargetEstimator):
                  estimate_scale: bool = False, min_detections: int = 10) -> None:
         if not (np.isfinite(window) and window > 0):
             raise ConfigError("estimator.window", f"must be a positive time (s), got {window}")
-        if int(min_detections) != min_detections or min_detections < 2:
-            raise ConfigError("estimator.min_detections", f"must be an integer >= 2, got {min_detections}")
+        if isinstance(min_detections, bool) or not isinstance(min_detections, int) or min_detections < 2:
+            raise ConfigError("estimator.min_detections", f"must be an integer >= 2, got {min_detections!r}")
         super().__init__(scale_error, None, estimate_scale)
         self.window = float(window)
         self.turn_rate = bool(turn_rate)

@@ -83,9 +83,11 @@ __all__ = ["GROUND_CLEARANCE", "AfterPlan", "Mode", "PlatformMotion", "SimResult
 
 GROUND_CLEARANCE = 0.3
 """Height (m) above the simulated world's ground (``SimScenario.ground_z``) below which the
-default planner configuration does not let the centre of mass go: the vehicle's size and its
-tracking error. With the limit at the ground itself, moving-platform plans that grazed it crashed
-in 4 of 10 seeded runs (1.0 rad plane)."""
+default planner configuration (and the campaign runner's, unless it sets a ground) does not let
+the centre of mass go: the vehicle's size and its tracking error. With the limit at the ground
+itself, moving-platform plans grazed it and crashed (docs/moving.md). A start or pad closer to
+the ground than this gets no plan from that configuration (a typed ``ConfigError`` naming the
+ground): pass a configuration with its own ``workspace.ground_z``."""
 
 
 def sim_config(
@@ -97,7 +99,8 @@ def sim_config(
 ) -> PlannerConfig:
     """The planner configuration :func:`simulate` uses by default: :class:`PlannerConfig`'s
     defaults with the simulated vehicle's ``limits`` and camera (the same objects), optionally
-    with another tilt-rate limit, and the world's ground (``ground_z``, m) as a workspace limit.
+    with another tilt-rate limit, and the planner's ground limit ``ground_z`` (m; :func:`simulate`
+    passes the world's ground plus :data:`GROUND_CLEARANCE`).
 
     Both defaults come from closed-loop runs here: without a rate bound, replans from a noisy
     state close to contact certified only after the relaxations and spun at 100+ rad/s (126
@@ -162,9 +165,8 @@ class PlatformMotion:
     tracking_time:
         Time (s) spent tracking and detecting before the first plan.
     window:
-        Detections of the last ``window`` s are fitted by the platform filter (4 s: on the
-        realistic moving grid, 10 seeds, 2 s left the plane at 1 rad and the roof at 16/20 and
-        15/20 and a 0.2 rad/s turn rate 0.01 rad/s off, 4 s perched them all).
+        Detections of the last ``window`` s are fitted by the platform filter (4 s; 2 s fitted
+        turn rates 5 times worse on the realistic moving grid: docs/moving.md).
     """
 
     speed: float = 0.0
@@ -596,7 +598,9 @@ def simulate(
         On rotorpy with the drag fed forward (``gains.rotor_drag=None``), give the planner that
         drag's planar coefficient at the pad's contact thrust (``limits.rotor_drag``,
         :func:`~avp.sim.controller.planar_drag`), so that it plans the thrust along the normal
-        at contact, as the controller will fly it. Default: when ``config`` is None (the
+        at contact, as the controller will fly it. The contact thrust is the static planner's
+        ``contact_alpha(incline)``; on a moving pad, whose contact thrust is free in the limits,
+        ``d`` (which scales with its square root) is that value's, not the plan's. Default: when ``config`` is None (the
         campaign runner and ``avp simulate``: unless the configuration sets ``rotor_drag``).
     """
     sc, cfg = _shared(scenario if scenario is not None else SimScenario(), config)
@@ -752,13 +756,12 @@ def simulate(
             antic_err.append(p_ant - (prev.p_W + lam * (new.p_W - prev.p_W)))
             antic_t.append(t_ex)
         detect(t_new, new)
-        if sc.ground_z is not None:
-            crash = ground_contact(prev, new, t_prev, t_new, sc.ground_z)
-            if crash is not None:
-                return crash
-        if platform is None:
-            return detect_contact(prev, new, pad, t_prev, t_new, sc.criteria)
-        return pad_contact(prev, new, t_prev, t_new, platform, sc.pad_half_size, sc.criteria)
+        hit = (detect_contact(prev, new, pad, t_prev, t_new, sc.criteria) if platform is None
+               else pad_contact(prev, new, t_prev, t_new, platform, sc.pad_half_size, sc.criteria))
+        crash = None if sc.ground_z is None else ground_contact(prev, new, t_prev, t_new, sc.ground_z)
+        if crash is not None and (hit is None or crash.t < hit.t):  # whichever came first in the step
+            return crash
+        return hit
 
     path_t.append(t_plan)
     path_p.append(state.p_W)
@@ -787,6 +790,8 @@ def simulate(
             return finish(
                 "crash: ground", None, first_plan=plan0, final_plan=final,
                 steps=tuple(replanner.history) if replanner is not None else (),
+                anticipation_error=np.array(antic_err, dtype=float).reshape(-1, 3),
+                anticipation_t=np.array(antic_t, dtype=float),
                 solve_times=np.array(solve_times, dtype=float), path_t=pt, path_p=pp,
                 visible=np.array(visible, dtype=bool),
             )
