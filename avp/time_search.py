@@ -196,7 +196,8 @@ class DurationSearch:
         x = x1 + (-MARGIN - e1) / slope
         if (x - x1) * self.direction <= 0.0:
             return None  # back against the scaling law
-        k = min(max(math.exp(x), self.lo), self.hi)
+        # clamped in log space: a nearly flat secant puts x far beyond the range (exp overflows)
+        k = math.exp(min(max(x, math.log(self.lo)), math.log(self.hi)))
         if e1 > 0.0 and e1 + slope * (math.log(k) - x1) > STALL * e1:
             return None  # the line barely improves inside the range: held by fixed conditions
         return self._step(k)

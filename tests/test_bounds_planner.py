@@ -80,6 +80,22 @@ def test_random_scenarios_certified_plans_meet_bounds_on_dense_grid(case) -> Non
                                  avp.PlanStatus.WORKSPACE_NOT_CERTIFIED)
 
 
+def test_a_flat_secant_in_the_time_search_does_not_overflow() -> None:
+    """Found by the random scenarios above (unseeded run): a wall 1.5 m ahead with a 12 m/s^2
+    thrust ceiling and 3 rad/s. The scaling search's secant was nearly flat and math.exp of its
+    far-off root overflowed out of plan_detailed as an OverflowError; now the step is clamped to
+    the search range and the result is an honest status."""
+    state = avp.State.hover([-1.5, 0.0, 2.0])
+    target = avp.PerchTarget.from_incline([0.0, 0.0, 2.0], math.pi / 2)
+    limits = avp.VehicleLimits(mass=1.0, thrust_min=1.0, thrust_max=12.0, tilt_rate_max=3.0)
+    result = avp.plan_detailed(state, target, avp.PlannerConfig(limits=limits))
+    if result.ok:
+        assert result.bounds.certified
+        assert_within_limits(result.trajectory, limits)
+    else:
+        assert result.status in (avp.PlanStatus.BOUNDS_NOT_CERTIFIED, avp.PlanStatus.WORKSPACE_NOT_CERTIFIED)
+
+
 GAO = avp.VehicleLimits(mass=1.0, thrust_min=5.0, thrust_max=17.0, tilt_rate_max=3.0)
 
 
