@@ -249,8 +249,10 @@ def test_platform_estimator_keeps_the_last_detections_through_a_gap():
     for m in _noisy_detections(truth, times, rng, 0.0, 0.0)[-2:]:
         lone.update(m)
     assert np.allclose(lone.target(truth.model).velocity, ref.velocity, atol=1e-6)  # two still fit exactly
-    with pytest.raises(ConfigError, match="min_detections"):
-        PlatformEstimator(min_detections=1)
+    for bad in (1, 2.5, math.nan, "10", True):
+        with pytest.raises(ConfigError, match="min_detections"):
+            PlatformEstimator(min_detections=bad)
+    assert PlatformEstimator(min_detections=np.int64(4)).min_detections == 4
 
 
 def test_platform_turn_rate_uses_the_track_not_only_the_noisy_yaw():

@@ -34,6 +34,7 @@ defaults (0, None) it is the plain inverse-variance fusion of every detection.
 
 from __future__ import annotations
 
+import operator
 from dataclasses import dataclass
 
 import numpy as np
@@ -208,12 +209,16 @@ class PlatformEstimator(TargetEstimator):
                  estimate_scale: bool = False, min_detections: int = 10) -> None:
         if not (np.isfinite(window) and window > 0):
             raise ConfigError("estimator.window", f"must be a positive time (s), got {window}")
-        if isinstance(min_detections, bool) or not isinstance(min_detections, int) or min_detections < 2:
+        try:
+            count = None if isinstance(min_detections, bool) else operator.index(min_detections)
+        except TypeError:
+            count = None
+        if count is None or count < 2:
             raise ConfigError("estimator.min_detections", f"must be an integer >= 2, got {min_detections!r}")
         super().__init__(scale_error, None, estimate_scale)
         self.window = float(window)
         self.turn_rate = bool(turn_rate)
-        self.min_detections = int(min_detections)
+        self.min_detections = count
 
     def update(self, meas: CameraMeasurement) -> None:
         """Add one detection (those captured more than ``window`` before the newest are dropped,
