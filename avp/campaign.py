@@ -123,7 +123,7 @@ class Runner:
         return {"data": self.data, "keep_result": self.keep_result, "config_id": self.config_id, "_settings": None}
 
     def __call__(self, trial: Trial) -> Any:
-        from .sim.run import GROUND_CLEARANCE, simulate
+        from .sim.run import simulate
 
         if self._settings is None:
             self._settings = load_settings(overrides=self.data)
@@ -135,9 +135,9 @@ class Runner:
         # the world's ground and gets the back-end's drag, unless the configuration sets them
         planner_data = self.data.get("planner", {})
         config = s.planner
-        if "ground_z" not in planner_data.get("workspace", {}) and scenario.ground_z is not None:
+        if "ground_z" not in planner_data.get("workspace", {}) and scenario.planner_ground_z is not None:
             config = dataclasses.replace(config, workspace=dataclasses.replace(
-                config.workspace, ground_z=scenario.ground_z + GROUND_CLEARANCE))
+                config.workspace, ground_z=scenario.planner_ground_z))
         own_drag = "rotor_drag" in planner_data.get("limits", {})
         res = simulate(scenario, trial.mode, seed=trial.seed, config=config, replan=s.replan,
                        plan_drag=not own_drag)

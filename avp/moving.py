@@ -18,9 +18,11 @@ time is then searched in one dimension (``docs/moving.md``):
    Once one ``T`` certifies, a second certified point one growth step away (shorter first) and
    one log-log secant step to the minimiser of ``Phi`` under ``J ~ T^-k``. At most
    ``max_solves`` QP solves.
+   The static workspace regions (ground, half-spaces, spheres, speed: :mod:`avp.safety`) have
+   QP rows in every candidate and are certified on its solution, with refinement rounds as on a
+   static pad; a candidate that keeps failing them scores ``+inf``.
 4. The best-scoring certified candidate gets the moving-plane clearance certificate
-   (:mod:`avp.moving_clearance`) and the static workspace regions (:mod:`avp.safety`); if they
-   fail, the next best is tried.
+   (:mod:`avp.moving_clearance`); if it fails, the next best is tried.
 
 The result is the best certified candidate *evaluated*, not a proven global minimiser of ``Phi``
 (certification is not monotone in ``T``). A platform that outruns the vehicle (no duration up
@@ -309,7 +311,7 @@ def plan_moving_detailed(
                               mcfg.yaw, cfg.workspace.body_offset)
 
     ws = cfg.workspace
-    static_cfg = replace(cfg, workspace=replace(ws, perch_clearance=False))
+    static_cfg = builder.static_config  # the workspace without the perch plane, which moves
     check_static = static_cfg.workspace.active
 
     def evaluate(T: float) -> _Eval:
@@ -449,12 +451,10 @@ def _bisect(run: Any, lo: _Eval, hi: _Eval, budget: int) -> None:
 
 
 def _pick(evals: list[_Eval], target: MovingTarget, cfg: PlannerConfig, log: list[str]) -> _Eval | None:
-    """Best certified candidate that also passes the moving-plane clearance certificate and the
-    static workspace regions (ground, speed, half-spaces, spheres: :func:`avp.safety.
-    certify_workspace` without the perch plane, which moves)."""
+    """Best certified candidate that also passes the moving-plane clearance certificate (the
+    static workspace regions were certified when it was evaluated: a candidate that failed them
+    scores ``+inf``)."""
     ws = cfg.workspace
-    static_ws = replace(ws, perch_clearance=False)
-    check_static = ws.ground_z is not None or math.isfinite(ws.max_speed) or bool(ws.half_spaces) or bool(ws.spheres)
     for e in sorted((e for e in evals if math.isfinite(e.score)), key=lambda e: e.score):
         assert e.traj is not None
         if ws.perch_clearance:
@@ -462,12 +462,8 @@ def _pick(evals: list[_Eval], target: MovingTarget, cfg: PlannerConfig, log: lis
             log.append(f"T = {e.T:.4f} s: {e.clearance.summary()}")
             if not e.clearance.certified:
                 continue
-        if check_static:
-            if e.safety is None:
-                e.safety = certify_workspace(e.traj, e.pad.static(), static_ws)
-            log.append(f"T = {e.T:.4f} s: workspace {'certified' if e.safety.certified else 'NOT certified'}")
-            if not e.safety.certified:
-                continue
+        if e.safety is not None:
+            log.append(f"T = {e.T:.4f} s: workspace certified")
         return e
     return None
 

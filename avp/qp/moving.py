@@ -149,7 +149,8 @@ class MovingQpBuilder:
         self.P, self.continuity, self.end, self.end_yaw, self.Z0, self.L0, self.G0 = fixed
         self.peak = _physical_scale(np.ones(cfg.n_segments), cfg.degree, cfg) * float(cfg.n_segments) ** (
             2 * cfg.position_cost_order - 1)  # largest raw diagonal of the cost matrix
-        self._static_config = replace(cfg, workspace=replace(cfg.workspace, perch_clearance=False))
+        self.static_config = replace(cfg, workspace=replace(cfg.workspace, perch_clearance=False))
+        """``config`` without the perch plane (it moves): the static workspace limits."""
         self._plane_rows: tuple[ConstraintBlock, ...] | None = None
 
     def build(self, pad: MovingTarget, total: float) -> PerchingQp:
@@ -224,7 +225,7 @@ class MovingQpBuilder:
         moves: it gets no rows here and is certified on the plan
         (:func:`avp.moving_clearance.certify_moving_clearance`); rows for it, measured on the
         moving grid, changed no outcome and cost 0.7 ms per plan."""
-        static_cfg = self._static_config
+        static_cfg = self.static_config
         if not static_cfg.workspace.active:
             return ()
         if static_cfg.workspace.spheres:  # linearised on the line to the contact point: per pad

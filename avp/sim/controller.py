@@ -157,9 +157,7 @@ def drag_acceleration(R: Array, v_W: Array, ref: FlatReferenceLike, params: Vehi
     ``rotor_drag``: per-rotor drag coefficients along ``b1, b2, b3`` (N per rad/s per m/s;
     rotorpy's ``k_d, k_d, k_z``)."""
     a_ref = np.asarray(ref.acceleration, dtype=float) + np.array([0.0, 0.0, params.g])
-    thrust = params.clip_thrust(params.mass * float(np.linalg.norm(a_ref)))
-    w_sum = 4.0 * math.sqrt(thrust / 4.0 / params.thrust_coefficient)
-    D = np.asarray(rotor_drag, dtype=float) * w_sum / params.mass
+    D = np.asarray(rotor_drag, dtype=float) * _rotor_speed_sum(params, float(np.linalg.norm(a_ref))) / params.mass
     return R @ (D * (R.T @ v_W))
 
 
@@ -172,9 +170,14 @@ def planar_drag(params: VehicleParams, rotor_drag: Any, accel: float) -> float:
     k = np.asarray(rotor_drag, dtype=float)
     if k.shape != (3,) or k[0] != k[1]:
         raise ConfigError("gains.rotor_drag", f"needs equal b1 and b2 coefficients for a planar drag, got {rotor_drag}")
-    thrust = params.clip_thrust(params.mass * float(accel))
-    w_sum = 4.0 * math.sqrt(thrust / 4.0 / params.thrust_coefficient)
-    return float(k[0] * w_sum / params.mass)
+    return float(k[0] * _rotor_speed_sum(params, float(accel)) / params.mass)
+
+
+def _rotor_speed_sum(params: VehicleParams, accel: float) -> float:
+    """``sum_i w_i`` (rad/s) of four rotors sharing the thrust ``m accel`` (clipped to the
+    vehicle's range), ``T_i = k_f w_i^2``."""
+    thrust = params.clip_thrust(params.mass * accel)
+    return 4.0 * math.sqrt(thrust / 4.0 / params.thrust_coefficient)
 
 
 def control(

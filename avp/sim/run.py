@@ -308,6 +308,12 @@ class SimScenario:
                                   f"{self.ground_z:g} m: raise pad_height or lower ground_z")
 
     @property
+    def planner_ground_z(self) -> float | None:
+        """The ground limit (m) the default planner configuration keeps: :attr:`ground_z` plus
+        :data:`GROUND_CLEARANCE` (None without a ground)."""
+        return None if self.ground_z is None else self.ground_z + GROUND_CLEARANCE
+
+    @property
     def start_height(self) -> float:
         """Start height above the pad centre (m)."""
         if self.height is not None:
@@ -468,8 +474,7 @@ def _estimate_target(est: TargetEstimator) -> PerchTarget | None:
 def _shared(sc: SimScenario, config: PlannerConfig | None) -> tuple[SimScenario, PlannerConfig]:
     """Scenario and planner configuration sharing one vehicle and one camera object."""
     if config is None:
-        ground = None if sc.ground_z is None else sc.ground_z + GROUND_CLEARANCE
-        return sc, sim_config(limits=sc.vehicle.limits, camera=sc.camera.camera, ground_z=ground)
+        return sc, sim_config(limits=sc.vehicle.limits, camera=sc.camera.camera, ground_z=sc.planner_ground_z)
     vehicle = sc.vehicle if sc.vehicle.limits is config.limits else dataclasses.replace(sc.vehicle, limits=config.limits)
     camera = sc.camera if sc.camera.camera is config.fov.camera else dataclasses.replace(sc.camera, camera=config.fov.camera)
     return dataclasses.replace(sc, vehicle=vehicle, camera=camera), config
