@@ -17,7 +17,8 @@ off-able:
   noise, scale bias and a tilted normal;
 - :mod:`~avp.sim.estimator`: the user-side target filter (inverse-variance fusion);
 - :mod:`~avp.sim.contact`: pad contact and the success criterion;
-- :mod:`~avp.sim.run` / :mod:`~avp.sim.evaluate`: one run, comparisons and sweeps.
+- :mod:`~avp.sim.run` / :mod:`~avp.sim.evaluate`: one run, comparisons and sweeps;
+- :mod:`~avp.sim.limit`: the ideal perch on a run's own target estimates (what the estimate allows).
 - :mod:`~avp.sim.line_run`: one closed-loop line perch (:func:`~avp.sim.line_run.simulate_line`).
 """
 

@@ -389,6 +389,14 @@ class SimResult:
     detections:
         ``(n, 4)``: time, true camera-pad distance (m), position error of the detection (m) and of
         the fused estimate after it (m), for every detection including the initial ones.
+    path_drift:
+        ``(n, 3)``: the odometry's drift (the random-walk part of believed minus true position,
+        m) at every ``path_t`` (zeros without odometry noise).
+    measurements:
+        The :class:`~avp.sim.camera.CameraMeasurement` objects handed to the target filter, in
+        order (what :mod:`avp.sim.limit` re-fuses).
+    detector_scale:
+        The camera's per-run scale error ``b`` (:class:`~avp.sim.camera.CameraParams`).
     t_plan:
         Time the first plan starts (s).
     perch:
@@ -420,6 +428,9 @@ class SimResult:
     perch: PerchOutcome | None = None
     vehicle: VehicleParams | None = None
     camera: CameraParams | None = None
+    measurements: tuple[CameraMeasurement, ...] = ()
+    detector_scale: float = 0.0
+    path_drift: Array | None = None
 
     @property
     def success(self) -> bool:
@@ -642,6 +653,7 @@ def simulate(
     odo = None if sc.odometry is None else Odometry(sc.odometry, rng_odo)
     state = RigidBodyState(sc.start())
     detections: list[tuple[float, float, float, float]] = []
+    measurements: list[CameraMeasurement] = []
 
     def believed(t: float, s: RigidBodyState) -> RigidBodyState:
         return s if odo is None else odo.sample(t, s)
@@ -653,6 +665,7 @@ def simulate(
 
     def _fuse(m: CameraMeasurement, t: float) -> None:
         estimator.update(m)
+        measurements.append(m)
         e = estimator.estimate()
         assert e is not None
         detections.append((t, m.distance, float(np.linalg.norm(m.p_W - truth_at(m.t).point)),
@@ -690,9 +703,10 @@ def simulate(
             initial_estimate_error=None if initial is None else initial.point - truth_at(t_plan).point,
             first_plan=None, final_plan=None, steps=(), anticipation_error=empty,
             anticipation_t=np.zeros(0), solve_times=np.zeros(0), path_t=np.zeros(0),
-            path_p=empty, visible=np.zeros(0, dtype=bool),
+            path_p=empty, path_drift=empty, visible=np.zeros(0, dtype=bool),
             detections=np.array(detections, dtype=float).reshape(-1, 4), t_plan=t_plan,
-            vehicle=sc.vehicle, camera=sc.camera,
+            vehicle=sc.vehicle, camera=sc.camera, measurements=tuple(measurements),
+            detector_scale=camera.scale,
         )
         base.update(kw)
         return SimResult(**base)
@@ -744,6 +758,7 @@ def simulate(
     path_t: list[float] = []
     path_p: list[Array] = []
     path_R: list[Array] = []
+    path_drift: list[Array] = []
     visible: list[bool] = []
     pending: list[tuple[float, Array]] = []  # (t_ex, anticipated position) of committed replans
     antic_err: list[Array] = []
@@ -753,6 +768,7 @@ def simulate(
         path_t.append(t_new)
         path_p.append(new.p_W)
         path_R.append(new.R_WB)
+        path_drift.append(np.zeros(3) if odo is None else odo.drift.copy())
         pad_t = truth_at(t_new)
         visible.append(camera.visible(new, pad_t.point, pad_t.R_WS))
         while pending and pending[0][0] <= t_new + 1e-9:
@@ -771,6 +787,7 @@ def simulate(
     path_t.append(t_plan)
     path_p.append(state.p_W)
     path_R.append(state.R_WB)
+    path_drift.append(np.zeros(3) if odo is None else odo.drift.copy())
     pad0 = truth_at(t_plan)
     visible.append(camera.visible(state, pad0.point, pad0.R_WS))
 
@@ -797,7 +814,7 @@ def simulate(
                 steps=tuple(replanner.history) if replanner is not None else (),
                 anticipation_error=np.array(antic_err, dtype=float).reshape(-1, 3),
                 anticipation_t=np.array(antic_t, dtype=float),
-                solve_times=np.array(solve_times, dtype=float), path_t=pt, path_p=pp,
+                solve_times=np.array(solve_times, dtype=float), path_t=pt, path_p=pp, path_drift=np.array(path_drift).reshape(-1, 3),
                 visible=np.array(visible, dtype=bool),
             )
     t_eval = min(final.tf, contact.t) if contact is not None else final.tf
@@ -827,6 +844,6 @@ def simulate(
         anticipation_error=np.array(antic_err, dtype=float).reshape(-1, 3),
         anticipation_t=np.array(antic_t, dtype=float),
         solve_times=np.array(solve_times, dtype=float),
-        path_t=pt, path_p=pp,
+        path_t=pt, path_p=pp, path_drift=np.array(path_drift).reshape(-1, 3),
         visible=np.array(visible, dtype=bool),
     )
