@@ -7,6 +7,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from scenarios import standard
 
 import avp
@@ -41,6 +43,36 @@ def test_right_hand_side_changes_reuse_the_factorisation_exactly() -> None:
     # other durations: another factorisation
     assert _qp([-2.0, 0.4, 2.0], [0.9, 0.8, 0.75]).elimination[0] is not Zb
     assert assemble._cached_factors() == 2
+
+
+@settings(max_examples=40, deadline=None)
+@given(total=st.floats(0.3, 9.0), scale=st.floats(0.2, 5.0), incline=st.floats(0.0, 170.0),
+       heading=st.floats(-math.pi, math.pi), tilt=st.floats(0.0, 0.2))
+def test_equal_splits_and_any_pad_frame_share_one_exact_factorisation(total, scale, incline, heading, tilt) -> None:
+    """Every replan splits the time left equally and re-estimates the pad's frame. The equality
+    matrix is then the same bits for any total time and any frame (rows scaled by one segment's
+    duration exactly; the whole contact velocity as world rows ``v = R_WS v_S``), so the cached
+    factorisation is an exact hit, and the plan still meets ``v_S`` in the new frame."""
+    config = avp.PlannerConfig(fov=avp.FovConfig(enabled=False))
+    state = avp.State.hover(np.array([-2.5, 0.3, 2.2]))
+    base = avp.PerchTarget.from_incline(np.array([0.0, 0.0, 1.5]), math.radians(30.0))
+    n = np.array([math.sin(math.radians(incline)) * math.cos(heading), math.sin(math.radians(incline)) *
+                  math.sin(heading), math.cos(math.radians(incline))])
+    other = avp.PerchTarget.from_normal(np.array([0.2, -0.1, 1.4]), n + tilt * np.array([0.3, -0.2, 0.1]))
+    a = build_perching_qp(state, base, config, np.full(3, total / 3))
+    b = build_perching_qp(state, other, config, np.full(3, scale * total / 3))
+    assert np.array_equal(a.stacked_equalities()[0], b.stacked_equalities()[0])
+    assemble._FACTORS.clear()
+    assert a.elimination[0] is b.elimination[0] and assemble._cached_factors() == 1
+    A, rhs = b.stacked_equalities()
+    _, c_p, _, _ = b.elimination
+    assert np.max(np.abs(A @ c_p - rhs)) < 1e-9 * max(1.0, np.max(np.abs(rhs)))
+    out = avp.solve.solve_perching_qp(b, config)
+    if out.ok:
+        traj = build_perching_qp(state, other, config, np.full(3, scale * total / 3)).trajectory(out.c_hat, config.g)
+        v_S = other.R_WS.T @ traj.derivatives(traj.tf)[1, :3]
+        want = [c for c in config.contact_velocity.components(other.incline)]
+        np.testing.assert_allclose(v_S, want, atol=1e-9 * max(1.0, float(np.max(np.abs(want)))))
 
 
 def test_time_scaled_durations_reuse_the_factorisation_to_rounding() -> None:

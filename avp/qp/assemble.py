@@ -9,12 +9,15 @@ equalities then hold to rounding whatever the solver's tolerance.
 The factorisation depends on the equality *matrix* ``A`` (durations and constraint pattern) and
 the cost ``P``, not on the right-hand side ``b`` (the state and target values): it is cached per
 ``(A, P)`` (:data:`ELIMINATION_CACHE_SIZE` entries, found by a cheap fingerprint), and only
-``c_p`` and the linear cost term are recomputed for a new ``b``. Because rows and cost are
-normalised by the mean duration, scaling every duration by one factor (the time search, a
-replan with the same split) changes ``A`` and ``P`` only by rounding: a cached factorisation
-whose ``A`` and ``P`` are within :data:`REUSE_TOL` (relative, entrywise) of the new ones is
-reused. Its null space then satisfies the new equalities to the same rounding level, and the
-particular solution ``c_p`` is checked against the new ``A`` as always.
+``c_p`` and the linear cost term are recomputed for a new ``b``. Rows and cost are normalised by
+the durations' scale: for equal durations (the allocation rule, every replan) by one of them
+exactly, so ``A`` and ``P`` are the same bits for any total time; and a fully given contact
+velocity is the world rows ``v(t_f) = R_WS v_S``, whose matrix does not depend on the pad's
+frame. A replan with a re-estimated pad therefore hits the cache exactly. Otherwise (unequal
+durations scaled by one factor in the time search) ``A`` and ``P`` change by rounding only: a
+cached factorisation whose ``A`` and ``P`` are within :data:`REUSE_TOL` (relative, entrywise)
+of the new ones is reused. Its null space then satisfies the new equalities to the same rounding
+level, and the particular solution ``c_p`` is checked against the new ``A`` as always.
 """
 
 from __future__ import annotations
@@ -317,11 +320,13 @@ def build_perching_qp(
     layout = layout_for(config.n_segments, config.degree)
     T = np.asarray(durations, dtype=float)
     knots_rel = np.concatenate([[0.0], np.cumsum(T)])
-    t_scale = float(T.mean())
+    # equal durations (every replan) scale by one of them exactly: the rows, which depend on
+    # T_i / t_scale, are then the same bits at every step and hit the elimination cache exactly
+    t_scale = float(T[0]) if np.all(T == T[0]) else float(T.mean())
     P = cost_matrix(layout, T, config.position_cost_order, config.yaw_cost_order)
     A0, b0 = initial_state_rows(layout, T, state, t_scale)
     Ac = continuity_rows(layout, T, config.continuity_order, t_scale)
-    At, bt, _names = terminal_rows(layout, knots_rel, target, config, state.yaw, t_scale)
+    At, bt, _names = terminal_rows(layout, knots_rel, target, config, state.yaw, t_scale, T_last=float(T[-1]))
     eq = (
         ConstraintBlock("initial state", A0, b0, b0),
         ConstraintBlock("continuity", Ac, np.zeros(Ac.shape[0]), np.zeros(Ac.shape[0])),

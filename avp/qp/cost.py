@@ -36,7 +36,8 @@ def cost_matrix(layout: DecisionLayout, durations: Array, position_order: int, y
     axes are separate sums). Cached per (layout, durations, orders): read-only.
     """
     T = np.ascontiguousarray(durations, dtype=float)
-    return _cost_matrix(layout.n_segments, layout.degree, T.tobytes(), position_order, yaw_order)
+    ratios = T / T.max()  # scale-free (the matrix depends on total / T_i only): exactly 1 for equal T
+    return _cost_matrix(layout.n_segments, layout.degree, ratios.tobytes(), position_order, yaw_order)
 
 
 @lru_cache(maxsize=256)

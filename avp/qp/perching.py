@@ -39,13 +39,17 @@ def terminal_rows(
     config: PlannerConfig,
     yaw_start: float,
     t_scale: float,
+    T_last: float | None = None,
 ) -> tuple[Array, Array, list[str]]:
     """Equalities at ``t_f``: position, acceleration (12), requested velocity components in S,
-    yaw (13). Returns rows, right-hand side and a name per row."""
+    yaw (13). Returns rows, right-hand side and a name per row. ``T_last``: the last segment's
+    duration (default from the knots; pass the duration itself to keep its exact bits)."""
     rows, rhs, names = [], [], []
     # position, t_scale * velocity, t_scale^2 * acceleration and yaw rows at t_f: they depend on
     # T_last / t_scale alone (cached)
-    P, V, A, Y = _end_rows(layout.n_segments, layout.degree, float(knots_rel[-1] - knots_rel[-2]) / t_scale)
+    if T_last is None:
+        T_last = float(knots_rel[-1] - knots_rel[-2])
+    P, V, A, Y = _end_rows(layout.n_segments, layout.degree, float(T_last) / t_scale)
     drag = config.limits.rotor_drag
     if drag:  # the thrust direction is a + g e3 + d v (VehicleLimits.rotor_drag): rows on a + d v
         A = A + (drag * t_scale) * V
@@ -65,14 +69,23 @@ def terminal_rows(
             rows.append(direction @ A)
             rhs.append(-config.g * direction[2] * t_scale**2)
             names.append(f"terminal thrust along s3 (12): no {label} component")
-    for label, direction, value in zip(
-        ("s1", "s2", "s3"), target.R_WS.T, config.contact_velocity.components(target.incline), strict=True
-    ):
-        if value is None:
-            continue
-        rows.append(direction @ V)
-        rhs.append(value * t_scale)
-        names.append(f"contact velocity v.{label}")
+    v_S = config.contact_velocity.components(target.incline)
+    if all(value is not None for value in v_S):
+        # the whole velocity is given: the same condition as world rows, v(t_f) = R_WS v_S, whose
+        # matrix does not depend on the pad's frame, so a re-estimated frame keeps the cached
+        # equality elimination (qp.assemble._factor)
+        v_W = target.R_WS @ np.array(v_S, dtype=float)
+        for axis in range(3):
+            rows.append(V[axis])
+            rhs.append(v_W[axis] * t_scale)
+            names.append(f"contact velocity {'xyz'[axis]} (R_WS v_S)")
+    else:
+        for label, direction, value in zip(("s1", "s2", "s3"), target.R_WS.T, v_S, strict=True):
+            if value is None:
+                continue
+            rows.append(direction @ V)
+            rhs.append(value * t_scale)
+            names.append(f"contact velocity v.{label}")
     rows.append(Y)
     rhs.append(terminal_yaw(target, yaw_start))
     names.append("terminal yaw (13)")
