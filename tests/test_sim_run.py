@@ -118,3 +118,30 @@ def test_cli_simulate_prints_the_tables(capsys, tmp_path):
         assert key in text
     pngs = sorted(p.name for p in (tmp_path / "out").glob("*.png"))
     assert pngs == ["estimate_error.png", "paths_0_1.5m.png", "visibility.png"]
+
+
+def test_the_user_side_aims_deeper_and_down_the_slope_by_the_scenarios_offsets():
+    """With an exact detector and exact odometry the first target handed to the planner is the
+    pad moved ``aim_normal`` into it and ``aim_slope sin(incline)`` down its slope (along -s1):
+    nothing down a level pad."""
+    from avp.sim.evaluate import SimConfig
+
+    for incline in (60.0, 0.0):
+        cfg = SimConfig(aim_normal=0.012, aim_slope=0.05).perfect_estimate()
+        sc = cfg.scenario(incline, 3.0)
+        r = simulate(sc, Mode.ONE_SHOT, seed=0, max_time=0.05)
+        pad = sc.target()
+        want = pad.point - 0.012 * pad.s3 - 0.05 * math.sin(math.radians(incline)) * pad.s1
+        np.testing.assert_allclose(r.initial_target.point, want, atol=1e-9)
+        np.testing.assert_allclose(r.initial_target.R_WS, pad.R_WS, atol=1e-9)
+
+
+def test_an_aim_beyond_the_success_window_is_refused():
+    import pytest
+
+    from avp.errors import ConfigError
+
+    with pytest.raises(ConfigError, match="aim_slope"):
+        SimScenario(aim_slope=0.2)
+    with pytest.raises(ConfigError, match="aim_normal"):
+        SimScenario(aim_normal=float("nan"))

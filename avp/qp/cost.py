@@ -33,7 +33,8 @@ def cost_matrix(layout: DecisionLayout, durations: Array, position_order: int, y
 
     Each axis block is scaled by ``T_total^(2j - 1)`` and the whole matrix to a unit largest
     diagonal entry, so entries stay O(1) whatever the durations; the minimiser is unchanged (the
-    axes are separate sums). Cached per (layout, durations, orders): read-only.
+    axes are separate sums). It depends on ``total / T_i`` only: cached per (layout, durations
+    over the longest, orders), read-only.
     """
     T = np.ascontiguousarray(durations, dtype=float)
     ratios = T / T.max()  # scale-free (the matrix depends on total / T_i only): exactly 1 for equal T

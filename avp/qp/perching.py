@@ -74,7 +74,9 @@ def terminal_rows(
         # the whole velocity is given: the same condition as world rows, v(t_f) = R_WS v_S, whose
         # matrix does not depend on the pad's frame, so a re-estimated frame keeps the cached
         # equality elimination (qp.assemble._factor)
-        v_W = target.R_WS @ np.array(v_S, dtype=float)
+        # solve(R_WS^T, v_S), not R_WS v_S: the same for an orthonormal frame, and exactly the
+        # per-direction conditions s_i . v = v_S,i for a frame orthonormal only to rounding
+        v_W = np.linalg.solve(target.R_WS.T, np.array(v_S, dtype=float))
         for axis in range(3):
             rows.append(V[axis])
             rhs.append(v_W[axis] * t_scale)

@@ -228,6 +228,14 @@ class SimScenario:
         Detections fused at hover before the first plan (10 Hz apart).
     filter_scale_error, filter_range_ratio, filter_estimate_scale:
         The user-side target filter's settings (:class:`~avp.sim.estimator.TargetEstimator`).
+    aim_normal, aim_slope:
+        Where the user-side code aims, off the estimated pad centre (m): ``aim_normal`` into the
+        pad (along ``-s3``) and ``aim_slope`` down the slope (along ``-s1``, times
+        ``sin(incline)`` like the contact velocity's slide: nothing on a level pad), both in the
+        estimated frame; a static pad only. A pad estimated too shallow is missed short of its
+        plane, one estimated too deep is met early, and the slide then carries the contact up
+        the slope (about 6.7 cm per cm on a wall). Aiming deeper and lower centres the contacts
+        on the success window (docs/simulation.md has the measurements). 0: aim at the estimate.
     replan_rate_hz:
         Rate of :meth:`Replanner.step` calls in AVP mode.
     timeout:
@@ -272,6 +280,8 @@ class SimScenario:
     filter_scale_error: float = 0.0
     filter_range_ratio: float | None = None
     filter_estimate_scale: bool = False
+    aim_normal: float = 0.0
+    aim_slope: float = 0.0
     replan_rate_hz: float = 30.0
     timeout: float = 0.5
     after_plan: AfterPlan = AfterPlan.HOLD_ACCELERATION
@@ -290,6 +300,11 @@ class SimScenario:
         for name in ("lateral", "pad_height"):
             if not math.isfinite(getattr(self, name)):
                 raise ConfigError(f"scenario.{name}", "must be finite")
+        for name in ("aim_normal", "aim_slope"):
+            val = getattr(self, name)
+            if not (isinstance(val, (int, float)) and math.isfinite(val) and abs(val) < self.perch_criteria.center_tolerance):
+                raise ConfigError(f"scenario.{name}", f"must be a finite offset (m) smaller than the success "
+                                  f"criterion's {self.perch_criteria.center_tolerance} m, got {val!r}")
         if self.height is not None and not math.isfinite(self.height):
             raise ConfigError("scenario.height", "must be finite or None")
         if self.initial_frames < 1:
@@ -477,9 +492,17 @@ def _odometry_state(b: RigidBodyState, t: float, ref: Any) -> State:
                  jerk=np.asarray(ref.jerk, dtype=float), yaw=yaw_from_b2(b2), yaw_rate=yaw_rate, time=t)
 
 
-def _estimate_target(est: TargetEstimator) -> PerchTarget | None:
+def _estimate_target(est: TargetEstimator, sc: SimScenario) -> PerchTarget | None:
+    """The target the user-side code hands the planner: the fused estimate, aimed by
+    ``sc.aim_normal`` / ``sc.aim_slope``."""
     e = est.estimate()
-    return None if e is None else PerchTarget(point=e.p_W, R_WS=e.R_WS)
+    if e is None:
+        return None
+    target = PerchTarget(point=e.p_W, R_WS=e.R_WS)
+    if sc.aim_normal == 0.0 and sc.aim_slope == 0.0:
+        return target
+    down = sc.aim_slope * math.sin(target.incline)
+    return PerchTarget(point=e.p_W - sc.aim_normal * target.s3 - down * target.s1, R_WS=e.R_WS)
 
 
 def _shared(sc: SimScenario, config: PlannerConfig | None) -> tuple[SimScenario, PlannerConfig]:
@@ -674,7 +697,7 @@ def simulate(
     def estimate_target() -> PerchTarget | None:
         if isinstance(estimator, PlatformEstimator):
             return estimator.target(platform.model if platform is not None else MotionModel.CTRV)
-        return _estimate_target(estimator)
+        return _estimate_target(estimator, sc)
 
     # 1. hover and detect (until the initial frames have been delivered); on a platform, track it
     t = 0.0
@@ -768,7 +791,6 @@ def simulate(
         path_t.append(t_new)
         path_p.append(new.p_W)
         path_R.append(new.R_WB)
-        path_drift.append(np.zeros(3) if odo is None else odo.drift.copy())
         pad_t = truth_at(t_new)
         visible.append(camera.visible(new, pad_t.point, pad_t.R_WS))
         while pending and pending[0][0] <= t_new + 1e-9:
@@ -776,7 +798,8 @@ def simulate(
             lam = min(max((t_ex - t_prev) / (t_new - t_prev), 0.0), 1.0)
             antic_err.append(p_ant - (prev.p_W + lam * (new.p_W - prev.p_W)))
             antic_t.append(t_ex)
-        detect(t_new, new)
+        detect(t_new, new)  # samples the odometry at t_new (the believed pose of a detection)
+        path_drift.append(np.zeros(3) if odo is None else odo.drift.copy())
         hit = (detect_contact(prev, new, pad, t_prev, t_new, sc.criteria) if platform is None
                else pad_contact(prev, new, t_prev, t_new, platform, sc.pad_half_size, sc.criteria))
         crash = None if sc.ground_z is None else ground_contact(prev, new, t_prev, t_new, sc.ground_z)
