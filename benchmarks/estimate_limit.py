@@ -23,11 +23,11 @@ suite.
 
 from __future__ import annotations
 
-import argparse
 import time
 import warnings
 
 import numpy as np
+from _grid import grid_parser
 
 from avp.sim.evaluate import SimConfig, wilson_interval
 from avp.sim.limit import estimate_limit
@@ -38,11 +38,7 @@ SLOPE_OFFSETS = np.round(np.arange(-0.10, 0.0001, 0.01), 3)  # along s1 (m), dow
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--trials", type=int, default=100)
-    ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--inclines", type=float, nargs="+", default=[90.0, 60.0, 45.0])
-    ap.add_argument("--distances", type=float, nargs="+", default=[4.5, 7.5])
+    ap = grid_parser(__doc__)
     ap.add_argument("--taus", type=float, nargs="+", default=[0.6, 0.45, 0.25],
                     help="how long before contact the estimate is taken (s)")
     ap.add_argument("--backend", default="avp", choices=["avp", "rotorpy"], help="simulator back-end")

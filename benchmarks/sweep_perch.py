@@ -11,9 +11,10 @@ on one core; not part of the test suite.
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import warnings
+
+from _grid import grid_parser
 
 from avp.sim.evaluate import SimConfig, sweep
 
@@ -28,11 +29,7 @@ AXES = {
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--trials", type=int, default=100)
-    ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--inclines", type=float, nargs="+", default=[90.0, 60.0, 45.0])
-    ap.add_argument("--distances", type=float, nargs="+", default=[4.5, 7.5])
+    ap = grid_parser(__doc__)
     ap.add_argument("--axes", action="store_true", help="also vary each knob of AXES one at a time")
     ap.add_argument("--axis-inclines", type=float, nargs="+", default=[90.0],
                     help="conditions for the one-at-a-time axes (fewer to save time)")
