@@ -1,4 +1,4 @@
-"""What the target estimate allows: the ideal perch on an estimate, a ceiling for the closed loop.
+"""What the target estimate allows: the ideal perch on an estimate, an approximate bound for the closed loop.
 
 A closed-loop perch can be no better than the estimate it steers to. This module judges, with
 the simulator's own criteria (:func:`~avp.sim.contact.judge_perch`), an *ideal* vehicle that
@@ -110,7 +110,8 @@ class EstimateLimit:
     """One run's estimates ``tau`` s before contact and the ideal perch on them (module docstring).
 
     ``filter`` / ``known_scale`` are the two estimates (None without a detection by then),
-    ``normal_error`` their errors along the true normal (m, > 0: in front of the pad). The pad,
+    ``normal_error`` their errors along the true normal (m, > 0: in front of the pad), net of
+    the odometry drift at ``t_f`` (``drift``), which the vehicle shares with them. The pad,
     contact velocity ``v_S``, contact time ``t_f`` and criteria are the run's.
     """
 
