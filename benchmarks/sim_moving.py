@@ -49,7 +49,8 @@ def realistic_scenario(target: MovingTarget, height: float) -> SimScenario:
     sc = SimConfig().scenario(math.degrees(incline), BEHIND)
     platform = PlatformMotion(speed=target.speed, heading=target.heading, turn_rate=target.omega)
     return dataclasses.replace(sc, vehicle=dataclasses.replace(sc.vehicle, limits=LIMITS), height=height,
-                               pad_height=float(target.point[2]), platform=platform)
+                               pad_height=float(target.point[2]), platform=platform,
+                               aim_normal=0.0, aim_slope=0.0)  # the aim is for a static pad
 
 
 def realistic_run(target: MovingTarget, height: float, seed: int, mode: str) -> tuple[bool, str, float, float, float]:

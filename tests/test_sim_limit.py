@@ -1,4 +1,4 @@
-"""avp.sim.limit: the ideal perch on a run's own estimates (a ceiling for the closed loop)."""
+"""avp.sim.limit: the ideal perch on a run's own estimates (an approximate bound for the closed loop)."""
 
 from __future__ import annotations
 
@@ -155,9 +155,21 @@ def test_aiming_at_the_true_plane_leaves_no_plane_or_early_contact_failure(wall_
 def test_the_estimate_limit_refuses_a_moving_pad():
     from avp.sim.run import PlatformMotion
 
-    sc = dataclasses.replace(SimConfig().scenario(30, 4.5), platform=PlatformMotion(speed=1.0))
+    sc = dataclasses.replace(SimConfig(aim_normal=0.0, aim_slope=0.0).scenario(30, 4.5),
+                             platform=PlatformMotion(speed=1.0))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         r = simulate(sc, Mode.ONE_SHOT, seed=0, max_time=0.2)
     with pytest.raises(ConfigError, match="static pad"):
         estimate_before(r, 0.3)
+
+
+def test_aiming_down_the_slope_moves_the_ideal_contact_down_by_the_offset(wall_run):
+    """``judge(0, d)`` aims ``d`` along the estimate's ``s1``: a contact judged at ``t_f`` moves
+    by ``d`` along the true ``s1`` (to the tilt between the frames)."""
+    lim = estimate_limit(wall_run, (0.25,))[0]
+    n = lim.normal_error[0]
+    base = lim.judge(-n + 0.01)[0]  # 1 cm in front of the plane: judged at t_f, no crossing
+    down = lim.judge(-n + 0.01, -0.05)[0]
+    assert base.t == down.t == pytest.approx(lim.t_f)
+    assert down.error_S[0] - base.error_S[0] == pytest.approx(-0.05, abs=2e-3)

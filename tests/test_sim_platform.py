@@ -80,7 +80,8 @@ def _realistic(speed: float, turn_rate: float = 0.0, incline: float = 0.5, perfe
     from avp.sim.evaluate import SimConfig
     from avp.sim.run import PlatformMotion
 
-    sim = SimConfig().perfect_estimate() if perfect else SimConfig()
+    sim = SimConfig(aim_normal=0.0, aim_slope=0.0)  # the aim is for a static pad
+    sim = sim.perfect_estimate() if perfect else sim
     sc = sim.scenario(math.degrees(incline), 3.0)  # rotor mixer, motor lag, odometry drift, camera latency...
     sc = dataclasses.replace(sc, vehicle=dataclasses.replace(sc.vehicle, limits=LIMITS), height=0.0,
                              platform=PlatformMotion(speed=speed, turn_rate=turn_rate))

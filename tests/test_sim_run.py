@@ -134,6 +134,7 @@ def test_the_user_side_aims_deeper_and_down_the_slope_by_the_scenarios_offsets()
         want = pad.point - 0.012 * pad.s3 - 0.05 * math.sin(math.radians(incline)) * pad.s1
         np.testing.assert_allclose(r.initial_target.point, want, atol=1e-9)
         np.testing.assert_allclose(r.initial_target.R_WS, pad.R_WS, atol=1e-9)
+        np.testing.assert_allclose(r.initial_estimate_error, 0.0, atol=1e-9)  # the estimate's own error
 
 
 def test_an_aim_beyond_the_success_window_is_refused():
@@ -145,3 +146,10 @@ def test_an_aim_beyond_the_success_window_is_refused():
         SimScenario(aim_slope=0.2)
     with pytest.raises(ConfigError, match="aim_normal"):
         SimScenario(aim_normal=float("nan"))
+    with pytest.raises(ConfigError, match="aim_normal"):
+        SimScenario(aim_normal=0.05)  # beyond the 3 cm plane tolerance
+    from avp.sim.run import PlatformMotion
+
+    with pytest.raises(ConfigError, match="static pad"):
+        SimScenario(aim_slope=0.05, platform=PlatformMotion(speed=1.0))
+    assert SimScenario(aim_normal=np.float32(0.01)).aim_normal == pytest.approx(0.01)

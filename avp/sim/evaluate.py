@@ -361,8 +361,10 @@ class SimConfig:
         Where the user-side code aims off the estimated pad centre (m): into the pad, and down the
         slope times ``sin(incline)`` (:class:`~avp.sim.run.SimScenario`). 1.5 cm and 7 cm: an
         early contact (a pad found too deep) slides up the slope, 6.7 cm per cm on a wall, and
-        the vehicle tracks about 1 cm short; on 60 seeds AVP perched 43 / 43 of 60 on the wall at
-        4.5 / 7.5 m with this aim, 32 / 32 aiming at the estimate (docs/simulation.md).
+        the vehicle tracks about 1 cm short. Chosen on seeds 0-59 (wall, 4.5 / 7.5 m: 43 / 43 of
+        60 with this aim, 32 / 32 at the estimate); on seeds 100-179, 47 / 55 of 80 against 33 / 37
+        (docs/simulation.md). A user-side calibration, not a planner change; set both to 0 for a
+        moving platform.
     backend:
         Simulator back-end (:class:`~avp.sim.backend.Backend` name): ``"avp"`` or ``"rotorpy"``.
     drag_feedforward:

@@ -128,7 +128,9 @@ class EstimateLimit:
     def judge(self, normal_offset: float = 0.0, slope_offset: float = 0.0) -> tuple[PerchOutcome | None, PerchOutcome | None]:
         """The ideal perch on ``(filter, known_scale)``, aimed ``normal_offset`` (m) in front of
         each estimate along its normal and ``slope_offset`` (m) along its ``s1`` (negative: down
-        the slope). The best constant aim over many runs is the module's (approximate) ceiling."""
+        the slope; no ``sin(incline)`` factor). The best constant aim over many runs is the module's
+        approximate bound. A scenario's aim (:class:`~avp.sim.run.SimScenario`) is
+        ``judge(-aim_normal, -aim_slope sin(incline))`` on the unaimed estimate."""
         out: list[PerchOutcome | None] = []
         for e in (self.filter, self.known_scale):
             if e is None:

@@ -48,6 +48,7 @@ from typing import Any
 
 import numpy as np
 
+from .. import _validate as v
 from ..camera import Camera
 from ..config import PlannerConfig, VehicleLimits
 from ..errors import AvpError, ConfigError
@@ -300,11 +301,16 @@ class SimScenario:
         for name in ("lateral", "pad_height"):
             if not math.isfinite(getattr(self, name)):
                 raise ConfigError(f"scenario.{name}", "must be finite")
-        for name in ("aim_normal", "aim_slope"):
-            val = getattr(self, name)
-            if not (isinstance(val, (int, float)) and math.isfinite(val) and abs(val) < self.perch_criteria.center_tolerance):
-                raise ConfigError(f"scenario.{name}", f"must be a finite offset (m) smaller than the success "
-                                  f"criterion's {self.perch_criteria.center_tolerance} m, got {val!r}")
+        for name, window in (("aim_normal", self.perch_criteria.plane_tolerance),
+                             ("aim_slope", self.perch_criteria.center_tolerance)):
+            val = v.finite_float(f"scenario.{name}", getattr(self, name))
+            if abs(val) >= window:
+                raise ConfigError(f"scenario.{name}", f"an aim of {val} m leaves the success window "
+                                  f"({window} m); aim inside it")
+            object.__setattr__(self, name, val)
+        if self.platform is not None and (self.aim_normal or self.aim_slope):
+            raise ConfigError("scenario.aim_normal", "the aim is defined for a static pad; set aim_normal = "
+                              "aim_slope = 0 with a platform")
         if self.height is not None and not math.isfinite(self.height):
             raise ConfigError("scenario.height", "must be finite or None")
         if self.initial_frames < 1:
@@ -385,7 +391,9 @@ class SimResult:
         Contact point in S coordinates ``(s1, s2)`` (m): ``s1`` along the slope (vertical on a wall),
         ``s2`` lateral. The paper's Table VI calls these ``s3`` and ``s2``. None without contact.
     initial_target, initial_estimate_error:
-        First target estimate and its position error (m, W) w.r.t. the true pad.
+        First target handed to the planner (the estimate, aimed by ``aim_normal`` /
+        ``aim_slope``) and the first estimate's own position error (m, W) w.r.t. the true pad
+        (without the aim).
     first_plan, final_plan:
         The first committed plan and the last one (the same for one-shot).
     steps:
@@ -716,6 +724,9 @@ def simulate(
         state, t = _track(state, platform, sc, detect, odo, dt, vehicle_plant)
     t_plan = t
     initial = estimate_target()
+    first_estimate = estimator.estimate() if platform is None else None  # the estimate itself, not the aim
+    initial_point = (first_estimate.p_W if first_estimate is not None
+                     else (initial.point if initial is not None else None))
     empty = np.zeros((0, 3))
 
     def finish(outcome: str, contact: Contact | None = None, **kw: Any) -> SimResult:
@@ -723,7 +734,7 @@ def simulate(
             scenario=sc, mode=mode, seed=int(seed), outcome=outcome, contact=contact,
             interception=None if contact is None else contact.p_S[:2].copy(),
             initial_target=initial,
-            initial_estimate_error=None if initial is None else initial.point - truth_at(t_plan).point,
+            initial_estimate_error=None if initial_point is None else initial_point - truth_at(t_plan).point,
             first_plan=None, final_plan=None, steps=(), anticipation_error=empty,
             anticipation_t=np.zeros(0), solve_times=np.zeros(0), path_t=np.zeros(0),
             path_p=empty, path_drift=empty, visible=np.zeros(0, dtype=bool),
