@@ -201,6 +201,7 @@ def test_certified_plans_keep_the_true_body_rate_below_the_limit(request) -> Non
 @settings(max_examples=200, deadline=None)
 @given(normal=st.tuples(*[st.floats(-1.0, 1.0)] * 3), up=st.tuples(*[st.floats(-1.0, 1.0)] * 3),
        alpha=st.floats(1.0, 15.0))
+@example(normal=(0.75, 1.192092896e-07, 1.192092896e-07), up=(0.0, 1.0, 0.0), alpha=1.0)  # a nearly vertical s2
 def test_contact_yaw_reproduces_R_WS_or_says_why_not(normal, up, alpha) -> None:
     n, u = np.array(normal), np.array(up)
     assume(np.linalg.norm(n) > 0.1 and np.linalg.norm(np.cross(u, n)) > 0.1 * np.linalg.norm(n))
@@ -215,7 +216,13 @@ def test_contact_yaw_reproduces_R_WS_or_says_why_not(normal, up, alpha) -> None:
         h = target.s2 * np.array([1.0, 1.0, 0.0])
         if np.linalg.norm(h) > 1e-6:  # b2_des is the horizontal direction of s2
             assert np.allclose(b2_des, h / np.linalg.norm(h), atol=1e-9)
-        assert abs(frames.contact_frame_error(target.R_WS) - frames.rotation_error_angle(R, target.R_WS)) < 1e-9
+        # Both sides build b1 = unit(b2_des x b3) from b3 = unit(a_f + g e3): the sum cancels g to
+        # a rounding of about eps g, and the cross product divides it by |b2_des x s3|, which
+        # vanishes as the roll nears 90 deg (a vertical s2). contact_frame_error uses 4 m/s^2 of
+        # thrust and this test alpha, so the two agree to that forward error, not to 1e-9 flat.
+        cond = float(np.linalg.norm(np.cross(b2_des, target.s3)))
+        tol = 1e-9 + 8 * np.finfo(float).eps * (1.0 + G / alpha) / max(cond, 1e-300)
+        assert abs(frames.contact_frame_error(target.R_WS) - frames.rotation_error_angle(R, target.R_WS)) < tol
         return
     assert np.allclose(frames.attitude(a_f, psi), target.R_WS, atol=1e-9)
     assert np.allclose(attitude_zyx(a_f[None], np.array([psi]))[0], target.R_WS, atol=1e-9)
