@@ -202,6 +202,7 @@ def test_certified_plans_keep_the_true_body_rate_below_the_limit(request) -> Non
 @given(normal=st.tuples(*[st.floats(-1.0, 1.0)] * 3), up=st.tuples(*[st.floats(-1.0, 1.0)] * 3),
        alpha=st.floats(1.0, 15.0))
 @example(normal=(0.75, 1.192092896e-07, 1.192092896e-07), up=(0.0, 1.0, 0.0), alpha=1.0)  # a nearly vertical s2
+@example(normal=(1.0, 0.5, 0.0), up=(0.0, 5.960464477539063e-08, 1.0), alpha=3.0)  # an error angle near 0
 def test_contact_yaw_reproduces_R_WS_or_says_why_not(normal, up, alpha) -> None:
     n, u = np.array(normal), np.array(up)
     assume(np.linalg.norm(n) > 0.1 and np.linalg.norm(np.cross(u, n)) > 0.1 * np.linalg.norm(n))
@@ -276,3 +277,17 @@ def test_from_incline_matches_from_normal_off_the_level_pads(incline_deg) -> Non
         b = avp.PerchTarget.from_normal([0.0, 0.0, 0.0], a.s3)
         assert np.allclose(a.R_WS, b.R_WS, atol=1e-12)
     assert np.allclose(a.s2, [-math.sin(0.4), math.cos(0.4), 0.0])  # s2 = e3 x h, horizontal
+
+
+@settings(max_examples=200, deadline=None)
+@given(angle=st.floats(0.0, math.pi), axis=st.tuples(*[st.floats(-1.0, 1.0)] * 3),
+       base=st.tuples(*[st.floats(-3.0, 3.0)] * 3))
+def test_rotation_error_angle_is_accurate_near_zero_and_pi(angle, axis, base) -> None:
+    """The angle between ``R`` and ``R exp(angle a)`` is ``angle`` to rounding, also where
+    ``arccos`` of the trace loses half the digits (about 1e-8 rad near 0 and pi)."""
+    a = np.array(axis)
+    assume(np.linalg.norm(a) > 0.1)
+    a /= np.linalg.norm(a)
+    R0 = frames.expm_so3(np.array(base))
+    R1 = R0 @ frames.expm_so3(angle * a)
+    assert abs(float(frames.rotation_error_angle(R0, R1)) - angle) < 1e-13 + 1e-12 * angle
