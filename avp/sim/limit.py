@@ -97,7 +97,7 @@ def estimate_before(result: SimResult, tau: float, *, known_scale: bool = False)
                 raise ConfigError("result", "a detection without the camera position cannot be unscaled")
             est.update(dataclasses.replace(m, p_W=m.p_cam_W + (m.p_W - m.p_cam_W) / (1.0 + b)))
     else:
-        est = TargetEstimator(sc.filter_scale_error, sc.filter_range_ratio, sc.filter_estimate_scale)
+        est = sc.target_filter()
         for m in ms:
             est.update(m)
     e = est.estimate()

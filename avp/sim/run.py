@@ -345,6 +345,10 @@ class SimScenario:
         """The true pad as a :class:`~avp.types.PerchTarget`."""
         return PerchTarget.from_incline([self.distance, 0.0, self.pad_height], self.incline, heading=0.0)
 
+    def target_filter(self) -> TargetEstimator:
+        """A fresh user-side filter of a static pad with this scenario's settings."""
+        return TargetEstimator(self.filter_scale_error, self.filter_range_ratio, self.filter_estimate_scale)
+
     def pad(self) -> PerchPad:
         """The true pad (at ``t = 0``) as a :class:`~avp.sim.contact.PerchPad`."""
         t = self.target()
@@ -677,7 +681,7 @@ def simulate(
     camera = CameraSensor(sc.camera, rng_bias)
     estimator: TargetEstimator | PlatformEstimator
     if sc.platform is None:
-        estimator = TargetEstimator(sc.filter_scale_error, sc.filter_range_ratio, sc.filter_estimate_scale)
+        estimator = sc.target_filter()
     else:
         estimator = PlatformEstimator(sc.platform.window, sc.filter_scale_error, sc.platform.turn_rate != 0.0,
                                       sc.filter_estimate_scale)
