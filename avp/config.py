@@ -711,9 +711,13 @@ class ReplanConfig:
         margin above hover; in the measured runs the trackability certificate, not this budget,
         was what stopped late corrections (the budget binds early, on far, noisy estimates).
     partial_fractions:
-        Fractions of the (budgeted) correction tried in order until one certifies. ``(1, 0.5,
-        0.25, 0.125)``: with ``(1, 0.5, 0.25)`` 1/6 (4.5 m) and 4/6 (7.5 m) wall perches succeeded,
-        with the extra 1/8 step 2/6 and 3/6 (6 seeds each; repeated small commits accumulate).
+        Fractions of the (budgeted) correction, largest first; the largest that certifies is
+        committed. Tried in the order: the first, the last, and only if the last certifies the
+        ones between, in order (a step that cannot correct at all costs two solves; over 168
+        closed-loop runs the same outcomes as trying all in order, with the step p99 at 6.0
+        instead of 8.4 ms). ``(1, 0.5, 0.25, 0.125)``: with ``(1, 0.5, 0.25)`` 1/6 (4.5 m) and
+        4/6 (7.5 m) wall perches succeeded, with the extra 1/8 step 2/6 and 3/6 (6 seeds each;
+        repeated small commits accumulate).
     reach_tolerance:
         Distance (m) between the committed contact point and the latest estimate above which a
         step without a full correction reports ``CANNOT_REACH``. 0.05 m: half the in-plane

@@ -15,7 +15,9 @@ committed plan, and commits the new plan only if it is certified. The policy
 - **Reach budget.** The contact point may move by at most ``0.5 reach_acceleration T^2`` with
   ``T`` the time left; larger corrections are clipped to the budget, and if the full correction
   does not certify, the fractions ``partial_fractions`` of it are tried: a partial, certified
-  correction is preferred over none (``PARTIAL``).
+  correction is preferred over none (``PARTIAL``). The full correction first, then the
+  smallest fraction; only if that certifies, the ones between, largest first: a step that
+  cannot correct at all costs two solves, not one per fraction.
 - **Certified commits.** A plan is committed only if ``result.ok`` (no relaxed plan unless
   ``allow_relaxed``), its actuator bounds are certified and its snap is certified below
   ``snap_max`` (:mod:`avp.trackability`), which bounds the angular acceleration.
@@ -316,7 +318,11 @@ class Replanner:
         fractions = rc.partial_fractions if self._static_pad else (1.0,)
         elapsed_total, n_solves, last_reason = 0.0, 0, ""
         last_result: PlanResult | None = None
-        for frac in fractions:
+        smallest: tuple[PlanResult, SnapReport | None, PerchTarget, float] | None = None
+        # Order: the full (first) fraction, then the smallest; only if the smallest certifies,
+        # the ones between, largest first (a step that cannot correct at all costs two solves).
+        order = list(fractions) if len(fractions) < 3 else [fractions[0], fractions[-1], *fractions[1:-1]]
+        for k, frac in enumerate(order):
             f = frac * f_max
             goal = _blend(self.committed_target, self.target, f) if f < 1.0 else self.target
             durations = np.full(self.config.n_segments, self._retimed(remaining, goal) / self.config.n_segments)
@@ -331,18 +337,36 @@ class Replanner:
             ok, why, snap = self._certified(result)
             if error is not None:
                 why = error
+            if ok and len(order) >= 3 and k == 1:
+                assert result is not None
+                smallest = (result, snap, goal, f)  # kept; a larger fraction between may certify
+                continue
             if ok:
                 assert result is not None
-                self._previous = committed
-                self.trajectory = result.trajectory
-                self.committed_target = goal
-                action = ReplanAction.REPLANNED if f >= 1.0 else ReplanAction.PARTIAL
-                return record(action, "ok" if f >= 1.0 else f"{f:.0%} of the correction ({shift:.3f} m requested, "
-                              f"budget {budget:.3f} m)", anticipated=start, result=result,
-                              solve_time=elapsed_total, fraction=f, anchored=anchored, n_solves=n_solves, snap=snap)
+                return self._commit(record, committed, result, snap, goal, f, shift, budget, start,
+                                    elapsed_total, anchored, n_solves)
             last_reason = why
+            if k == 1 and len(order) >= 3:
+                break  # not even the smallest correction certifies
+        if smallest is not None:
+            result, snap, goal, f = smallest
+            return self._commit(record, committed, result, snap, goal, f, shift, budget, start,
+                                elapsed_total, anchored, n_solves)
         return record(ReplanAction.KEPT_PREVIOUS, last_reason, anticipated=start, result=last_result,
                       solve_time=elapsed_total, anchored=anchored, n_solves=n_solves)
+
+    def _commit(self, record: Any, committed: Trajectory, result: PlanResult, snap: SnapReport | None,
+                goal: PerchTarget, f: float, shift: float, budget: float, start: State, elapsed: float,
+                anchored: bool, n_solves: int) -> ReplanStep:
+        """Make ``result`` (to ``goal``, fraction ``f`` of the correction) the committed plan."""
+        self._previous = committed
+        self.trajectory = result.trajectory
+        self.committed_target = goal
+        action = ReplanAction.REPLANNED if f >= 1.0 else ReplanAction.PARTIAL
+        reason = "ok" if f >= 1.0 else f"{f:.0%} of the correction ({shift:.3f} m requested, budget {budget:.3f} m)"
+        step: ReplanStep = record(action, reason, anticipated=start, result=result, solve_time=elapsed,
+                                  fraction=f, anchored=anchored, n_solves=n_solves, snap=snap)
+        return step
 
     def _retimed(self, remaining: float, goal: PerchTarget) -> float:
         """Time left after moving the contact time with the normal part of the correction."""

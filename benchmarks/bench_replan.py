@@ -269,16 +269,18 @@ def main() -> None:
             ref = json.load(fh)
         mine = {k: json.loads(json.dumps(v)) for k, v in decisions.items() if k in ref}
 
-        def policy(v: dict[str, Any]) -> Any:
-            return v["outcome"], [s[:3] for s in v["steps"]]
+        def policy(v: dict[str, Any], width: int = 3) -> Any:
+            return v["outcome"], [s[:width] for s in v["steps"]]
 
         same = [k for k in mine if mine[k] == ref[k]]
         same_policy = [k for k in mine if policy(mine[k]) == policy(ref[k])]
-        print(f"compared with {args.compare}: {len(mine)} runs in both; {len(same_policy)} with the same outcome "
-              f"and per-step actions, fractions and solves; {len(same)} also with every committed plan bit for bit; "
-              f"different decisions: {sorted(set(mine) - set(same_policy))[:10]}, "
+        same_choice = [k for k in mine if policy(mine[k], 2) == policy(ref[k], 2)]
+        print(f"compared with {args.compare}: {len(mine)} runs in both; {len(same_choice)} with the same outcome "
+              f"and per-step actions and fractions; {len(same_policy)} also with the same solves per step; "
+              f"{len(same)} also with every committed plan bit for bit; "
+              f"different actions or fractions: {sorted(set(mine) - set(same_choice))[:10]}, "
+              f"different solves only: {sorted(set(same_choice) - set(same_policy))[:10]}, "
               f"different plan bits only: {sorted(set(same_policy) - set(same))[:10]}")
-
 
 if __name__ == "__main__":
     main()

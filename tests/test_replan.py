@@ -175,6 +175,41 @@ def test_a_late_jump_of_the_estimate_is_reported_as_cannot_reach():
     assert last.reach_budget < 0.5  # the numbers say why: the budget has collapsed
 
 
+@pytest.mark.parametrize(("largest", "want_fraction", "want_solves"),
+                         [(1.0, 1.0, 1), (0.6, 0.5, 3), (0.3, 0.25, 4), (0.2, 0.125, 4), (0.1, 0.0, 2)])
+def test_fractions_are_tried_full_then_smallest_then_largest_between(monkeypatch, largest, want_fraction,
+                                                                     want_solves):
+    """Order (1, 1/8, 1/2, 1/4): a step that cannot correct at all costs two solves, and the largest
+    fraction that certifies is committed. The certificate is replaced by "fraction <= largest"."""
+    rp = Replanner(WALL, sim_config())
+    rp.step(0.0, START)
+    first = rp.trajectory
+    moved = avp.PerchTarget(point=WALL.point + [0.0, 0.04, 0.0], R_WS=WALL.R_WS)
+    tried: list[float] = []
+    real_plan = rp._plan
+
+    def plan(state, target, *args):
+        tried.append(float(np.linalg.norm(target.point - WALL.point) / 0.04))
+        return real_plan(state, target, *args)
+
+    def certified(result, trackability=True):
+        ok = tried[-1] <= largest + 1e-9
+        return ok, "ok" if ok else "injected: not certified", None
+
+    monkeypatch.setattr(rp, "_plan", plan)
+    monkeypatch.setattr(rp, "_certified", certified)
+    t = 0.4
+    s = rp.step(t, _fly_reference(rp, t), moved)
+    assert s.n_solves == want_solves == len(tried)
+    assert tried == pytest.approx([1.0, 0.125, 0.5, 0.25][:want_solves])
+    assert s.fraction == pytest.approx(want_fraction)
+    if want_fraction == 0.0:
+        assert s.action is ReplanAction.KEPT_PREVIOUS and rp.trajectory is first
+    else:
+        assert rp.trajectory is not first
+        assert np.linalg.norm(rp.committed_target.point - WALL.point) == pytest.approx(0.04 * want_fraction)
+
+
 def test_reach_budget_limits_how_far_one_step_moves_the_contact_point():
     rc = ReplanConfig(reach_acceleration=1.0)
     rp = Replanner(WALL, sim_config(), rc)
