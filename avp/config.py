@@ -7,6 +7,7 @@ variant with :func:`dataclasses.replace`.
 
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import dataclass, field
 from enum import Enum
@@ -711,11 +712,14 @@ class ReplanConfig:
         margin above hover; in the measured runs the trackability certificate, not this budget,
         was what stopped late corrections (the budget binds early, on far, noisy estimates).
     partial_fractions:
-        Fractions of the (budgeted) correction, largest first; the largest that certifies is
-        committed. Tried in the order: the first, the last, and only if the last certifies the
-        ones between, in order (a step that cannot correct at all costs two solves; over 168
-        closed-loop runs the same outcomes as trying all in order, with the step p99 at 6.0
-        instead of 8.4 ms). ``(1, 0.5, 0.25, 0.125)``: with ``(1, 0.5, 0.25)`` 1/6 (4.5 m) and
+        Fractions of the (budgeted) correction, strictly decreasing. Tried in the order: the
+        first, the last, and only if the last certifies the ones between, in order; the first
+        of those that certifies is committed, else the last. So when the smallest certifies the
+        largest certifying fraction is committed; when it does not, none is (a larger one that
+        would have certified is not tried). A step that cannot correct at all costs two solves,
+        a committed fraction between one solve more than in plain order. Over 168 closed-loop
+        runs against plain order: the same number of perches (142), the step p99 at 6.0 instead
+        of 8.4 ms. ``(1, 0.5, 0.25, 0.125)``: with ``(1, 0.5, 0.25)`` 1/6 (4.5 m) and
         4/6 (7.5 m) wall perches succeeded, with the extra 1/8 step 2/6 and 3/6 (6 seeds each;
         repeated small commits accumulate).
     reach_tolerance:
@@ -787,4 +791,7 @@ class ReplanConfig:
         fr = tuple(float(f) for f in self.partial_fractions)
         if not fr or any(not 0.0 < f <= 1.0 for f in fr):
             raise ConfigError("replan.partial_fractions", f"need fractions in (0, 1], got {self.partial_fractions!r}")
+        if any(b >= a for a, b in itertools.pairwise(fr)):
+            raise ConfigError("replan.partial_fractions",
+                              f"must be strictly decreasing (largest first), got {self.partial_fractions!r}")
         object.__setattr__(self, "partial_fractions", fr)

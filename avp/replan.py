@@ -34,6 +34,7 @@ inside planning): the :class:`ReplanStep` says what happened.
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 from enum import Enum
 from typing import Any
@@ -321,6 +322,7 @@ class Replanner:
         smallest: tuple[PlanResult, SnapReport | None, PerchTarget, float] | None = None
         # Order: the full (first) fraction, then the smallest; only if the smallest certifies,
         # the ones between, largest first (a step that cannot correct at all costs two solves).
+        # With a deadline, a certified smallest correction is committed when the time runs out.
         order = list(fractions) if len(fractions) < 3 else [fractions[0], fractions[-1], *fractions[1:-1]]
         for k, frac in enumerate(order):
             f = frac * f_max
@@ -331,6 +333,10 @@ class Replanner:
             n_solves += 1
             last_result = result
             if rc.deadline is not None and elapsed_total > rc.deadline:
+                if smallest is not None:  # a certified correction is at hand: commit it, solve no more
+                    result, snap, goal, f = smallest
+                    return self._commit(record, committed, result, snap, goal, f, shift, budget, start,
+                                        elapsed_total, anchored, n_solves)
                 return record(ReplanAction.KEPT_PREVIOUS, f"too late: solves took {elapsed_total * 1e3:.1f} ms > "
                               f"deadline {rc.deadline * 1e3:.1f} ms", anticipated=start, result=result,
                               solve_time=elapsed_total, anchored=anchored, n_solves=n_solves)
@@ -355,7 +361,7 @@ class Replanner:
         return record(ReplanAction.KEPT_PREVIOUS, last_reason, anticipated=start, result=last_result,
                       solve_time=elapsed_total, anchored=anchored, n_solves=n_solves)
 
-    def _commit(self, record: Any, committed: Trajectory, result: PlanResult, snap: SnapReport | None,
+    def _commit(self, record: Callable[..., ReplanStep], committed: Trajectory, result: PlanResult, snap: SnapReport | None,
                 goal: PerchTarget, f: float, shift: float, budget: float, start: State, elapsed: float,
                 anchored: bool, n_solves: int) -> ReplanStep:
         """Make ``result`` (to ``goal``, fraction ``f`` of the correction) the committed plan."""
@@ -364,9 +370,8 @@ class Replanner:
         self.committed_target = goal
         action = ReplanAction.REPLANNED if f >= 1.0 else ReplanAction.PARTIAL
         reason = "ok" if f >= 1.0 else f"{f:.0%} of the correction ({shift:.3f} m requested, budget {budget:.3f} m)"
-        step: ReplanStep = record(action, reason, anticipated=start, result=result, solve_time=elapsed,
-                                  fraction=f, anchored=anchored, n_solves=n_solves, snap=snap)
-        return step
+        return record(action, reason, anticipated=start, result=result, solve_time=elapsed,
+                      fraction=f, anchored=anchored, n_solves=n_solves, snap=snap)
 
     def _retimed(self, remaining: float, goal: PerchTarget) -> float:
         """Time left after moving the contact time with the normal part of the correction."""

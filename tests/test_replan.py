@@ -175,39 +175,68 @@ def test_a_late_jump_of_the_estimate_is_reported_as_cannot_reach():
     assert last.reach_budget < 0.5  # the numbers say why: the budget has collapsed
 
 
-@pytest.mark.parametrize(("largest", "want_fraction", "want_solves"),
-                         [(1.0, 1.0, 1), (0.6, 0.5, 3), (0.3, 0.25, 4), (0.2, 0.125, 4), (0.1, 0.0, 2)])
-def test_fractions_are_tried_full_then_smallest_then_largest_between(monkeypatch, largest, want_fraction,
-                                                                     want_solves):
-    """Order (1, 1/8, 1/2, 1/4): a step that cannot correct at all costs two solves, and the largest
-    fraction that certifies is committed. The certificate is replaced by "fraction <= largest"."""
-    rp = Replanner(WALL, sim_config())
+def _fraction_probe(monkeypatch, certifies, replan=None, elapsed=None):
+    """A replanner after its first plan whose certificate is replaced by ``certifies(fraction)``
+    (and, with ``elapsed``, each planning call reported to take that long, s); returns it and the
+    list of fractions it solved for."""
+    rp = Replanner(WALL, sim_config(), replan)
     rp.step(0.0, START)
-    first = rp.trajectory
-    moved = avp.PerchTarget(point=WALL.point + [0.0, 0.04, 0.0], R_WS=WALL.R_WS)
     tried: list[float] = []
     real_plan = rp._plan
 
     def plan(state, target, *args):
         tried.append(float(np.linalg.norm(target.point - WALL.point) / 0.04))
-        return real_plan(state, target, *args)
+        result, took, error = real_plan(state, target, *args)
+        return result, took if elapsed is None else elapsed, error
 
     def certified(result, trackability=True):
-        ok = tried[-1] <= largest + 1e-9
+        ok = certifies(tried[-1])
         return ok, "ok" if ok else "injected: not certified", None
 
     monkeypatch.setattr(rp, "_plan", plan)
     monkeypatch.setattr(rp, "_certified", certified)
+    return rp, tried
+
+
+MOVED = avp.PerchTarget(point=WALL.point + [0.0, 0.04, 0.0], R_WS=WALL.R_WS)
+
+
+@pytest.mark.parametrize(("certifying", "want_fraction", "want_solves"),
+                         [((1.0, 0.5, 0.25, 0.125), 1.0, 1), ((0.5, 0.25, 0.125), 0.5, 3),
+                          ((0.25, 0.125), 0.25, 4), ((0.125,), 0.125, 4), ((), 0.0, 2),
+                          ((0.5,), 0.0, 2)])  # not monotone: 1/2 would certify, 1/8 does not
+def test_fractions_are_tried_full_then_smallest_then_largest_between(monkeypatch, certifying, want_fraction,
+                                                                     want_solves):
+    """Order (1, 1/8, 1/2, 1/4): a step that cannot correct at all costs two solves; when 1/8
+    certifies, the largest fraction that certifies is committed."""
+    rp, tried = _fraction_probe(monkeypatch, lambda f: any(abs(f - c) < 1e-9 for c in certifying))
+    first = rp.trajectory
     t = 0.4
-    s = rp.step(t, _fly_reference(rp, t), moved)
+    s = rp.step(t, _fly_reference(rp, t), MOVED)
     assert s.n_solves == want_solves == len(tried)
     assert tried == pytest.approx([1.0, 0.125, 0.5, 0.25][:want_solves])
     assert s.fraction == pytest.approx(want_fraction)
     if want_fraction == 0.0:
         assert s.action is ReplanAction.KEPT_PREVIOUS and rp.trajectory is first
     else:
-        assert rp.trajectory is not first
+        assert s.action is (ReplanAction.REPLANNED if want_fraction == 1.0 else ReplanAction.PARTIAL)
+        assert rp.trajectory is not first and rp.trajectory is s.trajectory
         assert np.linalg.norm(rp.committed_target.point - WALL.point) == pytest.approx(0.04 * want_fraction)
+
+
+def test_a_deadline_commits_the_certified_smallest_correction(monkeypatch):
+    """With a deadline that the third solve overruns, the 1/8 correction already certified is
+    committed (not thrown away for a KEPT_PREVIOUS)."""
+    t = 0.4
+    rp, tried = _fraction_probe(monkeypatch, lambda f: f < 0.2, ReplanConfig(deadline=0.5), elapsed=1.0)
+    s = rp.step(t, _fly_reference(rp, t), MOVED)
+    assert tried == pytest.approx([1.0])  # the first solve already overran: nothing at hand
+    assert s.action is ReplanAction.KEPT_PREVIOUS and "too late" in s.reason
+
+    rp, tried = _fraction_probe(monkeypatch, lambda f: f < 0.2, ReplanConfig(deadline=2.5), elapsed=1.0)
+    s = rp.step(t, _fly_reference(rp, t), MOVED)
+    assert tried == pytest.approx([1.0, 0.125, 0.5])  # the third solve ends past 2.5 s
+    assert s.action is ReplanAction.PARTIAL and s.fraction == pytest.approx(0.125) and s.n_solves == 3
 
 
 def test_reach_budget_limits_how_far_one_step_moves_the_contact_point():
@@ -225,6 +254,10 @@ def test_reach_budget_limits_how_far_one_step_moves_the_contact_point():
 def test_replan_config_rejects_bad_knobs():
     with pytest.raises(avp.ConfigError, match="replan.partial_fractions"):
         ReplanConfig(partial_fractions=(1.0, 1.5))
+    with pytest.raises(avp.ConfigError, match="strictly decreasing"):
+        ReplanConfig(partial_fractions=(0.125, 0.25, 1.0))
+    with pytest.raises(avp.ConfigError, match="strictly decreasing"):
+        ReplanConfig(partial_fractions=(1.0, 0.5, 0.5))
     with pytest.raises(avp.ConfigError, match="replan.snap_thrust_max"):
         ReplanConfig(snap_thrust_max=-1.0)
     with pytest.raises(avp.ConfigError, match="replan.anchor_position"):
