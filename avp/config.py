@@ -150,15 +150,15 @@ class TimeAllocation:
     """Initial duration rule: ``T = t_attitude + sqrt(2 d / a_nominal) + |v0| / a_nominal``.
 
     ``d`` is the start-to-target distance; the speed term adds the time to bleed off ``|v0|``.
-    Segments share the total equally. With the defaults: 1.43 / 2.07 / 2.94 s at 1.5 / 3.5 / 7.5
+    Segments share the total equally. With the defaults: 1.42 / 2.07 / 2.94 s at 1.5 / 3.5 / 7.5
     m from rest. ``a_nominal = 2.0 m/s^2`` was measured in closed loop in the realistic
     simulator (``docs/decisions.md``): the extra time puts more of the camera's close detections
     before the last moment a correction can still be tracked. Against 2.5 m/s^2 on a wall, AVP
     perched 78 / 82 instead of 57 / 70 of 100 unused seeds (4.5 / 7.5 m). Shorter totals pitch
     the vehicle past the camera's half-angle at launch (target visibility 36-40 % at 4.6
     m/s^2); longer ones make the min-snap path dip below a wall target (from hover 7.5 m from a
-    wall, 1.52 m below the pad at 2.0 m/s^2, 1.16 m at 2.5): set ``Workspace.ground_z`` to bound
-    the dip where the ground is near.
+    wall, 1.52 m below the pad at 2.0 m/s^2, 1.16 m at 2.5; below a floor at z = 0 for a pad
+    1.5 m high): set ``Workspace.ground_z`` wherever there is a ground.
     """
 
     nominal_acceleration: float = 2.0

@@ -87,8 +87,9 @@ def test_failed_and_relaxed_plans_are_stamped(wall) -> None:
         assert fig._suptitle.get_text().split("\n")[1].startswith("FAILED")
     finally:
         pyplot().close(fig)
-    # a 3 m wall with a 2.5 rad/s tilt-rate limit certifies only after relaxations
-    relaxed_cfg = dataclasses.replace(avp.PlannerConfig(), limits=avp.VehicleLimits(tilt_rate_max=2.5))
+    # a 3 m wall with a 2.5 rad/s tilt-rate limit and 1.93 s certifies only after relaxations
+    relaxed_cfg = dataclasses.replace(avp.PlannerConfig(), limits=avp.VehicleLimits(tilt_rate_max=2.5),
+                                      time_allocation=avp.TimeAllocation(nominal_acceleration=2.0))
     wall_target = avp.PerchTarget.from_incline([3.0, 0.0, 1.5], math.pi / 2)
     relaxed = avp.plan_detailed(avp.State.hover([0.0, 0.0, 1.5]), wall_target, relaxed_cfg)
     assert relaxed.relaxations and relaxed.trajectory is not None
