@@ -34,7 +34,6 @@ inside planning): the :class:`ReplanStep` says what happened.
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
 from dataclasses import dataclass, replace
 from enum import Enum
 from typing import Any
@@ -320,10 +319,21 @@ class Replanner:
         elapsed_total, n_solves, last_reason = 0.0, 0, ""
         last_result: PlanResult | None = None
         smallest: tuple[PlanResult, SnapReport | None, PerchTarget, float] | None = None
+
+        def commit(result: PlanResult, snap: SnapReport | None, goal: PerchTarget, f: float) -> ReplanStep:
+            self._previous = committed
+            self.trajectory = result.trajectory
+            self.committed_target = goal
+            action = ReplanAction.REPLANNED if f >= 1.0 else ReplanAction.PARTIAL
+            reason = "ok" if f >= 1.0 else f"{f:.0%} of the correction ({shift:.3f} m requested, budget {budget:.3f} m)"
+            return record(action, reason, anticipated=start, result=result, solve_time=elapsed_total,
+                          fraction=f, anchored=anchored, n_solves=n_solves, snap=snap)
+
         # Order: the full (first) fraction, then the smallest; only if the smallest certifies,
         # the ones between, largest first (a step that cannot correct at all costs two solves).
         # With a deadline, a certified smallest correction is committed when the time runs out.
-        order = list(fractions) if len(fractions) < 3 else [fractions[0], fractions[-1], *fractions[1:-1]]
+        probe_smallest = len(fractions) >= 3
+        order = [fractions[0], fractions[-1], *fractions[1:-1]] if probe_smallest else list(fractions)
         for k, frac in enumerate(order):
             f = frac * f_max
             goal = _blend(self.committed_target, self.target, f) if f < 1.0 else self.target
@@ -334,44 +344,27 @@ class Replanner:
             last_result = result
             if rc.deadline is not None and elapsed_total > rc.deadline:
                 if smallest is not None:  # a certified correction is at hand: commit it, solve no more
-                    result, snap, goal, f = smallest
-                    return self._commit(record, committed, result, snap, goal, f, shift, budget, start,
-                                        elapsed_total, anchored, n_solves)
+                    return commit(*smallest)
                 return record(ReplanAction.KEPT_PREVIOUS, f"too late: solves took {elapsed_total * 1e3:.1f} ms > "
                               f"deadline {rc.deadline * 1e3:.1f} ms", anticipated=start, result=result,
                               solve_time=elapsed_total, anchored=anchored, n_solves=n_solves)
             ok, why, snap = self._certified(result)
             if error is not None:
                 why = error
-            if ok and len(order) >= 3 and k == 1:
-                assert result is not None
-                smallest = (result, snap, goal, f)  # kept; a larger fraction between may certify
-                continue
+            is_smallest = probe_smallest and k == 1
             if ok:
                 assert result is not None
-                return self._commit(record, committed, result, snap, goal, f, shift, budget, start,
-                                    elapsed_total, anchored, n_solves)
+                if not is_smallest:
+                    return commit(result, snap, goal, f)
+                smallest = (result, snap, goal, f)  # kept; a larger fraction between may certify
+                continue
             last_reason = why
-            if k == 1 and len(order) >= 3:
+            if is_smallest:
                 break  # not even the smallest correction certifies
         if smallest is not None:
-            result, snap, goal, f = smallest
-            return self._commit(record, committed, result, snap, goal, f, shift, budget, start,
-                                elapsed_total, anchored, n_solves)
+            return commit(*smallest)
         return record(ReplanAction.KEPT_PREVIOUS, last_reason, anticipated=start, result=last_result,
                       solve_time=elapsed_total, anchored=anchored, n_solves=n_solves)
-
-    def _commit(self, record: Callable[..., ReplanStep], committed: Trajectory, result: PlanResult, snap: SnapReport | None,
-                goal: PerchTarget, f: float, shift: float, budget: float, start: State, elapsed: float,
-                anchored: bool, n_solves: int) -> ReplanStep:
-        """Make ``result`` (to ``goal``, fraction ``f`` of the correction) the committed plan."""
-        self._previous = committed
-        self.trajectory = result.trajectory
-        self.committed_target = goal
-        action = ReplanAction.REPLANNED if f >= 1.0 else ReplanAction.PARTIAL
-        reason = "ok" if f >= 1.0 else f"{f:.0%} of the correction ({shift:.3f} m requested, budget {budget:.3f} m)"
-        return record(action, reason, anticipated=start, result=result, solve_time=elapsed,
-                      fraction=f, anchored=anchored, n_solves=n_solves, snap=snap)
 
     def _retimed(self, remaining: float, goal: PerchTarget) -> float:
         """Time left after moving the contact time with the normal part of the correction."""
