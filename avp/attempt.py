@@ -10,16 +10,20 @@ relaxations.
 FoV stage (``config.fov.enabled``; rows (8)-(9), SQP steps, fallback (16)), at the given
 durations:
 
-* **Replanning** (a ``previous`` plan is given): linearise the cone (7) at ``n_p`` points of the
-  previous plan (mapped by the fraction of the remaining time, which is the same absolute time when
-  the final time did not change), solve the QP with the FoV rows; if that is incompatible (16),
-  solve again without them.
+* **Replanning** (a ``previous`` plan is given): solve without FoV rows, linearise the cone (7)
+  at ``n_p`` points of that solution and solve again with the rows (one SQP step); if that is
+  incompatible (16), return the solution without them. (Linearising on the previous plan, as the
+  paper does, centres the trust region (9) on a plan that ends at the previous target estimate and
+  starts from the previous anticipated state: in the realistic simulator 58 % of those QPs were
+  incompatible, so most replans flew without FoV rows; ``docs/perception.md``.)
 * **First plan** (no previous plan): solve without FoV rows, linearise around that solution and
   solve again (an SQP step); repeat, at most ``fov.sqp_iterations`` times, while the visibility
   (:func:`avp.metrics.visibility` on a 200-sample grid, time + path fraction) improves; a step
   that does not improve it is discarded (so FoV on never lowers the visibility of a first plan).
   If the first FoV step is incompatible, the FoV-free solution is returned and the result says
   the rows were dropped.
+* In both, when every FoV row holds at the solution without FoV rows, that solution is also
+  optimal with them and is returned without a second solve.
 
 Incompatibility (16) is declared when the back-end reports no solution, raises, or returns a point
 whose KKT residuals are out of tolerance (:func:`avp.solve.incompatibility`, next to the back-end
@@ -133,6 +137,16 @@ class _Ledger:
         self.build += out.build_time
         self.solve += out.solve_time
         return out, None
+
+
+def _rows_hold(blocks: tuple[ConstraintBlock, ...], c_hat: Array, tol: float = 1e-9) -> bool:
+    """Whether ``lower <= matrix @ c_hat <= upper`` holds for every row of ``blocks`` (to ``tol``
+    relative to the bound)."""
+    for b in blocks:
+        y = b.matrix @ c_hat
+        if np.any(y > b.upper + tol * (1.0 + np.abs(b.upper))) or np.any(y < b.lower - tol * (1.0 + np.abs(b.lower))):
+            return False
+    return True
 
 
 def _trajectory(qp: PerchingQp, outcome: QpOutcome, g: float) -> Trajectory | None:
@@ -289,14 +303,24 @@ def solve_fov(
         log.append(f"{label} {cfg.solver}: {out.status.value} (max violation {out.max_violation:.1e})")
         return out, _trajectory(base, out, cfg.g)
 
-    def with_rows(reference: Trajectory, label: str) -> tuple[QpOutcome | None, Trajectory | None, str | None, FovLinearisation]:
+    def with_rows(reference: Trajectory, label: str, optimum: QpOutcome | None = None,
+                  ) -> tuple[QpOutcome | None, Trajectory | None, str | None, FovLinearisation]:
+        """The QP with FoV rows linearised on ``reference``. ``optimum``: the FoV-free solution
+        whose trajectory ``reference`` is; when every row holds there it is also an optimum with
+        the rows (the rows only shrink the feasible set, and it stays in it), so it is returned
+        without a solve."""
         tb = time.perf_counter()
         lin = perception.linearise_on(base, reference, target, cfg)
-        qp = base.with_inequalities(*lin.blocks)
         ledger.build += time.perf_counter() - tb
         n_vis = int(np.sum(lin.h0 <= 0.0))
         desc = (f"{label}: {int(lin.placed.sum())}/{lin.times.size} FoV points placed "
                 f"({int(lin.progress.sum())} progress-only, {n_vis} visible at linearisation)")
+        if optimum is not None and optimum.c_hat is not None and _rows_hold(lin.blocks, optimum.c_hat):
+            log.append(f"{desc}; every row holds at the solution without them: that solution, not re-solved")
+            return optimum, reference, None, lin
+        tb = time.perf_counter()
+        qp = base.with_inequalities(*lin.blocks)
+        ledger.build += time.perf_counter() - tb
         out, err = ledger.run(qp, fov_cfg, label, False, initvals)
         why = err if out is None else incompatibility(out)
         if why is not None or out is None:
@@ -305,19 +329,22 @@ def solve_fov(
         log.append(f"{desc}; {fov_cfg.solver}: solved (max violation {out.max_violation:.1e})")
         return out, _trajectory(qp, out, cfg.g), None, lin
 
+    out0: QpOutcome | None
+    traj0: Trajectory | None
     if previous is not None:
         probe = fov_times(0.0, float(np.sum(T)), cfg.fov)
         if probe.size == 0:
             out, traj = plain("QP (no FoV rows: inside the gate)")
             return ledger.attempt(out, traj, qp=base)
-        out, traj, why, lin = with_rows(previous, "QP + FoV (linearised on the previous plan)")
+        out0, traj0 = plain("QP (replan, before FoV)")
+        if out0 is None or traj0 is None:
+            return ledger.attempt(out0, None)
+        out, traj, why, lin = with_rows(traj0, "QP + FoV (linearised on that solution)", optimum=out0)
         if why is None:
             return ledger.attempt(out, traj, sqp_steps=1, linearisation=lin)
-        out, traj = plain("QP without FoV rows (fallback (16))")
-        return ledger.attempt(out, traj, fov_dropped=True, sqp_steps=1, linearisation=lin)
+        log.append("FoV rows dropped (16): returning the plan without them")
+        return ledger.attempt(out0, traj0, fov_dropped=True, sqp_steps=1, linearisation=lin, qp=base)
 
-    out0: QpOutcome | None
-    traj0: Trajectory | None
     if first is not None:
         _qp, out0, traj0 = first
         log.append("QP (first plan, before FoV): the search step's solution at these durations")
@@ -336,7 +363,9 @@ def solve_fov(
     best_lin: FovLinearisation | None = None
     steps = 0
     for k in range(cfg.fov.sqp_iterations):
-        out, traj, why, lin = with_rows(best_traj, f"SQP step {k + 1}")
+        out, traj, why, lin = with_rows(best_traj, f"SQP step {k + 1}", optimum=out0 if k == 0 else None)
+        if out is out0:  # the rows hold at the FoV-free optimum: it is the SQP's fixed point
+            break
         if why is not None or traj is None or out is None:
             if k == 0:
                 log.append("FoV rows dropped (16): returning the plan without them")

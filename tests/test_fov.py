@@ -180,7 +180,8 @@ def test_visibility_with_fov_not_below_without(distance: float, incline: float) 
 
 @pytest.mark.parametrize(("distance", "incline"), SCENARIOS)
 def test_replan_keeps_perch_and_uses_previous(distance: float, incline: float) -> None:
-    """A replan 1/30 s in, linearised on the committed plan, still perches exactly."""
+    """A replan 1/30 s in keeps its FoV rows (linearised on its own FoV-free solution, so the
+    trust region (9) is centred on a point that meets the perching rows) and perches exactly."""
     state, target = _scenario(distance, incline)
     first = plan_detailed(state, target, PlannerConfig())
     prev = first.trajectory
@@ -190,8 +191,8 @@ def test_replan_keeps_perch_and_uses_previous(distance: float, incline: float) -
               yaw=D[0, 3], yaw_rate=D[1, 3], time=t)
     rem = prev.tf - t
     again = plan_detailed(s, target, PlannerConfig(), durations=np.full(3, rem / 3), previous=prev)
-    assert again.ok
-    assert any("linearised on the previous plan" in line for line in again.log)
+    assert again.ok and again.status is avp.PlanStatus.SOLVED and not again.fov_dropped
+    assert any("QP + FoV (linearised on that solution)" in line for line in again.log)
     _terminal_ok(again.trajectory, target)
 
 
