@@ -2,7 +2,7 @@
 reference plan, and the visibility score that accepts an SQP step.
 
 The policy that uses them (first plan: SQP steps while the visibility improves; replanning:
-rows linearised on the previous plan; the fallback (16)) is the FoV stage of the planner's one
+one SQP step; the fallback (16)) is the FoV stage of the planner's one
 attempt path, :mod:`avp.attempt`. Incompatibility (16) is declared when the back-end reports no
 solution, raises, or returns a point whose KKT residuals are out of tolerance: primal violation
 above :data:`avp.solve.FEASIBILITY_TOL` (checked by :func:`~avp.solve.solve_perching_qp`), or

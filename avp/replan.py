@@ -169,7 +169,7 @@ class Replanner:
     target:
         Initial target estimate.
     config:
-        Planner configuration (FoV rows are linearised around the committed plan).
+        Planner configuration (a replan's FoV stage takes one SQP step, :mod:`avp.attempt`).
     replan:
         :class:`ReplanConfig`.
     trajectory:

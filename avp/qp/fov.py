@@ -175,26 +175,14 @@ def fov_blocks(
     decrease = (np.abs(gx).sum(1) * fov.trust_position + np.abs(ga).sum(1) * fov.trust_acceleration
                 + np.abs(gp) * fov.trust_yaw)
     reachable = h0 - decrease
-    # Every row of a point touches only its segment's columns. Per point, the local coefficients
-    # of row kind r (0: the FoV row (8); 1-3: x, y, z; 4-6: a_x, a_y, a_z; 7: yaw, the trust
-    # region (9)) on axis j are L[:, r, j, :], scattered once into the decision columns.
+    # Every row of a point touches only its segment's columns (layout.columns(axis, seg)).
     # Row (8): grad.z <= grad.z0 - h0 - margin, i.e. h0 + grad.(z - z0) <= -margin, with
-    # x/a columns gx_j b0 + ga_j b2 and yaw columns gp b0.
+    # x/a columns gx_j b0 + ga_j b2 and yaw columns gp b0; the trust region (9) rows are b0
+    # (x, yaw) and b2 (a) on one axis each.
     seg, u = layout.locate(knots_rel, t)
     T = knots_rel[seg + 1] - knots_rel[seg]
     b0 = layout.basis(0, u)  # (m, C)
     b2 = layout.basis(2, u) / (T**2)[:, None]
-    n_c = layout.n_coeffs
-    L = np.zeros((m, 8, 4, n_c))
-    L[:, 0, :3] = gx[:, :, None] * b0[:, None, :] + ga[:, :, None] * b2[:, None, :]
-    L[:, 0, YAW] = gp[:, None] * b0
-    eye = np.eye(3)[None, :, :, None]
-    L[:, 1:4, :3] = eye * b0[:, None, None, :]
-    L[:, 4:7, :3] = eye * b2[:, None, None, :]
-    L[:, 7, YAW] = b0
-    scatter = np.zeros((m, 8, 4, layout.n_segments, n_c))
-    scatter[np.arange(m), :, :, seg, :] = L
-    rows: Array = scatter.reshape(m, 8, layout.n_variables)
     lin0 = np.sum(gx * x0, 1) + np.sum(ga * a0, 1) + gp * psi0
     rhs = lin0 - h0 - fov.margin
     placed = ok.copy()
@@ -210,14 +198,27 @@ def fov_blocks(
         progress = hopeless.copy()
     blocks = []
     if placed.any():
-        sel = rows[placed]
         k = int(placed.sum())
-        blocks.append(ConstraintBlock(f"{FOV_PREFIX} rows (8)", sel[:, 0], np.full(k, -np.inf), rhs[placed]))
-        for label, R, z0, r in (
-            ("x", sel[:, 1:4].reshape(-1, layout.n_variables), np.asarray(x0)[placed].reshape(-1), fov.trust_position),
-            ("a", sel[:, 4:7].reshape(-1, layout.n_variables), np.asarray(a0)[placed].reshape(-1), fov.trust_acceleration),
-            ("yaw", sel[:, 7], np.asarray(psi0)[placed], fov.trust_yaw),
+        n_v = layout.n_variables
+        cols = layout.columns(np.arange(4)[None, :], seg[placed][:, None])  # (k, 4, C)
+        p0, p2 = b0[placed], b2[placed]
+        ik = np.arange(k)
+        row8 = np.zeros((k, n_v))
+        row8[ik[:, None, None], cols[:, :3]] = gx[placed][:, :, None] * p0[:, None, :] + ga[placed][:, :, None] * p2[:, None, :]
+        row8[ik[:, None], cols[:, YAW]] = gp[placed][:, None] * p0
+        blocks.append(ConstraintBlock(f"{FOV_PREFIX} rows (8)", row8, np.full(k, -np.inf), rhs[placed]))
+        i3 = np.arange(3 * k)[:, None]
+        for label, basis, z0, r in (
+            ("x", p0, np.asarray(x0)[placed].reshape(-1), fov.trust_position),
+            ("a", p2, np.asarray(a0)[placed].reshape(-1), fov.trust_acceleration),
         ):
             if math.isfinite(r):
+                R = np.zeros((3 * k, n_v))
+                R[i3, cols[:, :3].reshape(3 * k, -1)] = np.repeat(basis, 3, axis=0)
                 blocks.append(ConstraintBlock(f"{FOV_PREFIX} trust region (9) {label}", R, z0 - r, z0 + r))
+        if math.isfinite(fov.trust_yaw):
+            R = np.zeros((k, n_v))
+            R[ik[:, None], cols[:, YAW]] = p0
+            z0 = np.asarray(psi0)[placed]
+            blocks.append(ConstraintBlock(f"{FOV_PREFIX} trust region (9) yaw", R, z0 - fov.trust_yaw, z0 + fov.trust_yaw))
     return FovLinearisation(tuple(blocks), t, h0, reachable, placed, progress)
