@@ -142,10 +142,11 @@ class _Ledger:
 
 def _rows_hold(blocks: tuple[ConstraintBlock, ...], c_hat: Array, tol: float = 1e-9) -> bool:
     """Whether ``lower <= matrix @ c_hat <= upper`` holds for every row of ``blocks`` (to ``tol``
-    relative to the bound)."""
+    relative to the bound; a NaN anywhere fails; no rows hold trivially)."""
     for b in blocks:
         y = b.matrix @ c_hat
-        if np.any(y > b.upper + tol * (1.0 + np.abs(b.upper))) or np.any(y < b.lower - tol * (1.0 + np.abs(b.lower))):
+        if not (np.all(y <= b.upper + tol * (1.0 + np.abs(b.upper)))
+                and np.all(y >= b.lower - tol * (1.0 + np.abs(b.lower)))):
             return False
     return True
 
@@ -173,8 +174,9 @@ def solve_at(
 
     ``previous``: the committed plan when replanning (the FoV stage then takes one SQP step).
     ``initvals``: normalised coefficients that warm-start back-ends taking a guess. ``seed``: an
-    attempt at the same durations without FoV rows, solved with the initial rows only; a first
-    plan's FoV stage starts from its QP and solution. ``worth_fov``: a test of a first plan's
+    attempt at the same durations without FoV rows, solved with the initial rows only; the FoV
+    stage starts from its QP and solution (its workspace certificate is reused when the stage
+    returns that same plan). ``worth_fov``: a test of a first plan's
     FoV-free solution; ``False`` skips the SQP step (the planner: a sampled limit is already
     broken, a time search follows). ``ws_rows``: initial workspace rows by durations, shared by
     the attempts of one plan.
@@ -209,7 +211,10 @@ def solve_at(
             attempt.certify, attempt.log = certify, tuple(log)
             return attempt
         t_cert = time.perf_counter()
-        report = certify_workspace(attempt.trajectory, target, ws)
+        if seed is not None and round_index == 0 and attempt.trajectory is seed.trajectory and seed.safety is not None:
+            report = seed.safety  # the FoV stage returned the search step's own plan, certified
+        else:
+            report = certify_workspace(attempt.trajectory, target, ws)
         certify += time.perf_counter() - t_cert
         attempt.certify, attempt.safety = certify, report
         if report.certified:
@@ -316,7 +321,8 @@ def solve_fov(
         desc = (f"{label}: {int(lin.placed.sum())}/{lin.times.size} FoV points placed "
                 f"({int(lin.progress.sum())} progress-only, {n_vis} visible at linearisation)")
         if optimum is not None and optimum.c_hat is not None and _rows_hold(lin.blocks, optimum.c_hat):
-            log.append(f"{desc}; every row holds at the solution without them: that solution, not re-solved")
+            held = "every row holds" if lin.blocks else "no row placed"
+            log.append(f"{desc}; {held} at the solution without them: that solution, not re-solved")
             return optimum, reference, None, lin
         tb = time.perf_counter()
         qp = base.with_inequalities(*lin.blocks)
@@ -353,6 +359,7 @@ def solve_fov(
         label = "QP + FoV (linearised on that solution)" if replan else f"SQP step {k + 1}"
         out, traj, why, lin = with_rows(best_traj, label, optimum=out0 if k == 0 else None)
         if out is out0:  # the rows hold at the FoV-free optimum: it is the SQP's fixed point
+            best_lin = lin
             break
         if why is not None or traj is None or out is None:
             if k == 0:

@@ -223,7 +223,9 @@ def plan_detailed(
         Segment durations (s) overriding the allocation rule. The time search still scales them
         when a bound fails; pass ``BoundsPolicy(factors=(), relaxations=())`` to keep them.
     previous:
-        The committed plan when replanning (linearisation point of the FoV rows (8)).
+        The committed plan when replanning. It marks the call as a replan: the FoV stage then
+        takes one SQP step on the new plan's FoV-free solution and keeps it without a visibility
+        score (:mod:`avp.attempt`); the plan's coefficients are not used.
     warm_start:
         A plan whose shape seeds the back-end's initial guess (ProxQP, OSQP; DAQP ignores it).
     """
@@ -343,7 +345,7 @@ def plan_detailed(
                 log.append("bounds certified (Algorithm 1, exact)")
                 if attempt_cfg is not stage_cfg:
                     with_fov, fov_report = _with_fov(state, target, stage_cfg, T, log, previous, initvals, attempt,
-                                                     ws_rows)
+                                                     report, ws_rows)
                     with_fov.relaxations = attempt.relaxations
                     attempts += 1
                     build, solve, certify = (build + with_fov.build, solve + with_fov.solve,
@@ -393,17 +395,20 @@ def _measured(traj: Trajectory, target: PerchTarget, cfg: PlannerConfig) -> str:
 
 def _with_fov(
     state: State, target: PerchTarget, cfg: PlannerConfig, T: Array, log: list[str],
-    previous: Trajectory | None, initvals: Array | None, seed: Attempt,
+    previous: Trajectory | None, initvals: Array | None, seed: Attempt, seed_report: BoundReport,
     ws_rows: dict[bytes, tuple[ConstraintBlock, ...]] | None = None,
 ) -> tuple[Attempt, tuple[BoundReport | None, float]]:
-    """Re-solve a certified search step ``seed`` with the FoV rows (the SQP starts from the
-    seed's plan); ``(attempt, (report, seconds))`` with ``report`` set only when that plan
-    certifies too (bounds and workspace)."""
+    """Re-solve a certified search step ``seed`` (bounds: ``seed_report``) with the FoV rows (the
+    SQP starts from that step's plan); ``(attempt, (report, seconds))`` with ``report`` set only
+    when that plan certifies too (bounds and workspace)."""
     attempt = solve_at(state, target, cfg, T, previous=previous, initvals=initvals, seed=seed, ws_rows=ws_rows)
     log.extend(attempt.log)
     if attempt.trajectory is None or not attempt.safe or attempt.fov_dropped:
         log.append("FoV rows dropped (16): the plan with them did not solve or certify")
         return attempt, (None, 0.0)
+    if attempt.trajectory is seed.trajectory:  # the rows held at the search step's plan: certified already
+        log.append("FoV rows hold at the certified plan: bounds certified")
+        return attempt, (seed_report, 0.0)
     t0 = time.perf_counter()
     report = _certify(attempt.trajectory, cfg)
     seconds = time.perf_counter() - t0

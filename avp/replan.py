@@ -2,8 +2,9 @@
 (30 Hz in the paper) with odometry and the latest target estimate.
 
 Each :meth:`Replanner.step` plans from the moment a new plan can take over,
-``t_ex = t_rp + latency``, to the (re-estimated) target with the FoV rows linearised around the
-committed plan, and commits the new plan only if it is certified. The policy
+``t_ex = t_rp + latency``, to the (re-estimated) target with the FoV rows (one SQP step on the
+new plan's FoV-free solution, :mod:`avp.attempt`), and commits the new plan only if it is
+certified. The policy
 (:class:`ReplanConfig`, every knob measured in ``docs/simulation.md``):
 
 - **Anchoring.** While odometry agrees with the committed reference (tracking error below

@@ -4,7 +4,6 @@ planner's record is made of them."""
 from __future__ import annotations
 
 import numpy as np
-import pytest
 from scenarios import standard
 
 import avp
@@ -40,47 +39,54 @@ def test_fov_wrapper_appends_the_attempt_lines() -> None:
     assert perception.FovSolve is Attempt
 
 
-@pytest.mark.parametrize(("incline", "standoff"), [(90, 1.5), (90, 4.5), (60, 3.5), (45, 7.5), (30, 3.5), (0, 3.5)])
-def test_fov_rows_that_hold_at_the_plain_optimum_are_not_re_solved_and_nothing_is_lost(incline: float, standoff: float) -> None:
+def test_fov_rows_that_hold_at_the_plain_optimum_are_not_re_solved_and_nothing_is_lost() -> None:
     """The first SQP step is skipped exactly when every FoV row holds at the FoV-free optimum;
-    then a solve with the rows (done here independently) finds no lower cost and the same plan."""
-    sc = standard(incline, standoff)
-    cfg = avp.PlannerConfig()
-    T = initial_durations(sc.state, sc.target, cfg)
-    base = build_perching_qp(sc.state, sc.target, cfg, T)
-    plain = solve_perching_qp(base, cfg)
-    lin = perception.linearise_on(base, base.trajectory(plain.c_hat, cfg.g), sc.target, cfg)
-    with_rows = base.with_inequalities(*lin.blocks)
-    C, lo, hi = with_rows.stacked_inequalities()
-    y = C @ plain.c_hat
-    hold = bool(np.all(y <= hi + 1e-9 * (1 + np.abs(hi))) and np.all(y >= lo - 1e-9 * (1 + np.abs(lo))))
-    attempt = solve_fov(sc.state, sc.target, cfg, T)
-    skipped = any("not re-solved" in line for line in attempt.log)
-    assert skipped == hold
-    if not hold:
-        assert any("SQP step 1" in line and ("solved" in line or "incompatible" in line) for line in attempt.log)
-        return
-    forced = solve_perching_qp(with_rows, cfg)
+    then a solve with the rows (done here independently) finds no lower cost and the same plan.
+    Both branches occur among the scenarios."""
+    seen = set()
+    for incline, standoff in [(90, 1.5), (90, 4.5), (60, 3.5), (45, 7.5), (30, 3.5), (0, 3.5)]:
+        sc = standard(incline, standoff)
+        cfg = avp.PlannerConfig()
+        T = initial_durations(sc.state, sc.target, cfg)
+        base = build_perching_qp(sc.state, sc.target, cfg, T)
+        plain = solve_perching_qp(base, cfg)
+        lin = perception.linearise_on(base, base.trajectory(plain.c_hat, cfg.g), sc.target, cfg)
+        assert lin.blocks
+        C = np.vstack([b.matrix for b in lin.blocks])
+        lo = np.concatenate([b.lower for b in lin.blocks])
+        hi = np.concatenate([b.upper for b in lin.blocks])
+        y = C @ plain.c_hat
+        excess = np.maximum(y - hi, lo - y) / np.maximum(1.0, np.minimum(np.abs(lo), np.abs(hi)))
+        hold = bool(np.max(excess) <= 1e-9)
+        seen.add(hold)
+        attempt = solve_fov(sc.state, sc.target, cfg, T)
+        assert any("not re-solved" in line for line in attempt.log) == hold
+        if not hold:
+            assert any("SQP step 1" in line and ("solved" in line or "incompatible" in line) for line in attempt.log)
+            continue
+        forced = solve_perching_qp(base.with_inequalities(*lin.blocks), cfg)
 
-    def cost(c: np.ndarray) -> float:
-        return 0.5 * float(c @ base.P @ c)
+        cost_forced = 0.5 * float(forced.c_hat @ base.P @ forced.c_hat)
+        cost_plain = 0.5 * float(plain.c_hat @ base.P @ plain.c_hat)
+        assert cost_forced >= cost_plain * (1 - 1e-9)  # more rows never lower the cost
+        assert cost_forced <= cost_plain * (1 + 1e-7)  # and here they cost nothing
+        np.testing.assert_allclose(attempt.trajectory.coefficients, base.trajectory(plain.c_hat, cfg.g).coefficients)
+        np.testing.assert_allclose(forced.c_hat, plain.c_hat, rtol=1e-5, atol=1e-6 * np.abs(plain.c_hat).max())
+        assert attempt.linearisation is not None and attempt.sqp_steps == 0
+    assert seen == {True, False}
 
-    assert cost(forced.c_hat) >= cost(plain.c_hat) * (1 - 1e-9)  # more rows never lower the cost
-    assert cost(forced.c_hat) <= cost(plain.c_hat) * (1 + 1e-7)  # and here they cost nothing
-    np.testing.assert_allclose(attempt.trajectory.coefficients, base.trajectory(plain.c_hat, cfg.g).coefficients)
-    np.testing.assert_allclose(forced.c_hat, plain.c_hat, rtol=1e-5, atol=1e-6 * np.abs(plain.c_hat).max())
 
+def test_the_rows_check_on_synthetic_rows() -> None:
+    c = np.array([1.0, -2.0, 0.5])
+    M = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 1.0]])  # rows: 1, -1.5
 
-def test_the_rows_check_sees_a_violation_of_one_row() -> None:
-    sc = standard(60, 3.5)
-    cfg = avp.PlannerConfig()
-    T = initial_durations(sc.state, sc.target, cfg)
-    base = build_perching_qp(sc.state, sc.target, cfg, T)
-    plain = solve_perching_qp(base, cfg)
-    lin = perception.linearise_on(base, base.trajectory(plain.c_hat, cfg.g), sc.target, cfg)
-    assert _rows_hold(lin.blocks, plain.c_hat)
-    block = lin.blocks[-1]
-    y = block.matrix @ plain.c_hat
-    tight = ConstraintBlock(block.name, block.matrix, block.lower, y.copy())
-    tight.upper[0] -= 1e-6 * (1 + abs(y[0]))
-    assert not _rows_hold((*lin.blocks[:-1], tight), plain.c_hat)
+    def block(lo: list[float], hi: list[float]) -> ConstraintBlock:
+        return ConstraintBlock("fov test", M, np.array(lo), np.array(hi))
+
+    assert _rows_hold((), c)
+    assert _rows_hold((block([1.0, -np.inf], [1.0, -1.5]),), c)  # on both bounds exactly
+    assert _rows_hold((block([1.0 + 5e-10, -2.0], [2.0, 0.0]),), c)  # inside the tolerance
+    assert not _rows_hold((block([1.0 + 1e-6, -2.0], [2.0, 0.0]),), c)  # a lower bound
+    assert not _rows_hold((block([0.0, -2.0], [2.0, -1.5 - 1e-6]),), c)  # an upper bound
+    assert not _rows_hold((block([0.0, -2.0], [2.0, 0.0]), block([0.0, -2.0], [0.999, 0.0])), c)  # second block
+    assert not _rows_hold((block([0.0, -2.0], [2.0, 0.0]),), np.array([np.nan, 0.0, 0.0]))  # NaN fails

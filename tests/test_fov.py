@@ -178,22 +178,36 @@ def test_visibility_with_fov_not_below_without(distance: float, incline: float) 
     _terminal_ok(on.trajectory, target)
 
 
+@pytest.mark.parametrize("squeeze", [1.0, 0.6])
 @pytest.mark.parametrize(("distance", "incline"), SCENARIOS)
-def test_replan_keeps_perch_and_uses_previous(distance: float, incline: float) -> None:
-    """A replan 1/30 s in keeps its FoV rows (linearised on its own FoV-free solution, so the
-    trust region (9) is centred on a point that meets the perching rows) and perches exactly."""
+def test_a_replan_to_a_moved_estimate_keeps_its_fov_rows_and_perches(distance: float, incline: float, squeeze: float) -> None:
+    """A replan 1/30 s in, to an estimate 8 cm deeper: the FoV rows are linearised on the replan's
+    own FoV-free solution (so the trust region (9) is centred on a point that meets the perching
+    rows) and kept, in one SQP step; with durations squeezed to 0.6 the time search runs and the
+    FoV stage starts from its certified step. The plan perches exactly and meets the limits."""
     state, target = _scenario(distance, incline)
-    first = plan_detailed(state, target, PlannerConfig())
-    prev = first.trajectory
+    prev = plan_detailed(state, target, PlannerConfig()).trajectory
     t = prev.t0 + 1 / 30
     D = prev.derivatives(t, (0, 1, 2, 3))
     s = State(position=D[0, :3], velocity=D[1, :3], acceleration=D[2, :3], jerk=D[3, :3],
               yaw=D[0, 3], yaw_rate=D[1, 3], time=t)
-    rem = prev.tf - t
-    again = plan_detailed(s, target, PlannerConfig(), durations=np.full(3, rem / 3), previous=prev)
+    moved = PerchTarget(point=target.point - 0.08 * target.s3, R_WS=target.R_WS)
+    cfg = PlannerConfig()
+    again = plan_detailed(s, moved, cfg, durations=np.full(3, squeeze * (prev.tf - t) / 3), previous=prev)
     assert again.ok and again.status is avp.PlanStatus.SOLVED and not again.fov_dropped
-    assert any("QP + FoV (linearised on that solution)" in line for line in again.log)
-    _terminal_ok(again.trajectory, target)
+    assert any(line.startswith("QP + FoV (linearised on that solution)") for line in again.log)
+    assert not any(line.startswith("SQP step") for line in again.log)  # a replan takes one step
+    if squeeze < 1.0:
+        assert any("the search step's solution" in line for line in again.log)
+        assert any(line in ("FoV rows added back: bounds certified", "FoV rows hold at the certified plan: bounds certified")
+                   for line in again.log)
+    _terminal_ok(again.trajectory, moved)
+    tr = again.trajectory
+    ts = tr.sample(1e-3)
+    f = tr.thrust(ts)
+    lim = cfg.limits
+    assert f.min() >= lim.accel_min - 1e-9 and f.max() <= lim.accel_max + 1e-9
+    assert np.linalg.norm(tr.body_rates(ts)[:, :2], axis=1).max() <= lim.tilt_rate_max + 1e-9
 
 
 SOLVERS = ["daqp", "osqp", "proxqp"]

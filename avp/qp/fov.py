@@ -147,8 +147,8 @@ def fov_blocks(
     times:
         Relative times of the ``n_p`` points (:func:`fov_times`).
     x0, psi0, a0:
-        Linearisation point at each time (shapes ``(m, 3)``, ``(m,)``, ``(m, 3)``), from the
-        previous plan (anticipation (6)) or the previous SQP iterate.
+        Linearisation point at each time (shapes ``(m, 3)``, ``(m,)``, ``(m, 3)``): the QP's
+        FoV-free solution or the previous SQP iterate (:mod:`avp.attempt`).
     target_point:
         ``s`` (W).
     fov:
