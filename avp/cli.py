@@ -303,7 +303,7 @@ def demo(args: argparse.Namespace) -> int:
     settings = _settings(args, defaults=_ground_default(PlannerConfig))
     config = settings.planner
     if args.line_pitch_deg is not None:  # a line perch (avp/cli_line.py)
-        code, doc = line_demo(args, config)
+        code, doc = line_demo(args, config, settings.line)
         if args.json:
             _emit_json(doc)
         return code
@@ -514,7 +514,7 @@ def simulate(args: argparse.Namespace) -> int:
     if args.line_pitch_deg is not None:  # closed-loop line perches (avp/cli_line.py)
         if args.simulator not in (None, "avp"):
             raise ConfigError("--simulator", "line perches fly on avp's simulator only; drop --simulator/--backend rotorpy")
-        doc = line_simulate(args, settings.planner)
+        doc = line_simulate(args, settings.planner, settings.replan, settings.line)
         if args.json:
             _emit_json(doc)
         return EXIT_SOLVED

@@ -62,12 +62,13 @@ def _line_doc(line: Any) -> dict[str, Any]:
             "grasp": line.grasp, "gripper_offset": line.gripper_offset}
 
 
-def line_demo(args: argparse.Namespace, config: Any) -> tuple[int, dict[str, Any]]:
-    """Plan one line perch and its recovery; log a summary. Returns the exit code and the JSON document."""
+def line_demo(args: argparse.Namespace, config: Any, options: Any = None) -> tuple[int, dict[str, Any]]:
+    """Plan one line perch and its recovery (``options``: the ``[line]`` table's
+    :class:`~avp.line_planner.LineOptions`); log a summary. Returns the exit code and the JSON document."""
     from .line_planner import plan_line
 
     state, line = line_geometry(args)
-    result = plan_line(state, line, config)
+    result = plan_line(state, line, config, options)
     code = 0 if result.ok else 1
     log.info("avp demo: perch on a line at %g deg pitch, %g m away, %g m above the start",
              args.line_pitch_deg, args.line_distance, float(line.vertices[:, 2].mean()) - LINE_START_HEIGHT)
@@ -102,9 +103,9 @@ def line_demo(args: argparse.Namespace, config: Any) -> tuple[int, dict[str, Any
                   "start": state.position.tolist(), "summary": summary, "log": list(result.log)}
 
 
-def line_simulate(args: argparse.Namespace, config: Any) -> dict[str, Any]:
-    """Seeded closed-loop line perches in both modes (:func:`avp.sim.line_run.simulate_line`); logs
-    a table and returns the JSON document."""
+def line_simulate(args: argparse.Namespace, config: Any, replan: Any = None, options: Any = None) -> dict[str, Any]:
+    """Seeded closed-loop line perches in both modes (:func:`avp.sim.line_run.simulate_line`) with
+    the ``[replan]`` and ``[line]`` tables' settings; logs a table and returns the JSON document."""
     from .sim.line_run import LineScenario, simulate_line
     from .sim.vehicle import VehicleParams
 
@@ -118,7 +119,8 @@ def line_simulate(args: argparse.Namespace, config: Any) -> dict[str, Any]:
     log.info("| mode | success | gripper err cm median / max | b3 err deg median / max |")
     log.info("|---|---|---|---|")
     for mode in ("one_shot", "avp"):
-        runs = [simulate_line(scenario, mode, seed=s, config=config) for s in range(args.seed, args.seed + args.trials)]
+        runs = [simulate_line(scenario, mode, seed=s, config=config, replan=replan, options=options)
+                for s in range(args.seed, args.seed + args.trials)]
         flown = [r for r in runs if not r.outcome.startswith("no plan")]
         ok = sum(r.success for r in runs)
         grip = [100 * r.gripper_error for r in flown] or [math.nan]

@@ -1,6 +1,6 @@
 """Configuration files: TOML tables mapped onto avp's frozen configuration dataclasses.
 
-A file has up to three top-level tables, each optional::
+A file has up to four top-level tables, each optional::
 
     [planner]                 # avp.PlannerConfig (scalar fields)
     solver = "proxqp"
@@ -14,6 +14,8 @@ A file has up to three top-level tables, each optional::
     half_fov = 0.61
     [replan]                  # avp.ReplanConfig
     latency = 0.03
+    [line]                    # avp.line_planner.LineOptions (line perches: --line-pitch-deg)
+    wedge_angle = 0.6
     [scenario]                # avp.sim.run.SimScenario (avp simulate / avp campaign)
     pad_half_size = 0.2
 
@@ -36,6 +38,8 @@ from collections.abc import Mapping
 from enum import Enum
 from pathlib import Path
 from typing import Any
+
+import numpy as np
 
 from .errors import ConfigError
 
@@ -129,6 +133,10 @@ def _convert(tp: Any, value: Any, where: str) -> Any:
         if isinstance(value, str) and value.strip().lower() in ("inf", "+inf", "-inf"):
             return float(value)  # as --json writes infinities
         raise _bad(where, tp, value)
+    if origin is np.ndarray or tp is np.ndarray:  # a vector of floats (the class checks its shape)
+        if isinstance(value, list) and all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in value):
+            return np.asarray(value, dtype=float)
+        raise ConfigError(where, f"expected a list of numbers, got {value!r}")
     if origin is tuple:
         if len(args) == 2 and args[1] is Ellipsis:
             item = args[0]
@@ -180,9 +188,10 @@ def to_mapping(obj: Any) -> Any:
 
 def _sections() -> dict[str, type]:
     from .config import PlannerConfig
+    from .line_planner import LineOptions
     from .replan import ReplanConfig
 
-    return {"planner": PlannerConfig, "replan": ReplanConfig}
+    return {"planner": PlannerConfig, "replan": ReplanConfig, "line": LineOptions}
 
 
 def scenario_class() -> type:
@@ -196,13 +205,15 @@ def scenario_class() -> type:
 class Settings:
     """What a configuration file (plus command-line overrides) sets.
 
-    ``planner`` and ``replan`` are built eagerly; the ``[scenario]`` table is kept as data and
-    built by :meth:`scenario` (that imports the simulator). ``data`` is the merged mapping.
+    ``planner``, ``replan`` and ``line`` (:class:`~avp.line_planner.LineOptions`, used by line
+    perches) are built eagerly; the ``[scenario]`` table is kept as data and built by
+    :meth:`scenario` (that imports the simulator). ``data`` is the merged mapping.
     """
 
     planner: Any
     replan: Any
     data: Mapping[str, Any] = dataclasses.field(default_factory=dict)
+    line: Any = None
 
     def scenario(self, **overrides: Any) -> Any:
         """:class:`~avp.sim.run.SimScenario` from the ``[scenario]`` table with ``overrides``."""
@@ -227,7 +238,7 @@ def load_settings(path: str | Path | None = None, overrides: Mapping[str, Any] |
     built = {name: from_mapping(cls, data.get(name, {}), name) for name, cls in sections.items()}
     if "scenario" in data:  # validate now so a bad key fails before any trial runs
         from_mapping(scenario_class(), data["scenario"], "scenario")
-    return Settings(planner=built["planner"], replan=built["replan"], data=data)
+    return Settings(planner=built["planner"], replan=built["replan"], data=data, line=built["line"])
 
 
 # -- the configuration page ------------------------------------------------------------------
@@ -257,6 +268,12 @@ UNITS: dict[str, str] = {
     "Workspace.half_spaces": "m (point), - (normal)", "Workspace.spheres": "m",
     # ReplanConfig
     "ReplanConfig.latency": "s", "ReplanConfig.freeze_horizon": "s", "ReplanConfig.deadline": "s",
+    # LineOptions
+    "LineOptions.approach_deceleration": "m/s^2", "LineOptions.guide_dt": "s", "LineOptions.wedge_angle": "rad",
+    "LineOptions.wedge_window": "s", "LineOptions.takeoff_snap": "m/s^4", "LineOptions.recovery_point": "m",
+    "LineOptions.recovery_distance": "m", "LineOptions.recovery_height_margin": "m",
+    "LineOptions.ground_margin": "m", "LineOptions.flip_window": "s", "LineOptions.flip_thrust": "m/s^2",
+    "LineOptions.flip_time": "s",
 }
 """Units of the dimensioned knobs (``Class.field``); every other knob is dimensionless."""
 

@@ -141,6 +141,31 @@ def test_config_file_to_plan_to_json_round_trip(tmp_path: Path, capsys) -> None:
     assert doc["summary"]["contact_position_error_m"] < 1e-6
 
 
+def test_the_line_table_sets_line_options(tmp_path: Path) -> None:
+    from avp.line_planner import LineOptions
+
+    path = tmp_path / "line.toml"
+    path.write_text("[line]\nrecovery = false\nwedge_angle = 0.6\nflip_window = [0.6, 0.2]\n"
+                    "recovery_point = [1.0, 2.0, 3.5]\n")
+    opts = load_settings(path).line
+    assert isinstance(opts, LineOptions)
+    assert opts.recovery is False and opts.wedge_angle == 0.6 and opts.flip_window == (0.6, 0.2)
+    np.testing.assert_array_equal(opts.recovery_point, [1.0, 2.0, 3.5])
+    assert opts.guide_dt == LineOptions().guide_dt  # untouched knobs keep their defaults
+    assert load_settings(None).line == LineOptions()
+
+
+def test_avp_demo_on_a_line_flies_the_line_table(tmp_path: Path, capsys) -> None:
+    """The [line] table reaches the line planner: without a recovery the JSON has none."""
+    path = tmp_path / "line.toml"
+    path.write_text("[line]\nrecovery = false\n")
+    code = main(["demo", "--line-pitch-deg", "60", "--config", str(path), "--json", "--no-plot"])
+    doc = json.loads(capsys.readouterr().out)
+    assert code == EXIT_SOLVED and doc["summary"]["recovery_s"] is None
+    main(["demo", "--line-pitch-deg", "60", "--json", "--no-plot"])
+    assert json.loads(capsys.readouterr().out)["summary"]["recovery_s"] > 0.0
+
+
 @pytest.mark.parametrize(("text", "field"), [
     ("[planner]\nnot_a_knob = 1\n", "planner.not_a_knob"),
     ("[planner.limits]\nmass = \"heavy\"\n", "planner.limits.mass"),
@@ -151,6 +176,10 @@ def test_config_file_to_plan_to_json_round_trip(tmp_path: Path, capsys) -> None:
     ("[planner.limits]\nmass = -1.0\n", "limits.mass"),
     ("[plannr]\nsolver = \"daqp\"\n", "plannr"),
     ("[planner]\nsolver = \n", "--config"),
+    ("[line]\nwedge = 0.6\n", "line.wedge"),
+    ("[line]\nrecovery_point = [1.0, \"a\", 3.0]\n", "line.recovery_point"),
+    ("[line]\nrecovery_point = [1.0, 2.0]\n", "options.recovery_point"),
+    ("[line]\nwedge_angle = 4.0\n", "options.wedge_angle"),
 ])
 def test_config_errors_name_the_key(tmp_path: Path, text: str, field: str, capsys) -> None:
     path = tmp_path / "bad.toml"
