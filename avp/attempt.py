@@ -140,17 +140,6 @@ class _Ledger:
         return out, None
 
 
-def _rows_hold(blocks: tuple[ConstraintBlock, ...], c_hat: Array, tol: float = 1e-9) -> bool:
-    """Whether ``lower <= matrix @ c_hat <= upper`` holds for every row of ``blocks`` (to ``tol``
-    relative to the bound; a NaN anywhere fails; no rows hold trivially)."""
-    for b in blocks:
-        y = b.matrix @ c_hat
-        if not (np.all(y <= b.upper + tol * (1.0 + np.abs(b.upper)))
-                and np.all(y >= b.lower - tol * (1.0 + np.abs(b.lower)))):
-            return False
-    return True
-
-
 def _trajectory(qp: PerchingQp, outcome: QpOutcome, g: float) -> Trajectory | None:
     if not outcome.ok or outcome.c_hat is None:
         return None
@@ -309,20 +298,25 @@ def solve_fov(
         return out, _trajectory(base, out, cfg.g)
 
     def with_rows(reference: Trajectory, label: str, optimum: QpOutcome | None = None,
+                  worth: Callable[[], bool] | None = None,
                   ) -> tuple[QpOutcome | None, Trajectory | None, str | None, FovLinearisation]:
         """The QP with FoV rows linearised on ``reference``. ``optimum``: the FoV-free solution
         whose trajectory ``reference`` is; when every row holds there it is also an optimum with
         the rows (the rows only shrink the feasible set, and it stays in it), so it is returned
-        without a solve."""
+        without a solve; so it is too when ``worth()`` is False (a first plan whose FoV-free
+        solution already breaks a sampled limit: a time search follows)."""
         tb = time.perf_counter()
         lin = perception.linearise_on(base, reference, target, cfg)
         ledger.build += time.perf_counter() - tb
         n_vis = int(np.sum(lin.h0 <= 0.0))
         desc = (f"{label}: {int(lin.placed.sum())}/{lin.times.size} FoV points placed "
                 f"({int(lin.progress.sum())} progress-only, {n_vis} visible at linearisation)")
-        if optimum is not None and optimum.c_hat is not None and _rows_hold(lin.blocks, optimum.c_hat):
-            held = "every row holds" if lin.blocks else "no row placed"
+        if optimum is not None and optimum.c_hat is not None and lin.hold_at_linearisation:
+            held = "every row holds" if lin.placed.any() else "no row placed"
             log.append(f"{desc}; {held} at the solution without them: that solution, not re-solved")
+            return optimum, reference, None, lin
+        if optimum is not None and worth is not None and not worth():
+            log.append(f"{desc}; no SQP step: the plan without FoV rows already violates a vehicle limit")
             return optimum, reference, None, lin
         tb = time.perf_counter()
         qp = base.with_inequalities(*lin.blocks)
@@ -348,17 +342,17 @@ def solve_fov(
     if fov_times(0.0, float(np.sum(T)), cfg.fov).size == 0:
         log.append("no FoV points: the gate covers the whole plan")
         return ledger.attempt(out0, traj0, qp=base)
-    if not replan and worth_fov is not None and not worth_fov(traj0):
-        log.append("no SQP step: the plan without FoV rows already violates a vehicle limit")
-        return ledger.attempt(out0, traj0, qp=base)
+    plan0 = traj0
+    worth0 = (lambda: worth_fov(plan0)) if not replan and worth_fov is not None else None
     best_out, best_traj = out0, traj0
     best_score: float | None = None  # scored with the first step's plan, in one pass
     best_lin: FovLinearisation | None = None
     steps = 0
     for k in range(1 if replan else cfg.fov.sqp_iterations):
         label = "QP + FoV (linearised on that solution)" if replan else f"SQP step {k + 1}"
-        out, traj, why, lin = with_rows(best_traj, label, optimum=out0 if k == 0 else None)
-        if out is out0:  # the rows hold at the FoV-free optimum: it is the SQP's fixed point
+        out, traj, why, lin = with_rows(best_traj, label, optimum=out0 if k == 0 else None,
+                                        worth=worth0 if k == 0 else None)
+        if out is out0:  # the rows hold at the FoV-free optimum (its fixed point), or no step is worth it
             best_lin = lin
             break
         if why is not None or traj is None or out is None:

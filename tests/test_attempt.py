@@ -4,11 +4,14 @@ planner's record is made of them."""
 from __future__ import annotations
 
 import numpy as np
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from scenarios import standard
 
 import avp
 from avp import perception
-from avp.attempt import Attempt, _rows_hold, solve_at, solve_fov
+from avp.attempt import Attempt, solve_at, solve_fov
+from avp.config import FovPointPolicy
 from avp.qp.assemble import ConstraintBlock, build_perching_qp
 from avp.solve import solve_perching_qp
 from avp.timing import initial_durations
@@ -74,6 +77,38 @@ def test_fov_rows_that_hold_at_the_plain_optimum_are_not_re_solved_and_nothing_i
         np.testing.assert_allclose(forced.c_hat, plain.c_hat, rtol=1e-5, atol=1e-6 * np.abs(plain.c_hat).max())
         assert attempt.linearisation is not None and attempt.sqp_steps == 0
     assert seen == {True, False}
+
+
+def _rows_hold(blocks: tuple[ConstraintBlock, ...], c_hat: np.ndarray, tol: float = 1e-9) -> bool:
+    """The oracle: every row of ``blocks`` evaluated at ``c_hat`` (a NaN fails)."""
+    for b in blocks:
+        y = b.matrix @ c_hat
+        if not (np.all(y <= b.upper + tol * (1 + np.abs(b.upper))) and np.all(y >= b.lower - tol * (1 + np.abs(b.lower)))):
+            return False
+    return True
+
+
+@settings(max_examples=60, deadline=None)
+@given(incline=st.sampled_from([0.0, 30.0, 60.0, 90.0, 120.0]), standoff=st.floats(1.0, 8.0),
+       shift=st.tuples(st.floats(-0.3, 0.3), st.floats(-0.3, 0.3), st.floats(-0.3, 0.3)),
+       tilt=st.floats(-0.3, 0.3), policy=st.sampled_from(list(FovPointPolicy)),
+       margin=st.sampled_from([0.0, 0.02]))
+def test_hold_at_linearisation_agrees_with_the_rows_evaluated_at_the_point(
+        incline: float, standoff: float, shift: tuple[float, float, float], tilt: float,
+        policy: FovPointPolicy, margin: float) -> None:
+    """``hold_at_linearisation`` (decided from ``h0`` without building rows) equals evaluating
+    the built rows at the coefficients the linearisation point came from, on FoV-free optima
+    and on those optima moved off by a perturbed target (points that are not an optimum)."""
+    sc = standard(incline, standoff)
+    cfg = avp.PlannerConfig(fov=avp.FovConfig(point_policy=policy, margin=margin))
+    T = initial_durations(sc.state, sc.target, cfg)
+    base = build_perching_qp(sc.state, sc.target, cfg, T)
+    moved = avp.PerchTarget(point=sc.target.point + np.array(shift), R_WS=sc.target.R_WS)
+    other = solve_perching_qp(build_perching_qp(sc.state, moved, cfg, T), cfg)
+    for c in (solve_perching_qp(base, cfg).c_hat, other.c_hat):
+        traj = base.trajectory(c, cfg.g)
+        lin = perception.linearise_on(base, traj, sc.target, cfg)
+        assert lin.hold_at_linearisation == _rows_hold(lin.blocks, c)
 
 
 def test_the_rows_check_on_synthetic_rows() -> None:

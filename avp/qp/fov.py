@@ -17,7 +17,9 @@ are linear rows on the QP. All blocks are named ``"fov ..."`` so ``qp.without("f
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 import numpy.typing as npt
@@ -113,14 +115,27 @@ def fov_times(start: float, end: float, fov: FovConfig) -> Array:
 
 @dataclass(frozen=True)
 class FovLinearisation:
-    """The FoV blocks of one QP and what happened to each linearisation point."""
+    """The FoV blocks of one QP and what happened to each linearisation point.
 
-    blocks: tuple[ConstraintBlock, ...]
+    ``blocks`` are built on first access: a caller that only needs to know whether the rows
+    hold at the linearisation point itself (:attr:`hold_at_linearisation`) never builds them.
+    """
+
     times: Array  # relative times of the points
     h0: Array  # h/|n_d| at the linearisation points (<= 0: visible there)
     reachable: Array  # smallest h/|n_d| the linearised row reaches inside the box (9)
     placed: Array  # bool: a FoV row was placed
     progress: Array  # bool: the row asks for progress only (PROGRESS policy)
+    hold_at_linearisation: bool
+    """Every placed row holds at the linearisation point: row (8) reads ``h0 <= -margin`` there
+    (to 1e-9 relative to its right-hand side, as :func:`avp.attempt` checks rows), the trust
+    region (9) is centred on it, and no row asks for progress (those need a decrease)."""
+    build: Callable[[], tuple[ConstraintBlock, ...]] = field(repr=False, compare=False, default=tuple)
+
+    @cached_property
+    def blocks(self) -> tuple[ConstraintBlock, ...]:
+        """Blocks ``"fov rows (8)"`` and ``"fov trust region (9) x|a|yaw"`` (built once)."""
+        return self.build()
 
     @property
     def n_rows(self) -> int:
@@ -163,7 +178,7 @@ def fov_blocks(
     m = t.size
     empty = np.zeros(0)
     if m == 0:
-        return FovLinearisation((), t, empty, empty, np.zeros(0, bool), np.zeros(0, bool))
+        return FovLinearisation(t, empty, empty, np.zeros(0, bool), np.zeros(0, bool), True)
     grad = fov_gradient(x0, psi0, a0, target_point, fov.camera, g)
     ok = np.isfinite(grad.h) & np.all(np.isfinite(grad.d_a), axis=1) & np.isfinite(grad.d_psi) & (grad.distance > 1e-6)
     dist = np.where(ok, grad.distance, 1.0)
@@ -196,29 +211,35 @@ def fov_blocks(
         # Ask for a fraction of the reachable decrease: h0 + grad.(z - z0) <= h0 - f * decrease.
         rhs = np.where(hopeless, lin0 - fov.progress_fraction * decrease, rhs)
         progress = hopeless.copy()
-    blocks = []
-    if placed.any():
-        k = int(placed.sum())
-        n_v = layout.n_variables
-        cols = layout.columns(np.arange(4)[None, :], seg[placed][:, None])  # (k, 4, C)
-        p0, p2 = b0[placed], b2[placed]
-        ik = np.arange(k)
-        row8 = np.zeros((k, n_v))
-        row8[ik[:, None, None], cols[:, :3]] = gx[placed][:, :, None] * p0[:, None, :] + ga[placed][:, :, None] * p2[:, None, :]
-        row8[ik[:, None], cols[:, YAW]] = gp[placed][:, None] * p0
-        blocks.append(ConstraintBlock(f"{FOV_PREFIX} rows (8)", row8, np.full(k, -np.inf), rhs[placed]))
-        i3 = np.arange(3 * k)[:, None]
-        for label, basis, z0, r in (
-            ("x", p0, np.asarray(x0)[placed].reshape(-1), fov.trust_position),
-            ("a", p2, np.asarray(a0)[placed].reshape(-1), fov.trust_acceleration),
-        ):
-            if math.isfinite(r):
-                R = np.zeros((3 * k, n_v))
-                R[i3, cols[:, :3].reshape(3 * k, -1)] = np.repeat(basis, 3, axis=0)
-                blocks.append(ConstraintBlock(f"{FOV_PREFIX} trust region (9) {label}", R, z0 - r, z0 + r))
-        if math.isfinite(fov.trust_yaw):
-            R = np.zeros((k, n_v))
-            R[ik[:, None], cols[:, YAW]] = p0
-            z0 = np.asarray(psi0)[placed]
-            blocks.append(ConstraintBlock(f"{FOV_PREFIX} trust region (9) yaw", R, z0 - fov.trust_yaw, z0 + fov.trust_yaw))
-    return FovLinearisation(tuple(blocks), t, h0, reachable, placed, progress)
+
+    def build() -> tuple[ConstraintBlock, ...]:
+        blocks: list[ConstraintBlock] = []
+        if placed.any():
+            k = int(placed.sum())
+            n_v = layout.n_variables
+            cols = layout.columns(np.arange(4)[None, :], seg[placed][:, None])  # (k, 4, C)
+            p0, p2 = b0[placed], b2[placed]
+            ik = np.arange(k)
+            row8 = np.zeros((k, n_v))
+            row8[ik[:, None, None], cols[:, :3]] = gx[placed][:, :, None] * p0[:, None, :] + ga[placed][:, :, None] * p2[:, None, :]
+            row8[ik[:, None], cols[:, YAW]] = gp[placed][:, None] * p0
+            blocks.append(ConstraintBlock(f"{FOV_PREFIX} rows (8)", row8, np.full(k, -np.inf), rhs[placed]))
+            i3 = np.arange(3 * k)[:, None]
+            for label, basis, z0, r in (
+                ("x", p0, np.asarray(x0)[placed].reshape(-1), fov.trust_position),
+                ("a", p2, np.asarray(a0)[placed].reshape(-1), fov.trust_acceleration),
+            ):
+                if math.isfinite(r):
+                    R = np.zeros((3 * k, n_v))
+                    R[i3, cols[:, :3].reshape(3 * k, -1)] = np.repeat(basis, 3, axis=0)
+                    blocks.append(ConstraintBlock(f"{FOV_PREFIX} trust region (9) {label}", R, z0 - r, z0 + r))
+            if math.isfinite(fov.trust_yaw):
+                R = np.zeros((k, n_v))
+                R[ik[:, None], cols[:, YAW]] = p0
+                z0 = np.asarray(psi0)[placed]
+                blocks.append(ConstraintBlock(f"{FOV_PREFIX} trust region (9) yaw", R, z0 - fov.trust_yaw, z0 + fov.trust_yaw))
+        return tuple(blocks)
+
+    hold = bool(not np.any(progress & placed)
+                and np.all(h0[placed] + fov.margin <= 1e-9 * (1.0 + np.abs(rhs[placed]))))
+    return FovLinearisation(t, h0, reachable, placed, progress, hold, build)
