@@ -316,7 +316,8 @@ def solve_fov(
             log.append(f"{desc}; {held} at the solution without them: that solution, not re-solved")
             return optimum, reference, None, lin
         if optimum is not None and worth is not None and not worth():
-            log.append(f"{desc}; no SQP step: the plan without FoV rows already violates a vehicle limit")
+            log.append(f"{desc}; not solved: the plan without FoV rows already violates a vehicle limit "
+                       "(a time search follows)")
             return optimum, reference, None, lin
         tb = time.perf_counter()
         qp = base.with_inequalities(*lin.blocks)

@@ -3,7 +3,7 @@ trials, one-shot planning vs AVP) and ``avp campaign`` (a grid x seeds of trials
 pool or Ray, resumable results, summary).
 
 ``avp --help`` and ``avp COMMAND --help`` list the flags with their defaults. Every planner,
-vehicle, camera and replanner knob can be set from a TOML file (``--config``, see
+vehicle, camera, replanner and line-perch knob can be set from a TOML file (``--config``, see
 ``docs/configuration.md``); the common ones also from flags, which win over the file. Degrees
 appear only here (``--incline-deg``, ``--camera-half-fov-deg``); everything else is SI.
 
@@ -168,7 +168,7 @@ def _common_parser() -> argparse.ArgumentParser:
     g.add_argument("--json", action="store_true", help="print one JSON document on stdout instead of the summary")
     c = p.add_argument_group("configuration (flags win over --config)")
     c.add_argument("--config", metavar="FILE.toml",
-                   help="TOML file with [planner], [replan], [scenario] tables (docs/configuration.md)")
+                   help="TOML file with [planner], [replan], [line], [scenario] tables (docs/configuration.md)")
     c.add_argument("--solver", help=f"qpsolvers back-end: daqp, proxqp, osqp... (default {PlannerConfig.solver})")
     c.add_argument("--mass", type=float, help=f"vehicle mass, kg (default {lim.mass})")
     c.add_argument("--thrust-min", type=float, help=f"minimum thrust, N (default {lim.thrust_min:g})")

@@ -166,7 +166,13 @@ def from_mapping(cls: type, data: Mapping[str, Any], where: str = "") -> Any:
         kwargs[key] = _convert(hints[key], value, path)
     try:
         return cls(**kwargs)
-    except ConfigError:
+    except ConfigError as exc:
+        # the class names its own field ("limits.mass", "options.wedge_angle"); name the key as
+        # written in the file when it is one of this table's keys
+        key = exc.field.rsplit(".", 1)[-1]
+        if where and key in kwargs and exc.field != f"{where}.{key}":
+            message = str(exc)[len(exc.field) + 2:] if str(exc).startswith(f"{exc.field}: ") else str(exc)
+            raise ConfigError(f"{where}.{key}", message) from exc
         raise
     except (TypeError, ValueError) as exc:
         raise ConfigError(where or cls.__name__, str(exc)) from exc
@@ -420,6 +426,8 @@ def configuration_markdown() -> str:
                     + " take the fields of those classes (see their docstrings)."]
             continue
         title = f"`[{table}]`: `{cls.__module__.replace('avp.', 'avp.', 1)}.{cls.__name__}`"
+        if table == "line":
+            title += " (avp demo, avp simulate with --line-pitch-deg)"
         if cls in seen:
             out += ["", f"## {title}", "", f"Same fields as `{cls.__name__}` above."]
             continue

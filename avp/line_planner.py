@@ -132,6 +132,15 @@ class LineOptions:
             object.__setattr__(self, "recovery_point", v.frozen_array("options.recovery_point", self.recovery_point, (3,)))
         v.positive_float("options.recovery_distance", self.recovery_distance)
         v.positive_float("options.recovery_height_margin", self.recovery_height_margin)
+        if not (math.isfinite(self.ground_margin) and self.ground_margin >= 0.0):
+            raise ConfigError("options.ground_margin", f"must be a finite distance >= 0 m, got {self.ground_margin}")
+        w0, w1 = (v.finite_float("options.flip_window", x) for x in self.flip_window)
+        if not w0 > w1 >= 0.0:
+            raise ConfigError("options.flip_window", f"must be (start, end) seconds before contact with start > end >= 0, "
+                              f"got {self.flip_window}")
+        v.positive_float("options.flip_thrust", self.flip_thrust)
+        if not (math.isfinite(self.flip_time) and self.flip_time >= 0.0):
+            raise ConfigError("options.flip_time", f"must be a finite time >= 0 s, got {self.flip_time}")
 
 
 class LineStatus(Enum):

@@ -49,7 +49,7 @@ try:  # the one attempt path (absent before it was unified)
     import avp.attempt as attempt
 except ImportError:  # pragma: no cover
     attempt = None
-from avp.qp import assemble, boundary, perching
+from avp.qp import assemble, boundary, fov, perching
 from avp.qp.cost import gram
 from avp.qp.layout import N_AXES, YAW, layout_for
 from avp.timing import initial_durations
@@ -92,6 +92,7 @@ def instrumented(timer: StageTimer) -> Iterator[None]:
         (planner, "build_perching_qp", "build"),
         (assemble.PerchingQp, "reduce", "elimination"),
         (perception, "linearise_on", "FoV"),
+        (fov, "fov_rows", "FoV"),  # the rows, built on first access to FovLinearisation.blocks
         (perception, "_scores", "FoV"),  # current: scoring several plans in one pass
         (perception, "_score", "FoV"),  # before: one plan at a time
         (qpsolvers, "solve_problem", "solve"),  # other back-ends (and DAQP before the direct call)

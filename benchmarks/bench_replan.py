@@ -92,6 +92,7 @@ STAGES = (  # (module, function, label): CPU inside Replanner.step, per planning
     ("avp.attempt", "build_perching_qp", "  build the QP"),
     ("avp.attempt", "workspace_blocks", "  workspace rows"),
     ("avp.perception", "linearise_on", "  FoV linearisation (8)-(9)"),
+    ("avp.qp.fov", "fov_rows", "  FoV rows built (when a QP needs them)"),
     ("avp.attempt", "solve_perching_qp", "  reduce and solve the QPs"),
     ("avp.qp.assemble", "_factor", "    of which: elimination QR (cache lookups and misses)"),
     ("avp.solve", "_solve_two_sided", "    of which: DAQP"),

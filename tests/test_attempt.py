@@ -3,8 +3,11 @@ planner's record is made of them."""
 
 from __future__ import annotations
 
+import math
+import pickle
+
 import numpy as np
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 from scenarios import standard
 
@@ -13,6 +16,8 @@ from avp import perception
 from avp.attempt import Attempt, solve_at, solve_fov
 from avp.config import FovPointPolicy
 from avp.qp.assemble import ConstraintBlock, build_perching_qp
+from avp.qp.fov import fov_blocks
+from avp.qp.layout import layout_for
 from avp.solve import solve_perching_qp
 from avp.timing import initial_durations
 
@@ -88,27 +93,86 @@ def _rows_hold(blocks: tuple[ConstraintBlock, ...], c_hat: np.ndarray, tol: floa
     return True
 
 
-@settings(max_examples=60, deadline=None)
-@given(incline=st.sampled_from([0.0, 30.0, 60.0, 90.0, 120.0]), standoff=st.floats(1.0, 8.0),
-       shift=st.tuples(st.floats(-0.3, 0.3), st.floats(-0.3, 0.3), st.floats(-0.3, 0.3)),
-       tilt=st.floats(-0.3, 0.3), policy=st.sampled_from(list(FovPointPolicy)),
-       margin=st.sampled_from([0.0, 0.02]))
-def test_hold_at_linearisation_agrees_with_the_rows_evaluated_at_the_point(
-        incline: float, standoff: float, shift: tuple[float, float, float], tilt: float,
-        policy: FovPointPolicy, margin: float) -> None:
-    """``hold_at_linearisation`` (decided from ``h0`` without building rows) equals evaluating
-    the built rows at the coefficients the linearisation point came from, on FoV-free optima
-    and on those optima moved off by a perturbed target (points that are not an optimum)."""
+def _hold_matches(incline: float, standoff: float, shift: tuple[float, float, float], policy: FovPointPolicy,
+                  margin: float, **fov: float) -> list[bool]:
+    """``hold_at_linearisation`` against the built rows evaluated at the coefficients the
+    linearisation point came from (asserted equal), on the FoV-free optimum and on the optimum
+    for a moved target (a point that is not an optimum); returns the outcomes."""
     sc = standard(incline, standoff)
-    cfg = avp.PlannerConfig(fov=avp.FovConfig(point_policy=policy, margin=margin))
+    cfg = avp.PlannerConfig(fov=avp.FovConfig(point_policy=policy, margin=margin, **fov))
     T = initial_durations(sc.state, sc.target, cfg)
     base = build_perching_qp(sc.state, sc.target, cfg, T)
     moved = avp.PerchTarget(point=sc.target.point + np.array(shift), R_WS=sc.target.R_WS)
     other = solve_perching_qp(build_perching_qp(sc.state, moved, cfg, T), cfg)
+    out = []
     for c in (solve_perching_qp(base, cfg).c_hat, other.c_hat):
-        traj = base.trajectory(c, cfg.g)
-        lin = perception.linearise_on(base, traj, sc.target, cfg)
-        assert lin.hold_at_linearisation == _rows_hold(lin.blocks, c)
+        lin = perception.linearise_on(base, base.trajectory(c, cfg.g), sc.target, cfg)
+        assert lin.hold_at_linearisation == _rows_hold(lin.blocks, c), (incline, standoff, policy, margin)
+        out.append(lin.hold_at_linearisation)
+    return out
+
+
+@settings(max_examples=60, deadline=None)
+@example(incline=120.0, standoff=3.0, shift=(0.0, 0.0, 0.0), policy=FovPointPolicy.SKIP, margin=0.02)
+@given(incline=st.sampled_from([0.0, 30.0, 60.0, 90.0, 120.0]), standoff=st.floats(1.0, 8.0),
+       shift=st.tuples(st.floats(-0.3, 0.3), st.floats(-0.3, 0.3), st.floats(-0.3, 0.3)),
+       policy=st.sampled_from(list(FovPointPolicy)), margin=st.sampled_from([0.0, 0.02]))
+def test_hold_at_linearisation_agrees_with_the_rows_evaluated_at_the_point(
+        incline: float, standoff: float, shift: tuple[float, float, float], policy: FovPointPolicy,
+        margin: float) -> None:
+    _hold_matches(incline, standoff, shift, policy, margin)
+
+
+def test_hold_at_linearisation_on_a_grid_sees_both_outcomes_for_every_policy() -> None:
+    """Dense fixed grid (no sampling luck): zero mismatches; both outcomes occur for every policy
+    without a margin and for SKIP with one (with a 0.02 margin, KEEP and PROGRESS always leave
+    some row violated here), so a rule that ignored the margin or the policy would be caught."""
+    for policy in FovPointPolicy:
+        for margin in (0.0, 0.02):
+            seen = set()
+            for incline in (0.0, 30.0, 60.0, 90.0, 120.0):
+                for standoff in (1.0, 2.5, 4.5, 8.0):
+                    for shift in ((0.0, 0.0, 0.0), (0.0, 0.0, -0.1)):
+                        seen.update(_hold_matches(incline, standoff, shift, policy, margin))
+            if margin == 0.0 or policy is FovPointPolicy.SKIP:
+                assert seen == {True, False}, (policy, margin)
+    # infinite trust radii: no trust-region rows, the rule is unchanged
+    _hold_matches(90.0, 3.0, (0.0, 0.0, 0.0), FovPointPolicy.SKIP, 0.0, trust_position=math.inf,
+                  trust_acceleration=math.inf, trust_yaw=math.inf)
+
+
+def test_fov_blocks_edge_cases_and_pickling() -> None:
+    layout = layout_for(3, 7)
+    knots = np.array([0.0, 0.5, 1.0, 1.5])
+    t = np.array([0.3, 0.9, 1.4])
+    x0 = np.array([[-2.0, 0.0, 1.0], [-1.0, 0.0, 1.0], [-0.5, 0.0, 1.0]])
+    psi0 = np.zeros(3)
+    s_W = np.array([0.0, 0.0, 1.0])
+    fall = np.tile([0.0, 0.0, -avp.frames.GRAVITY], (3, 1))  # no thrust: no usable gradient
+    lin = fov_blocks(layout, knots, t, x0, psi0, fall, s_W, avp.FovConfig())
+    assert not lin.placed.any() and lin.hold_at_linearisation and lin.blocks == ()
+    level = np.zeros((3, 3))  # hover: the target ahead is seen by the front camera
+    lin = fov_blocks(layout, knots, t, x0, psi0, level, s_W, avp.FovConfig())
+    assert lin.placed.all() and lin.hold_at_linearisation == bool(np.all(lin.h0 <= 0.0))
+    assert len(lin.blocks) == 4 and lin.n_rows == 3 + 9 + 9 + 3
+    again = pickle.loads(pickle.dumps(lin))
+    assert all(np.array_equal(a.matrix, b.matrix) for a, b in zip(again.blocks, lin.blocks, strict=True))
+    assert not lin.placed.flags.writeable and not lin.h0.flags.writeable
+    behind = np.array([-5.0, 0.0, 1.0])  # a target behind the camera
+    prog = fov_blocks(layout, knots, t, x0, psi0, level, behind,
+                      avp.FovConfig(point_policy=FovPointPolicy.PROGRESS))
+    assert prog.progress.any() and not prog.hold_at_linearisation
+    assert not _rows_hold(prog.blocks, _coefficients_through(layout, knots, t, x0, level, psi0))
+
+
+def _coefficients_through(layout, knots, t, x0, a0, psi0) -> np.ndarray:
+    """Some coefficients whose position, acceleration and yaw at ``t`` are ``x0``, ``a0``,
+    ``psi0`` (least squares on the rows the FoV block uses)."""
+    lin = fov_blocks(layout, knots, t, x0, psi0, a0, np.array([10.0, 0.0, 1.0]),
+                     avp.FovConfig(point_policy=FovPointPolicy.KEEP))
+    M = np.vstack([b.matrix for b in lin.blocks[1:]])
+    rhs = np.concatenate([0.5 * (b.lower + b.upper) for b in lin.blocks[1:]])
+    return np.linalg.lstsq(M, rhs, rcond=None)[0]
 
 
 def test_the_rows_check_on_synthetic_rows() -> None:

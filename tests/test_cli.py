@@ -173,13 +173,14 @@ def test_avp_demo_on_a_line_flies_the_line_table(tmp_path: Path, capsys) -> None
     ("[planner.fov]\nenabled = 1\n", "planner.fov.enabled"),
     ("[planner]\nn_segments = true\n", "planner.n_segments"),
     ("[planner]\npre_impact = \"sideways\"\n", "planner.pre_impact"),
-    ("[planner.limits]\nmass = -1.0\n", "limits.mass"),
+    ("[planner.limits]\nmass = -1.0\n", "planner.limits.mass"),
     ("[plannr]\nsolver = \"daqp\"\n", "plannr"),
     ("[planner]\nsolver = \n", "--config"),
     ("[line]\nwedge = 0.6\n", "line.wedge"),
     ("[line]\nrecovery_point = [1.0, \"a\", 3.0]\n", "line.recovery_point"),
-    ("[line]\nrecovery_point = [1.0, 2.0]\n", "options.recovery_point"),
-    ("[line]\nwedge_angle = 4.0\n", "options.wedge_angle"),
+    ("[line]\nrecovery_point = [1.0, 2.0]\n", "line.recovery_point"),
+    ("[line]\nwedge_angle = 4.0\n", "line.wedge_angle"),
+    ("[line]\nflip_window = [0.1, 0.3]\n", "line.flip_window"),
 ])
 def test_config_errors_name_the_key(tmp_path: Path, text: str, field: str, capsys) -> None:
     path = tmp_path / "bad.toml"

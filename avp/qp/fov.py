@@ -17,7 +17,6 @@ are linear rows on the QP. All blocks are named ``"fov ..."`` so ``qp.without("f
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
 from dataclasses import dataclass, field
 from functools import cached_property
 
@@ -36,9 +35,11 @@ __all__ = [
     "FOV_PREFIX",
     "FovGradient",
     "FovLinearisation",
+    "FovRowInputs",
     "fov_blocks",
     "fov_gradient",
     "fov_h",
+    "fov_rows",
     "fov_times",
 ]
 
@@ -113,12 +114,67 @@ def fov_times(start: float, end: float, fov: FovConfig) -> Array:
     return start + (last - start) * k / fov.n_points
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
+class FovRowInputs:
+    """What the FoV rows of the placed points are built from (:func:`fov_rows`)."""
+
+    layout: DecisionLayout
+    seg: npt.NDArray[np.intp]  # (k,) segment of each placed point
+    b0: Array  # (k, C) position basis
+    b2: Array  # (k, C) acceleration basis (over T^2)
+    gx: Array  # (k, 3) row (8) gradient in x, over |n_d|
+    ga: Array  # (k, 3) ... in a
+    gp: Array  # (k,) ... in yaw
+    rhs: Array  # (k,) right-hand side of row (8)
+    x0: Array  # (k, 3) linearisation point
+    a0: Array  # (k, 3)
+    psi0: Array  # (k,)
+    fov: FovConfig
+
+
+def fov_rows(inp: FovRowInputs) -> tuple[ConstraintBlock, ...]:
+    """Blocks ``"fov rows (8)"`` and ``"fov trust region (9) x|a|yaw"`` of the placed points.
+
+    Every row of a point touches only its segment's columns (``layout.columns(axis, seg)``):
+    row (8) ``grad.z <= grad.z0 - h0 - margin`` (i.e. ``h0 + grad.(z - z0) <= -margin``) has x/a
+    columns ``gx_j b0 + ga_j b2`` and yaw columns ``gp b0``; the trust region (9) rows are ``b0``
+    (x, yaw) and ``b2`` (a) on one axis each.
+    """
+    k = inp.seg.size
+    if k == 0:
+        return ()
+    fov, n_v = inp.fov, inp.layout.n_variables
+    cols = inp.layout.columns(np.arange(4)[None, :], inp.seg[:, None])  # (k, 4, C)
+    p0, p2 = inp.b0, inp.b2
+    ik = np.arange(k)
+    row8 = np.zeros((k, n_v))
+    row8[ik[:, None, None], cols[:, :3]] = inp.gx[:, :, None] * p0[:, None, :] + inp.ga[:, :, None] * p2[:, None, :]
+    row8[ik[:, None], cols[:, YAW]] = inp.gp[:, None] * p0
+    blocks = [ConstraintBlock(f"{FOV_PREFIX} rows (8)", row8, np.full(k, -np.inf), inp.rhs)]
+    i3 = np.arange(3 * k)[:, None]
+    for label, basis, z0, r in (
+        ("x", p0, inp.x0.reshape(-1), fov.trust_position),
+        ("a", p2, inp.a0.reshape(-1), fov.trust_acceleration),
+    ):
+        if math.isfinite(r):
+            R = np.zeros((3 * k, n_v))
+            R[i3, cols[:, :3].reshape(3 * k, -1)] = np.repeat(basis, 3, axis=0)
+            blocks.append(ConstraintBlock(f"{FOV_PREFIX} trust region (9) {label}", R, z0 - r, z0 + r))
+    if math.isfinite(fov.trust_yaw):
+        R = np.zeros((k, n_v))
+        R[ik[:, None], cols[:, YAW]] = p0
+        blocks.append(ConstraintBlock(f"{FOV_PREFIX} trust region (9) yaw", R, inp.psi0 - fov.trust_yaw,
+                                      inp.psi0 + fov.trust_yaw))
+    return tuple(blocks)
+
+
+@dataclass(frozen=True, eq=False)
 class FovLinearisation:
     """The FoV blocks of one QP and what happened to each linearisation point.
 
-    ``blocks`` are built on first access: a caller that only needs to know whether the rows
-    hold at the linearisation point itself (:attr:`hold_at_linearisation`) never builds them.
+    ``blocks`` are built on first access (:func:`fov_rows`): a caller that only needs to know
+    whether the rows hold at the linearisation point itself (:attr:`hold_at_linearisation`)
+    never builds them. The arrays are read-only.
     """
 
     times: Array  # relative times of the points
@@ -128,18 +184,23 @@ class FovLinearisation:
     progress: Array  # bool: the row asks for progress only (PROGRESS policy)
     hold_at_linearisation: bool
     """Every placed row holds at the linearisation point: row (8) reads ``h0 <= -margin`` there
-    (to 1e-9 relative to its right-hand side, as :func:`avp.attempt` checks rows), the trust
+    (to 1e-9 relative to its right-hand side, as the rows are checked elsewhere), the trust
     region (9) is centred on it, and no row asks for progress (those need a decrease)."""
-    build: Callable[[], tuple[ConstraintBlock, ...]] = field(repr=False, compare=False, default=tuple)
+    rows: FovRowInputs | None = field(default=None, repr=False)
 
     @cached_property
     def blocks(self) -> tuple[ConstraintBlock, ...]:
         """Blocks ``"fov rows (8)"`` and ``"fov trust region (9) x|a|yaw"`` (built once)."""
-        return self.build()
+        return fov_rows(self.rows) if self.rows is not None else ()
 
     @property
     def n_rows(self) -> int:
         return int(sum(b.n_rows for b in self.blocks))
+
+
+def _times_radius(g: Array, r: float) -> Array:
+    """``g r`` for ``g >= 0``, with ``0 inf = 0`` (an infinite trust radius on a zero gradient)."""
+    return g * r if math.isfinite(r) else np.where(g > 0.0, np.inf, 0.0)
 
 
 def fov_blocks(
@@ -174,7 +235,7 @@ def fov_blocks(
     FovLinearisation
         Blocks ``"fov rows (8)"`` and ``"fov trust region (9) x|a|yaw"``.
     """
-    t = np.asarray(times, dtype=float)
+    t = np.array(times, dtype=float)  # a copy: it is returned read-only
     m = t.size
     empty = np.zeros(0)
     if m == 0:
@@ -187,13 +248,10 @@ def fov_blocks(
     gp = np.where(ok, grad.d_psi, 0.0) / dist
     h0 = np.where(ok, grad.h, np.inf) / dist
     # Largest linearised decrease inside the box (9): sum |grad_i| r_i.
-    decrease = (np.abs(gx).sum(1) * fov.trust_position + np.abs(ga).sum(1) * fov.trust_acceleration
-                + np.abs(gp) * fov.trust_yaw)
+    decrease = (_times_radius(np.abs(gx).sum(1), fov.trust_position)
+                + _times_radius(np.abs(ga).sum(1), fov.trust_acceleration) + _times_radius(np.abs(gp), fov.trust_yaw))
     reachable = h0 - decrease
-    # Every row of a point touches only its segment's columns (layout.columns(axis, seg)).
-    # Row (8): grad.z <= grad.z0 - h0 - margin, i.e. h0 + grad.(z - z0) <= -margin, with
-    # x/a columns gx_j b0 + ga_j b2 and yaw columns gp b0; the trust region (9) rows are b0
-    # (x, yaw) and b2 (a) on one axis each.
+    # the rows themselves are built by fov_rows, on first access to the blocks
     seg, u = layout.locate(knots_rel, t)
     T = knots_rel[seg + 1] - knots_rel[seg]
     b0 = layout.basis(0, u)  # (m, C)
@@ -211,35 +269,11 @@ def fov_blocks(
         # Ask for a fraction of the reachable decrease: h0 + grad.(z - z0) <= h0 - f * decrease.
         rhs = np.where(hopeless, lin0 - fov.progress_fraction * decrease, rhs)
         progress = hopeless.copy()
-
-    def build() -> tuple[ConstraintBlock, ...]:
-        blocks: list[ConstraintBlock] = []
-        if placed.any():
-            k = int(placed.sum())
-            n_v = layout.n_variables
-            cols = layout.columns(np.arange(4)[None, :], seg[placed][:, None])  # (k, 4, C)
-            p0, p2 = b0[placed], b2[placed]
-            ik = np.arange(k)
-            row8 = np.zeros((k, n_v))
-            row8[ik[:, None, None], cols[:, :3]] = gx[placed][:, :, None] * p0[:, None, :] + ga[placed][:, :, None] * p2[:, None, :]
-            row8[ik[:, None], cols[:, YAW]] = gp[placed][:, None] * p0
-            blocks.append(ConstraintBlock(f"{FOV_PREFIX} rows (8)", row8, np.full(k, -np.inf), rhs[placed]))
-            i3 = np.arange(3 * k)[:, None]
-            for label, basis, z0, r in (
-                ("x", p0, np.asarray(x0)[placed].reshape(-1), fov.trust_position),
-                ("a", p2, np.asarray(a0)[placed].reshape(-1), fov.trust_acceleration),
-            ):
-                if math.isfinite(r):
-                    R = np.zeros((3 * k, n_v))
-                    R[i3, cols[:, :3].reshape(3 * k, -1)] = np.repeat(basis, 3, axis=0)
-                    blocks.append(ConstraintBlock(f"{FOV_PREFIX} trust region (9) {label}", R, z0 - r, z0 + r))
-            if math.isfinite(fov.trust_yaw):
-                R = np.zeros((k, n_v))
-                R[ik[:, None], cols[:, YAW]] = p0
-                z0 = np.asarray(psi0)[placed]
-                blocks.append(ConstraintBlock(f"{FOV_PREFIX} trust region (9) yaw", R, z0 - fov.trust_yaw, z0 + fov.trust_yaw))
-        return tuple(blocks)
-
     hold = bool(not np.any(progress & placed)
                 and np.all(h0[placed] + fov.margin <= 1e-9 * (1.0 + np.abs(rhs[placed]))))
-    return FovLinearisation(t, h0, reachable, placed, progress, hold, build)
+    rows = FovRowInputs(layout, seg[placed], b0[placed], b2[placed], gx[placed], ga[placed], gp[placed],
+                        rhs[placed], np.asarray(x0, dtype=float)[placed], np.asarray(a0, dtype=float)[placed],
+                        np.asarray(psi0, dtype=float)[placed], fov)
+    for arr in (t, h0, reachable, placed, progress):
+        arr.setflags(write=False)
+    return FovLinearisation(t, h0, reachable, placed, progress, hold, rows)
