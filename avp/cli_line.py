@@ -99,8 +99,13 @@ def line_demo(args: argparse.Namespace, config: Any, options: Any = None) -> tup
     log.info("  planning time   : %.1f ms (perch + recovery)", 1e3 * result.timings.get("total", math.nan))
     if not result.ok:
         log.warning("no certified line perch: %s", result.status.value)
+    from .configfile import to_mapping
+    from .line_planner import LineOptions
+
+    used = options if options is not None else LineOptions()
     return code, {"command": "demo", "exit_code": code, "status": result.status.name, "line": _line_doc(line),
-                  "start": state.position.tolist(), "summary": summary, "log": list(result.log)}
+                  "start": state.position.tolist(), "summary": summary, "log": list(result.log),
+                  "config": {"planner": to_mapping(config), "line": to_mapping(used)}}
 
 
 def line_simulate(args: argparse.Namespace, config: Any, replan: Any = None, options: Any = None) -> dict[str, Any]:

@@ -160,8 +160,12 @@ def test_avp_demo_on_a_line_flies_the_line_table(tmp_path: Path, capsys) -> None
     path = tmp_path / "line.toml"
     path.write_text("[line]\nrecovery = false\n")
     code = main(["demo", "--line-pitch-deg", "60", "--config", str(path), "--json", "--no-plot"])
-    doc = json.loads(capsys.readouterr().out)
+    doc = json.loads(capsys.readouterr().out, parse_constant=lambda c: pytest.fail(f"non-JSON constant {c}"))
     assert code == EXIT_SOLVED and doc["summary"]["recovery_s"] is None
+    from avp.configfile import from_mapping
+    from avp.line_planner import LineOptions
+
+    assert from_mapping(LineOptions, doc["config"]["line"], "line") == LineOptions(recovery=False)  # the options used
     main(["demo", "--line-pitch-deg", "60", "--json", "--no-plot"])
     assert json.loads(capsys.readouterr().out)["summary"]["recovery_s"] > 0.0
 
