@@ -37,6 +37,7 @@ import time
 import warnings
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from functools import partial
 
 import numpy as np
 
@@ -343,8 +344,7 @@ def solve_fov(
     if fov_times(0.0, float(np.sum(T)), cfg.fov).size == 0:
         log.append("no FoV points: the gate covers the whole plan")
         return ledger.attempt(out0, traj0, qp=base)
-    plan0 = traj0
-    worth0 = (lambda: worth_fov(plan0)) if not replan and worth_fov is not None else None
+    worth0 = partial(worth_fov, traj0) if not replan and worth_fov is not None else None
     best_out, best_traj = out0, traj0
     best_score: float | None = None  # scored with the first step's plan, in one pass
     best_lin: FovLinearisation | None = None

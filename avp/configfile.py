@@ -171,8 +171,7 @@ def from_mapping(cls: type, data: Mapping[str, Any], where: str = "") -> Any:
         # written in the file when it is one of this table's keys
         key = exc.field.rsplit(".", 1)[-1]
         if where and key in kwargs and exc.field != f"{where}.{key}":
-            message = str(exc)[len(exc.field) + 2:] if str(exc).startswith(f"{exc.field}: ") else str(exc)
-            raise ConfigError(f"{where}.{key}", message) from exc
+            raise ConfigError(f"{where}.{key}", exc.message) from exc
         raise
     except (TypeError, ValueError) as exc:
         raise ConfigError(where or cls.__name__, str(exc)) from exc

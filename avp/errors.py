@@ -35,10 +35,13 @@ class ConfigError(AvpError, ValueError):
     ----------
     field:
         Name of the offending argument or field (``"target.R_WS"``, ``"limits.thrust_min"``).
+    message:
+        What is wrong and what to do, without the field name.
     """
 
     def __init__(self, field: str, message: str) -> None:
         self.field = field
+        self.message = message
         super().__init__(f"{field}: {message}")
 
 
