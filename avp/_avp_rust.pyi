@@ -17,6 +17,7 @@ __all__ = [
     "certify_spline",
     "eval_spline",
     "fov_gradient",
+    "fov_linearise",
     "sturm_count",
     "trackability_rows",
 ]
@@ -76,6 +77,37 @@ def fov_gradient(
     ``(h (m,), d_x (m, 3), d_psi (m,), d_a (m, 3), distance (m,))``; non-finite where the
     construction (13) is singular. Raises ``KernelError`` on bad shapes or non-finite ``s``,
     ``axis_B``, ``cos_half``, ``g``."""
+
+def fov_linearise(
+    x0: npt.NDArray[np.float64],
+    psi0: npt.NDArray[np.float64],
+    a0: npt.NDArray[np.float64],
+    s: npt.NDArray[np.float64],
+    axis_B: npt.NDArray[np.float64],
+    cos_half: float,
+    g: float,
+    trust: tuple[float, float, float],
+    margin: float,
+    reach_fraction: float,
+    progress_fraction: float,
+    policy: str,
+) -> tuple[
+    npt.NDArray[np.float64],
+    npt.NDArray[np.float64],
+    npt.NDArray[np.float64],
+    npt.NDArray[np.float64],
+    npt.NDArray[np.float64],
+    npt.NDArray[np.float64],
+    npt.NDArray[np.bool_],
+    npt.NDArray[np.bool_],
+    bool,
+]:
+    """The linearised FoV rows (8) at ``m`` points (:func:`avp.qp.fov.fov_blocks`):
+    ``(h0, reachable, gx (m, 3), ga (m, 3), gp, rhs, placed, progress, hold)``. ``trust``: the
+    box (9) radii in position, acceleration and yaw (``inf`` allowed); ``policy``: ``"keep"``,
+    ``"skip"`` or ``"progress"``. A degenerate point has no row, a zero gradient and
+    ``h0 = inf``. ``hold``: every placed row holds at the linearisation point. Raises
+    ``KernelError`` on bad shapes, a negative radius, margin or fraction, or an unknown policy."""
 
 # --- bound certificates (sturm.rs, exact.rs, certify.rs, bounds.rs) ---------------------------
 

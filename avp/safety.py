@@ -75,9 +75,24 @@ def contact_position(target: PerchTarget, workspace: Workspace) -> Array:
     return np.asarray(target.point + workspace.body_offset * target.s3, dtype=np.float64)
 
 
+_LAST_REGIONS: tuple[PerchTarget, Workspace, tuple[Region, ...]] | None = None
+"""The last :func:`regions_for` call (both arguments are immutable: frozen, read-only arrays),
+held by reference: one planning call asks for the same regions three times."""
+
+
 def regions_for(target: PerchTarget, workspace: Workspace) -> tuple[Region, ...]:
     """The regions of ``workspace`` for a perch on ``target``, in a fixed order: perch plane,
     ground, half-spaces, spheres, speed."""
+    global _LAST_REGIONS
+    last = _LAST_REGIONS
+    if last is not None and last[0] is target and last[1] is workspace:
+        return last[2]
+    regions = _regions_for(target, workspace)
+    _LAST_REGIONS = (target, workspace, regions)
+    return regions
+
+
+def _regions_for(target: PerchTarget, workspace: Workspace) -> tuple[Region, ...]:
     p_c = contact_position(target, workspace)
     planes: list[tuple[str, Array, float]] = []
     if workspace.perch_clearance:
@@ -91,6 +106,9 @@ def regions_for(target: PerchTarget, workspace: Workspace) -> tuple[Region, ...]
             for k, s in enumerate(workspace.spheres)]
     if math.isfinite(workspace.max_speed):
         out.append(Region("max speed", "speed", np.zeros(3), float(workspace.max_speed)))
+    for r in out:  # shared by later calls (regions_for): read-only, copied where it is a view
+        if r.normal.flags.writeable:
+            r.normal.setflags(write=False)
     return tuple(out)
 
 
@@ -247,7 +265,9 @@ def _position_rows(layout: DecisionLayout, knots_rel: Array, times: Array, per_s
 
 def _plane_block(name: str, P: Array, normal: Array, offset: Array | float) -> ConstraintBlock:
     """``normal . p(t_j) >= offset`` with ``P`` the position rows at the ``t_j``."""
-    G = np.einsum("i,min->mn", normal, P)
+    # one product and sum per axis (a position row has one axis's columns: the same values as
+    # the contraction over the axes, without einsum's dispatch)
+    G = normal[0] * P[:, 0, :] + normal[1] * P[:, 1, :] + normal[2] * P[:, 2, :]
     m = P.shape[0]
     lower = np.broadcast_to(np.asarray(offset, dtype=float), (m,)).copy()
     return ConstraintBlock(name, G, lower, np.full(m, np.inf))

@@ -388,3 +388,66 @@ def test_fov_blocks_equal_previous_implementation(policy: FovPointPolicy) -> Non
             name = f"{FOV_PREFIX} trust region (9) {label}"
             if name in blocks:
                 np.testing.assert_array_equal(blocks[name].matrix, R)
+
+
+def _ref_fov_terms(x0: Array, psi0: Array, a0: Array, s: Array, fov: FovConfig) -> dict[str, object]:
+    """The former NumPy construction of the row terms of fov_blocks (before the Rust kernel),
+    on the same gradient: the kernel must give the same bits."""
+    grad = fov_gradient(x0, psi0, a0, s, fov.camera)
+    ok = np.isfinite(grad.h) & np.all(np.isfinite(grad.d_a), axis=1) & np.isfinite(grad.d_psi) & (grad.distance > 1e-6)
+    dist = np.where(ok, grad.distance, 1.0)
+    gx = np.where(ok[:, None], grad.d_x, 0.0) / dist[:, None]
+    ga = np.where(ok[:, None], grad.d_a, 0.0) / dist[:, None]
+    gp = np.where(ok, grad.d_psi, 0.0) / dist
+    h0 = np.where(ok, grad.h, np.inf) / dist
+
+    def times_radius(v: Array, r: float) -> Array:
+        return v * r if math.isfinite(r) else np.where(v > 0.0, np.inf, 0.0)
+
+    decrease = (times_radius(np.abs(gx).sum(1), fov.trust_position)
+                + times_radius(np.abs(ga).sum(1), fov.trust_acceleration) + times_radius(np.abs(gp), fov.trust_yaw))
+    lin0 = np.sum(gx * x0, 1) + np.sum(ga * a0, 1) + gp * psi0
+    rhs = lin0 - h0 - fov.margin
+    placed, progress = ok.copy(), np.zeros(ok.size, bool)
+    hopeless = ok & (h0 - fov.reach_fraction * decrease > -fov.margin)
+    if fov.point_policy is FovPointPolicy.SKIP:
+        placed &= ~hopeless
+    elif fov.point_policy is FovPointPolicy.PROGRESS:
+        rhs = np.where(hopeless, lin0 - fov.progress_fraction * decrease, rhs)
+        progress = hopeless.copy()
+    hold = bool(not np.any(progress & placed)
+                and np.all(h0[placed] + fov.margin <= 1e-9 * (1.0 + np.abs(rhs[placed]))))
+    return dict(h0=h0, reachable=h0 - decrease, placed=placed, progress=progress, hold=hold,
+                gx=gx[placed], ga=ga[placed], gp=gp[placed], rhs=rhs[placed])
+
+
+@settings(max_examples=300, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), policy=st.sampled_from(list(FovPointPolicy)),
+       radii=st.tuples(*(st.sampled_from([1e-3, 0.05, 0.2, 1.0, math.inf]) for _ in range(3))),
+       margin=st.sampled_from([0.0, 0.01, 0.1]), reach=st.sampled_from([0.5, 0.9, 1.0]),
+       degenerate=st.booleans())
+def test_fov_kernel_row_terms_equal_the_former_numpy_construction_bit_for_bit(
+    seed: int, policy: FovPointPolicy, radii: tuple[float, float, float], margin: float, reach: float,
+    degenerate: bool,
+) -> None:
+    rng = np.random.default_rng(seed)
+    x, psi, a, s = _random_fov_case(rng, 8)
+    if not degenerate:
+        x[0] += 0.5
+    if degenerate and seed % 3 == 0:
+        a[1] = [0.0, 0.0, -GRAVITY]  # no thrust: no usable gradient at that point
+    fov = FovConfig(point_policy=policy, trust_position=radii[0], trust_acceleration=radii[1], trust_yaw=radii[2],
+                    margin=margin, reach_fraction=reach, camera=Camera(half_fov=math.radians(rng.uniform(20, 60))))
+    layout = avp.qp.layout.layout_for(3, 7)
+    knots = np.array([0.0, 0.7, 1.4, 2.1])
+    times = np.sort(rng.uniform(0.0, 2.1, 8))
+    lin = fov_blocks(layout, knots, times, x, psi, a, s, fov)
+    ref = _ref_fov_terms(x, psi, a, s, fov)
+    for name in ("h0", "reachable", "placed", "progress"):
+        np.testing.assert_array_equal(getattr(lin, name), ref[name], err_msg=name)
+    assert lin.hold_at_linearisation == ref["hold"]
+    rows = lin.rows
+    assert rows is not None
+    for name in ("gx", "ga", "gp", "rhs"):
+        np.testing.assert_array_equal(getattr(rows, name), ref[name], err_msg=name)
+    np.testing.assert_array_equal(rows.times, times[ref["placed"]])

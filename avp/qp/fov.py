@@ -26,7 +26,7 @@ import numpy.typing as npt
 from .. import _avp_rust
 from .._typing import Array
 from ..camera import Camera
-from ..config import FovConfig, FovPointPolicy
+from ..config import FovConfig
 from ..frames import GRAVITY
 from .assemble import ConstraintBlock
 from .layout import YAW, DecisionLayout
@@ -119,9 +119,8 @@ class FovRowInputs:
     """What the FoV rows of the placed points are built from (:func:`fov_rows`)."""
 
     layout: DecisionLayout
-    seg: npt.NDArray[np.intp]  # (k,) segment of each placed point
-    b0: Array  # (k, C) position basis
-    b2: Array  # (k, C) acceleration basis (over T^2)
+    knots_rel: Array  # (S + 1,) knots of the QP, relative to its start
+    times: Array  # (k,) relative times of the placed points
     gx: Array  # (k, 3) row (8) gradient in x, over |n_d|
     ga: Array  # (k, 3) ... in a
     gp: Array  # (k,) ... in yaw
@@ -140,12 +139,15 @@ def fov_rows(inp: FovRowInputs) -> tuple[ConstraintBlock, ...]:
     columns ``gx_j b0 + ga_j b2`` and yaw columns ``gp b0``; the trust region (9) rows are ``b0``
     (x, yaw) and ``b2`` (a) on one axis each.
     """
-    k = inp.seg.size
+    k = inp.times.size
     if k == 0:
         return ()
-    fov, n_v = inp.fov, inp.layout.n_variables
-    cols = inp.layout.columns(np.arange(4)[None, :], inp.seg[:, None])  # (k, 4, C)
-    p0, p2 = inp.b0, inp.b2
+    fov, layout, n_v = inp.fov, inp.layout, inp.layout.n_variables
+    seg, u = layout.locate(inp.knots_rel, inp.times)
+    T = inp.knots_rel[seg + 1] - inp.knots_rel[seg]
+    p0 = layout.basis(0, u)  # (k, C) position basis
+    p2 = layout.basis(2, u) / (T**2)[:, None]  # (k, C) acceleration basis
+    cols = layout.columns(np.arange(4)[None, :], seg[:, None])  # (k, 4, C)
     ik = np.arange(k)
     row8 = np.zeros((k, n_v))
     row8[ik[:, None, None], cols[:, :3]] = inp.gx[:, :, None] * p0[:, None, :] + inp.ga[:, :, None] * p2[:, None, :]
@@ -180,8 +182,8 @@ class FovLinearisation:
     times: Array  # relative times of the points
     h0: Array  # h/|n_d| at the linearisation points (<= 0: visible there)
     reachable: Array  # smallest h/|n_d| the linearised row reaches inside the box (9)
-    placed: Array  # bool: a FoV row was placed
-    progress: Array  # bool: the row asks for progress only (PROGRESS policy)
+    placed: npt.NDArray[np.bool_]  # a FoV row was placed
+    progress: npt.NDArray[np.bool_]  # the row asks for progress only (PROGRESS policy)
     hold_at_linearisation: bool
     """Every placed row holds at the linearisation point: row (8) reads ``h0 <= -margin`` there
     (to 1e-9 relative to its right-hand side, as the rows are checked elsewhere), the trust
@@ -196,11 +198,6 @@ class FovLinearisation:
     @property
     def n_rows(self) -> int:
         return int(sum(b.n_rows for b in self.blocks))
-
-
-def _times_radius(g: Array, r: float) -> Array:
-    """``g r`` for ``g >= 0``, with ``0 inf = 0`` (an infinite trust radius on a zero gradient)."""
-    return g * r if math.isfinite(r) else np.where(g > 0.0, np.inf, 0.0)
 
 
 def fov_blocks(
@@ -240,40 +237,24 @@ def fov_blocks(
     empty = np.zeros(0)
     if m == 0:
         return FovLinearisation(t, empty, empty, np.zeros(0, bool), np.zeros(0, bool), True)
-    grad = fov_gradient(x0, psi0, a0, target_point, fov.camera, g)
-    ok = np.isfinite(grad.h) & np.all(np.isfinite(grad.d_a), axis=1) & np.isfinite(grad.d_psi) & (grad.distance > 1e-6)
-    dist = np.where(ok, grad.distance, 1.0)
-    gx = np.where(ok[:, None], grad.d_x, 0.0) / dist[:, None]
-    ga = np.where(ok[:, None], grad.d_a, 0.0) / dist[:, None]
-    gp = np.where(ok, grad.d_psi, 0.0) / dist
-    h0 = np.where(ok, grad.h, np.inf) / dist
-    # Largest linearised decrease inside the box (9): sum |grad_i| r_i.
-    decrease = (_times_radius(np.abs(gx).sum(1), fov.trust_position)
-                + _times_radius(np.abs(ga).sum(1), fov.trust_acceleration) + _times_radius(np.abs(gp), fov.trust_yaw))
-    reachable = h0 - decrease
+    # copies (kept by the rows, read-only): the caller's arrays may be views it reuses
+    x0, a0, psi0 = np.array(x0, dtype=float), np.array(a0, dtype=float), np.array(psi0, dtype=float)
+    # Rust: the gradient, the largest linearised decrease inside the box (9) (sum |grad_i| r_i),
+    # the rows' right-hand sides and the point policy: a point whose row needs more than
+    # reach_fraction of that decrease is out of reach (a thin feasible set makes first-order
+    # back-ends, proxqp and osqp, declare infeasibility)
+    h0, reachable, gx, ga, gp, rhs, placed, progress, hold = _avp_rust.fov_linearise(
+        x0, psi0, a0, np.ascontiguousarray(target_point, dtype=float), np.ascontiguousarray(fov.camera.axis_B),
+        math.cos(fov.camera.half_fov), float(g), (fov.trust_position, fov.trust_acceleration, fov.trust_yaw),
+        fov.margin, fov.reach_fraction, fov.progress_fraction, fov.point_policy.name.lower(),
+    )
     # the rows themselves are built by fov_rows, on first access to the blocks
-    seg, u = layout.locate(knots_rel, t)
-    T = knots_rel[seg + 1] - knots_rel[seg]
-    b0 = layout.basis(0, u)  # (m, C)
-    b2 = layout.basis(2, u) / (T**2)[:, None]
-    lin0 = np.sum(gx * x0, 1) + np.sum(ga * a0, 1) + gp * psi0
-    rhs = lin0 - h0 - fov.margin
-    placed = ok.copy()
-    progress = np.zeros(m, bool)
-    # A row needing more than reach_fraction of the box's decrease is treated as out of reach:
-    # a thin feasible set makes first-order back-ends (proxqp, osqp) declare infeasibility.
-    hopeless = ok & (h0 - fov.reach_fraction * decrease > -fov.margin)
-    if fov.point_policy is FovPointPolicy.SKIP:
-        placed &= ~hopeless
-    elif fov.point_policy is FovPointPolicy.PROGRESS:
-        # Ask for a fraction of the reachable decrease: h0 + grad.(z - z0) <= h0 - f * decrease.
-        rhs = np.where(hopeless, lin0 - fov.progress_fraction * decrease, rhs)
-        progress = hopeless.copy()
-    hold = bool(not np.any(progress & placed)
-                and np.all(h0[placed] + fov.margin <= 1e-9 * (1.0 + np.abs(rhs[placed]))))
-    rows = FovRowInputs(layout, seg[placed], b0[placed], b2[placed], gx[placed], ga[placed], gp[placed],
-                        rhs[placed], np.asarray(x0, dtype=float)[placed], np.asarray(a0, dtype=float)[placed],
-                        np.asarray(psi0, dtype=float)[placed], fov)
+    knots = np.array(knots_rel, dtype=float)
+    if placed.all():  # every point placed: the arrays as they are
+        rows = FovRowInputs(layout, knots, t.copy(), gx, ga, gp, rhs, x0, a0, psi0, fov)
+    else:
+        rows = FovRowInputs(layout, knots, t[placed], gx[placed], ga[placed], gp[placed], rhs[placed],
+                            x0[placed], a0[placed], psi0[placed], fov)
     for arr in (t, h0, reachable, placed, progress):
         arr.setflags(write=False)
     return FovLinearisation(t, h0, reachable, placed, progress, hold, rows)

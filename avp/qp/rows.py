@@ -43,6 +43,11 @@ def point_rows(
                 start = (a * n_s + s) * n_c
                 rows[i, j, start:start + n_c] = local[i]
         return rows
+    if np.all(seg == seg[0]):  # one segment (e.g. the band (14)): a slice per axis
+        for j, a in enumerate(ax):
+            start = (a * n_s + int(seg[0])) * n_c
+            rows[:, j, start:start + n_c] = local
+        return rows
     cols = layout.columns(np.asarray(ax)[None, :], seg[:, None])  # (m, A, C)
     m_idx = np.arange(m)[:, None, None]
     a_idx = np.arange(len(ax))[None, :, None]

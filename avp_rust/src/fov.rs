@@ -179,6 +179,159 @@ pub fn fov_gradient(
         .collect())
 }
 
+/// What to do with a point whose row (8) cannot hold inside its trust region (9)
+/// (`avp.config.FovPointPolicy`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum PointPolicy {
+    /// Place the row as it is.
+    Keep,
+    /// Leave the point without a row.
+    Skip,
+    /// Ask for a fraction of the reachable decrease.
+    Progress,
+}
+
+impl PointPolicy {
+    /// The policy named `"keep"`, `"skip"` or `"progress"`.
+    pub fn from_name(name: &str) -> Result<Self> {
+        match name {
+            "keep" => Ok(Self::Keep),
+            "skip" => Ok(Self::Skip),
+            "progress" => Ok(Self::Progress),
+            _ => Err(Error::Invalid {
+                arg: "policy",
+                detail: format!("expected \"keep\", \"skip\" or \"progress\", got {name:?}"),
+            }),
+        }
+    }
+}
+
+/// The FoV configuration a linearisation needs (`avp.camera.FovConfig`, with the camera's
+/// `cos(half_fov)`): trust radii (9) in position, acceleration and yaw (each may be infinite),
+/// the row margin, the reach and progress fractions and the point policy.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LinearisationSettings {
+    pub cos_half: f64,
+    pub g: f64,
+    pub trust: [f64; 3],
+    pub margin: f64,
+    pub reach_fraction: f64,
+    pub progress_fraction: f64,
+    pub policy: PointPolicy,
+}
+
+/// One point of the linearised FoV rows (8): `h0 = h / |n_d|` at the linearisation point, the
+/// gradient over `|n_d|` (`gx`, `ga`, `gp`), the smallest `h / |n_d|` reachable inside the box
+/// (9), the row's right-hand side, and whether a row is placed and asks for progress only.
+/// A degenerate point (non-finite `h`, `d_a`, `d_psi`, or `|n_d| <= 1e-6`) has a zero gradient,
+/// `h0 = inf` and no row.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FovRowTerms {
+    pub h0: f64,
+    pub reachable: f64,
+    pub gx: V3,
+    pub ga: V3,
+    pub gp: f64,
+    pub rhs: f64,
+    pub placed: bool,
+    pub progress: bool,
+}
+
+/// `g r` for `g >= 0` with `0 inf = 0` (an infinite trust radius on a zero gradient).
+#[inline]
+fn times_radius(g: f64, r: f64) -> f64 {
+    if r.is_finite() {
+        g * r
+    } else if g > 0.0 {
+        f64::INFINITY
+    } else {
+        0.0
+    }
+}
+
+/// The row terms of one point from its gradient (the operations in the order of the former
+/// NumPy code, so the rows are the same bits).
+pub fn row_terms(p: &FovPoint, x0: V3, psi0: f64, a0: V3, st: &LinearisationSettings) -> FovRowTerms {
+    let ok = p.h.is_finite()
+        && p.d_a.iter().all(|v| v.is_finite())
+        && p.d_psi.is_finite()
+        && p.distance > 1e-6;
+    let (dist, dx, da, dp, h) = if ok {
+        (p.distance, p.d_x, p.d_a, p.d_psi, p.h)
+    } else {
+        (1.0, [0.0; 3], [0.0; 3], 0.0, f64::INFINITY)
+    };
+    let gx = [dx[0] / dist, dx[1] / dist, dx[2] / dist];
+    let ga = [da[0] / dist, da[1] / dist, da[2] / dist];
+    let gp = dp / dist;
+    let h0 = h / dist;
+    let abs_sum = |v: V3| v[0].abs() + v[1].abs() + v[2].abs();
+    let decrease = times_radius(abs_sum(gx), st.trust[0])
+        + times_radius(abs_sum(ga), st.trust[1])
+        + times_radius(gp.abs(), st.trust[2]);
+    let reachable = h0 - decrease;
+    let lin0 = (gx[0] * x0[0] + gx[1] * x0[1] + gx[2] * x0[2])
+        + (ga[0] * a0[0] + ga[1] * a0[1] + ga[2] * a0[2])
+        + gp * psi0;
+    let mut rhs = lin0 - h0 - st.margin;
+    let hopeless = ok && (h0 - st.reach_fraction * decrease > -st.margin);
+    let mut placed = ok;
+    let mut progress = false;
+    match st.policy {
+        PointPolicy::Keep => {}
+        PointPolicy::Skip => placed = ok && !hopeless,
+        PointPolicy::Progress => {
+            if hopeless {
+                rhs = lin0 - st.progress_fraction * decrease;
+            }
+            progress = hopeless;
+        }
+    }
+    FovRowTerms { h0, reachable, gx, ga, gp, rhs, placed, progress }
+}
+
+/// The linearised FoV rows (8) of `m` points (`x0`, `a0` flattened `(m, 3)`, `psi0` `(m,)`)
+/// and whether every placed row holds at the linearisation point itself (`h0 <= -margin` to
+/// `1e-9 (1 + |rhs|)`, and no row asks for progress).
+pub fn fov_linearise(
+    x0: &[f64],
+    psi0: &[f64],
+    a0: &[f64],
+    s: &[f64],
+    axis_b: &[f64],
+    st: &LinearisationSettings,
+) -> Result<(Vec<FovRowTerms>, bool)> {
+    for (arg, v) in [
+        ("trust", &st.trust[..]),
+        ("margin", &[st.margin][..]),
+        ("reach_fraction", &[st.reach_fraction][..]),
+        ("progress_fraction", &[st.progress_fraction][..]),
+    ] {
+        if v.iter().any(|r| r.is_nan() || *r < 0.0) {
+            return Err(Error::Invalid {
+                arg,
+                detail: "must be >= 0 (a trust radius may be inf)".into(),
+            });
+        }
+    }
+    for (arg, v) in [("margin", st.margin), ("reach_fraction", st.reach_fraction), ("progress_fraction", st.progress_fraction)] {
+        check_finite(arg, &[v])?;
+    }
+    let points = fov_gradient(x0, psi0, a0, s, axis_b, st.cos_half, st.g)?;
+    let v3 = |v: &[f64], i: usize| [v[3 * i], v[3 * i + 1], v[3 * i + 2]];
+    let terms: Vec<FovRowTerms> = points
+        .iter()
+        .enumerate()
+        .map(|(i, p)| row_terms(p, v3(x0, i), psi0[i], v3(a0, i), st))
+        .collect();
+    let hold = !terms.iter().any(|t| t.placed && t.progress)
+        && terms
+            .iter()
+            .filter(|t| t.placed)
+            .all(|t| t.h0 + st.margin <= 1e-9 * (1.0 + t.rhs.abs()));
+    Ok((terms, hold))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -200,5 +353,56 @@ mod tests {
             assert!(((hf(x, psi, ap) - hf(x, psi, am)) / (2.0 * e) - p.d_a[k]).abs() < 1e-7);
         }
         assert!(((hf(x, psi + e, a) - hf(x, psi - e, a)) / (2.0 * e) - p.d_psi).abs() < 1e-7);
+    }
+
+    fn settings(policy: PointPolicy, trust: [f64; 3]) -> LinearisationSettings {
+        LinearisationSettings {
+            cos_half: 0.8,
+            g: 9.81,
+            trust,
+            margin: 0.01,
+            reach_fraction: 0.9,
+            progress_fraction: 0.5,
+            policy,
+        }
+    }
+
+    #[test]
+    fn visible_point_holds_and_hopeless_point_follows_the_policy() {
+        // hovering 3 m in front of the pad, camera along b1 (x): visible, the row holds
+        let axis = [1.0, 0.0, 0.0];
+        let (x, a, s) = ([0.0, 0.0, 1.0], [0.0, 0.0, 0.0], [3.0, 0.0, 1.0]);
+        let st = settings(PointPolicy::Skip, [0.05, 0.2, f64::INFINITY]);
+        let (t, hold) = fov_linearise(&x, &[0.0], &a, &s, &axis, &st).unwrap();
+        assert!(t[0].placed && !t[0].progress && t[0].h0 < -st.margin && hold);
+        // the pad behind the vehicle: h0 = (cos + 1) |n_d| / |n_d| > 0, not reachable in a small box
+        let behind = [-3.0, 0.0, 1.0];
+        let tight = [0.05, 0.2, 0.1];
+        for (policy, placed, progress) in [
+            (PointPolicy::Skip, false, false),
+            (PointPolicy::Keep, true, false),
+            (PointPolicy::Progress, true, true),
+        ] {
+            let st = settings(policy, tight);
+            let (t, hold) = fov_linearise(&x, &[0.0], &a, &behind, &axis, &st).unwrap();
+            assert!((t[0].h0 - 1.8).abs() < 1e-12, "{}", t[0].h0);
+            assert_eq!((t[0].placed, t[0].progress), (placed, progress));
+            assert_eq!(hold, !placed, "{policy:?}");
+            assert!(t[0].reachable < t[0].h0);
+        }
+    }
+
+    #[test]
+    fn degenerate_point_gets_no_row_and_infinite_radius_no_nan() {
+        let axis = [1.0, 0.0, 0.0];
+        let st = settings(PointPolicy::Keep, [f64::INFINITY; 3]);
+        // at the target (|n_d| = 0) and one regular point with a zero yaw gradient
+        let (t, _) = fov_linearise(&[3.0, 0.0, 1.0, 0.0, 0.0, 1.0], &[0.0, 0.0], &[0.0; 6], &[3.0, 0.0, 1.0], &axis, &st)
+            .unwrap();
+        assert!(!t[0].placed && t[0].h0.is_infinite() && t[0].gx == [0.0; 3]);
+        assert!(t[1].placed && !t[1].reachable.is_nan());
+        let bad = LinearisationSettings { margin: -1.0, ..st };
+        assert_eq!(fov_linearise(&[0.0; 3], &[0.0], &[0.0; 3], &[1.0; 3], &axis, &bad).unwrap_err().arg(), "margin");
+        assert_eq!(PointPolicy::from_name("all").unwrap_err().arg(), "policy");
     }
 }

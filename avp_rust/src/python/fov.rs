@@ -53,7 +53,79 @@ fn fov_gradient_py<'py>(
     ))
 }
 
+/// The linearised FoV rows (8) at `m` points (`avp.qp.fov.fov_blocks`): `x0 (m, 3)`,
+/// `psi0 (m,)`, `a0 (m, 3)`, target `s (3,)`, optical axis `axis_B (3,)`; `trust` the box (9)
+/// radii in position, acceleration and yaw (each may be inf); `policy` `"keep"`, `"skip"` or
+/// `"progress"`. Returns `(h0 (m,), reachable (m,), gx (m, 3), ga (m, 3), gp (m,), rhs (m,),
+/// placed (m,) bool, progress (m,) bool, hold)`.
+#[pyfunction(name = "fov_linearise")]
+#[allow(clippy::type_complexity, clippy::too_many_arguments, non_snake_case)]
+fn fov_linearise_py<'py>(
+    py: Python<'py>,
+    x0: PyReadonlyArray2<'py, f64>,
+    psi0: PyReadonlyArray1<'py, f64>,
+    a0: PyReadonlyArray2<'py, f64>,
+    s: PyReadonlyArray1<'py, f64>,
+    axis_B: PyReadonlyArray1<'py, f64>,
+    cos_half: f64,
+    g: f64,
+    trust: (f64, f64, f64),
+    margin: f64,
+    reach_fraction: f64,
+    progress_fraction: f64,
+    policy: &str,
+) -> PyResult<(
+    Bound<'py, PyArray1<f64>>,
+    Bound<'py, PyArray1<f64>>,
+    Bound<'py, PyArray2<f64>>,
+    Bound<'py, PyArray2<f64>>,
+    Bound<'py, PyArray1<f64>>,
+    Bound<'py, PyArray1<f64>>,
+    Bound<'py, PyArray1<bool>>,
+    Bound<'py, PyArray1<bool>>,
+    bool,
+)> {
+    let xs = contiguous("x0", x0.as_slice())?;
+    let ps = contiguous("psi0", psi0.as_slice())?;
+    let as_ = contiguous("a0", a0.as_slice())?;
+    let ss = contiguous("s", s.as_slice())?;
+    let ds = contiguous("axis_B", axis_B.as_slice())?;
+    let policy = crate::fov::PointPolicy::from_name(policy).map_err(to_py_err)?;
+    let settings = crate::fov::LinearisationSettings {
+        cos_half,
+        g,
+        trust: [trust.0, trust.1, trust.2],
+        margin,
+        reach_fraction,
+        progress_fraction,
+        policy,
+    };
+    let (terms, hold) = guarded(|| crate::fov::fov_linearise(xs, ps, as_, ss, ds, &settings))
+        .map_err(to_py_err)?;
+    let m = terms.len();
+    let col = |f: fn(&crate::fov::FovRowTerms) -> f64| terms.iter().map(f).collect::<Vec<f64>>();
+    let flag = |f: fn(&crate::fov::FovRowTerms) -> bool| terms.iter().map(f).collect::<Vec<bool>>();
+    let shape = |v: Vec<f64>| {
+        numpy::ndarray::Array2::from_shape_vec((m, 3), v)
+            .map_err(|e| kernel_err("kernel", format!("internal shape error: {e}")))
+    };
+    let gx: Vec<f64> = terms.iter().flat_map(|t| t.gx).collect();
+    let ga: Vec<f64> = terms.iter().flat_map(|t| t.ga).collect();
+    Ok((
+        col(|t| t.h0).into_pyarray(py),
+        col(|t| t.reachable).into_pyarray(py),
+        shape(gx)?.into_pyarray(py),
+        shape(ga)?.into_pyarray(py),
+        col(|t| t.gp).into_pyarray(py),
+        col(|t| t.rhs).into_pyarray(py),
+        flag(|t| t.placed).into_pyarray(py),
+        flag(|t| t.progress).into_pyarray(py),
+        hold,
+    ))
+}
+
 pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(fov_gradient_py, m)?)?;
+    m.add_function(wrap_pyfunction!(fov_linearise_py, m)?)?;
     Ok(())
 }
