@@ -383,16 +383,18 @@ _WITHOUT_WAYPOINT = "without the overhang waypoint"
 
 
 def _measured(traj: Trajectory, target: PerchTarget, cfg: PlannerConfig) -> str:
-    """The last plan's extremes against the limits, for the failure message: sampled on a grid
-    of 1 ms, or of 400 samples for plans longer than 0.4 s (a message, not a certificate: the
-    bound report has the proven violations; finer grids made this line cost as much as a solve
-    in replans)."""
-    t = traj.sample(max(1e-3, traj.duration / 400))
-    f = traj.thrust(t)
+    """The last plan's extremes on a 1 ms grid against the limits, for the failure message. The
+    tilt rate is ``|b3'| = |P j| / |f|`` (``P = I - b3 b3^T``, ``f = a + g e3``), which equals
+    the roll-pitch part ``|(w_x, w_y)|`` of the body rates (22) without the attitude."""
+    d = traj.derivatives(traj.sample(1e-3), (2, 3))
+    f = d[0, :, :3] + np.array([0.0, 0.0, cfg.g])
+    f_norm = np.linalg.norm(f, axis=1)
+    b3 = f / f_norm[:, None]
+    j = d[1, :, :3]
+    tilt = float((np.linalg.norm(j - np.sum(j * b3, axis=1)[:, None] * b3, axis=1) / f_norm).max())
     lim = cfg.limits
-    tilt = float(np.linalg.norm(traj.body_rates(t)[:, :2], axis=1).max())
     return (f"the last plan ({traj.duration:.2f} s, incline {np.degrees(target.incline):.0f} deg) measured "
-            f"thrust {f.min():.2f}..{f.max():.2f} m/s^2 against limits {lim.accel_min:.2f}..{lim.accel_max:.2f}, "
+            f"thrust {f_norm.min():.2f}..{f_norm.max():.2f} m/s^2 against limits {lim.accel_min:.2f}..{lim.accel_max:.2f}, "
             f"tilt rate up to {tilt:.1f} rad/s against {lim.tilt_rate_max:g}")
 
 
