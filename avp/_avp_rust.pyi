@@ -18,6 +18,7 @@ __all__ = [
     "eval_spline",
     "fov_gradient",
     "fov_linearise",
+    "fov_row_matrices",
     "sturm_count",
     "trackability_rows",
 ]
@@ -108,6 +109,22 @@ def fov_linearise(
     ``"skip"`` or ``"progress"``. A degenerate point has no row, a zero gradient and
     ``h0 = inf``. ``hold``: every placed row holds at the linearisation point. Raises
     ``KernelError`` on bad shapes, a negative radius, margin or fraction, or an unknown policy."""
+
+
+def fov_row_matrices(
+    n_segments: int,
+    seg: npt.NDArray[np.int64],
+    p0: npt.NDArray[np.float64],
+    p2: npt.NDArray[np.float64],
+    gx: npt.NDArray[np.float64],
+    ga: npt.NDArray[np.float64],
+    gp: npt.NDArray[np.float64],
+) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+    """Dense FoV rows of ``k`` placed points (:func:`avp.qp.fov.fov_rows`): rows (8) ``(k, n)``
+    and the trust-region (9) rows in position ``(3k, n)``, acceleration ``(3k, n)`` and yaw
+    ``(k, n)``, ``n = 4 n_segments C``, from each point's segment ``seg``, basis rows ``p0``,
+    ``p2`` ``(k, C)`` and gradients ``gx``, ``ga`` ``(k, 3)``, ``gp`` ``(k,)``. Raises
+    ``KernelError`` on bad shapes or a segment outside ``0..n_segments``."""
 
 # --- bound certificates (sturm.rs, exact.rs, certify.rs, bounds.rs) ---------------------------
 

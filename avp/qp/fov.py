@@ -29,7 +29,7 @@ from ..camera import Camera
 from ..config import FovConfig
 from ..frames import GRAVITY
 from .assemble import ConstraintBlock
-from .layout import YAW, DecisionLayout
+from .layout import DecisionLayout
 
 __all__ = [
     "FOV_PREFIX",
@@ -137,7 +137,8 @@ def fov_rows(inp: FovRowInputs) -> tuple[ConstraintBlock, ...]:
     Every row of a point touches only its segment's columns (``layout.columns(axis, seg)``):
     row (8) ``grad.z <= grad.z0 - h0 - margin`` (i.e. ``h0 + grad.(z - z0) <= -margin``) has x/a
     columns ``gx_j b0 + ga_j b2`` and yaw columns ``gp b0``; the trust region (9) rows are ``b0``
-    (x, yaw) and ``b2`` (a) on one axis each.
+    (x, yaw) and ``b2`` (a) on one axis each. The basis rows are evaluated here, the dense
+    matrices filled by the Rust kernel ``avp._avp_rust.fov_row_matrices``.
     """
     k = inp.times.size
     if k == 0:
@@ -147,25 +148,19 @@ def fov_rows(inp: FovRowInputs) -> tuple[ConstraintBlock, ...]:
     T = inp.knots_rel[seg + 1] - inp.knots_rel[seg]
     p0 = layout.basis(0, u)  # (k, C) position basis
     p2 = layout.basis(2, u) / (T**2)[:, None]  # (k, C) acceleration basis
-    cols = layout.columns(np.arange(4)[None, :], seg[:, None])  # (k, 4, C)
-    ik = np.arange(k)
-    row8 = np.zeros((k, n_v))
-    row8[ik[:, None, None], cols[:, :3]] = inp.gx[:, :, None] * p0[:, None, :] + inp.ga[:, :, None] * p2[:, None, :]
-    row8[ik[:, None], cols[:, YAW]] = inp.gp[:, None] * p0
+    row8, Rx, Ra, Ryaw = _avp_rust.fov_row_matrices(
+        layout.n_segments, np.ascontiguousarray(seg, dtype=np.int64), np.ascontiguousarray(p0), np.ascontiguousarray(p2),
+        np.ascontiguousarray(inp.gx), np.ascontiguousarray(inp.ga), np.ascontiguousarray(inp.gp),
+    )
     blocks = [ConstraintBlock(f"{FOV_PREFIX} rows (8)", row8, np.full(k, -np.inf), inp.rhs)]
-    i3 = np.arange(3 * k)[:, None]
-    for label, basis, z0, r in (
-        ("x", p0, inp.x0.reshape(-1), fov.trust_position),
-        ("a", p2, inp.a0.reshape(-1), fov.trust_acceleration),
+    for label, R, z0, r in (
+        ("x", Rx, inp.x0.reshape(-1), fov.trust_position),
+        ("a", Ra, inp.a0.reshape(-1), fov.trust_acceleration),
     ):
         if math.isfinite(r):
-            R = np.zeros((3 * k, n_v))
-            R[i3, cols[:, :3].reshape(3 * k, -1)] = np.repeat(basis, 3, axis=0)
             blocks.append(ConstraintBlock(f"{FOV_PREFIX} trust region (9) {label}", R, z0 - r, z0 + r))
     if math.isfinite(fov.trust_yaw):
-        R = np.zeros((k, n_v))
-        R[ik[:, None], cols[:, YAW]] = p0
-        blocks.append(ConstraintBlock(f"{FOV_PREFIX} trust region (9) yaw", R, inp.psi0 - fov.trust_yaw,
+        blocks.append(ConstraintBlock(f"{FOV_PREFIX} trust region (9) yaw", Ryaw, inp.psi0 - fov.trust_yaw,
                                       inp.psi0 + fov.trust_yaw))
     return tuple(blocks)
 

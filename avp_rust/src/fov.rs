@@ -332,6 +332,67 @@ pub fn fov_linearise(
     Ok((terms, hold))
 }
 
+/// Dense FoV row matrices of `k` placed points (`avp.qp.fov.fov_rows`), for a decision vector
+/// laid out `(axis * n_segments + segment) * n_coeffs + j` over 4 axes (x, y, z, yaw):
+/// row (8) of point `i` has `gx[i][a] p0[i] + ga[i][a] p2[i]` on axis `a`'s columns of its
+/// segment and `gp[i] p0[i]` on the yaw columns; the trust-region (9) rows `3 i + a` have
+/// `p0[i]` (position) or `p2[i]` (acceleration) on axis `a`, and yaw row `i` has `p0[i]`.
+/// `p0`, `p2` are `(k, n_coeffs)` basis rows, `gx`, `ga` `(k, 3)`. Returns the four matrices
+/// `(k, n)`, `(3k, n)`, `(3k, n)`, `(k, n)` flattened row-major, `n = 4 n_segments n_coeffs`.
+#[allow(clippy::too_many_arguments, clippy::type_complexity)]
+pub fn fov_row_matrices(
+    n_segments: usize,
+    n_coeffs: usize,
+    seg: &[i64],
+    p0: &[f64],
+    p2: &[f64],
+    gx: &[f64],
+    ga: &[f64],
+    gp: &[f64],
+) -> Result<(Vec<f64>, Vec<f64>, Vec<f64>, Vec<f64>)> {
+    let k = seg.len();
+    for (arg, v, n) in [
+        ("p0", p0, k * n_coeffs),
+        ("p2", p2, k * n_coeffs),
+        ("gx", gx, 3 * k),
+        ("ga", ga, 3 * k),
+        ("gp", gp, k),
+    ] {
+        if v.len() != n {
+            return Err(Error::Shape {
+                arg,
+                detail: format!("expected {n} values, got {}", v.len()),
+            });
+        }
+    }
+    if let Some(&bad) = seg.iter().find(|&&s| s < 0 || s as usize >= n_segments) {
+        return Err(Error::Invalid {
+            arg: "seg",
+            detail: format!("segment {bad} outside 0..{n_segments}"),
+        });
+    }
+    let n = 4 * n_segments * n_coeffs;
+    let (mut row8, mut rx, mut ra, mut ryaw) = (vec![0.0; k * n], vec![0.0; 3 * k * n], vec![0.0; 3 * k * n], vec![0.0; k * n]);
+    for (i, &s) in seg.iter().enumerate() {
+        let (b0, b2) = (&p0[i * n_coeffs..][..n_coeffs], &p2[i * n_coeffs..][..n_coeffs]);
+        let col = |axis: usize| (axis * n_segments + s as usize) * n_coeffs;
+        for axis in 0..3 {
+            let (c, g_x, g_a) = (col(axis), gx[3 * i + axis], ga[3 * i + axis]);
+            for j in 0..n_coeffs {
+                row8[i * n + c + j] = g_x * b0[j] + g_a * b2[j];
+            }
+            rx[(3 * i + axis) * n + c..][..n_coeffs].copy_from_slice(b0);
+            ra[(3 * i + axis) * n + c..][..n_coeffs].copy_from_slice(b2);
+        }
+        let c = col(3);
+        for j in 0..n_coeffs {
+            row8[i * n + c + j] = gp[i] * b0[j];
+        }
+        ryaw[i * n + c..][..n_coeffs].copy_from_slice(b0);
+    }
+    Ok((row8, rx, ra, ryaw))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -404,5 +465,24 @@ mod tests {
         let bad = LinearisationSettings { margin: -1.0, ..st };
         assert_eq!(fov_linearise(&[0.0; 3], &[0.0], &[0.0; 3], &[1.0; 3], &axis, &bad).unwrap_err().arg(), "margin");
         assert_eq!(PointPolicy::from_name("all").unwrap_err().arg(), "policy");
+    }
+
+    #[test]
+    fn row_matrices_place_each_point_in_its_segment() {
+        // 2 segments, 3 coefficients: n = 24; one point in segment 1
+        let (p0, p2) = ([1.0, 2.0, 3.0], [4.0, 5.0, 6.0]);
+        let (r8, rx, ra, ry) =
+            fov_row_matrices(2, 3, &[1], &p0, &p2, &[1.0, 0.0, -1.0], &[0.5, 0.0, 0.0], &[2.0]).unwrap();
+        assert_eq!((r8.len(), rx.len(), ra.len(), ry.len()), (24, 72, 72, 24));
+        // axis x, segment 1: columns 3..6
+        assert_eq!(&r8[3..6], &[1.0 + 2.0, 2.0 + 2.5, 3.0 + 3.0]);
+        assert_eq!(&r8[9..12], &[0.0; 3]); // y: zero gradient
+        assert_eq!(&r8[15..18], &[-1.0, -2.0, -3.0]); // z
+        assert_eq!(&r8[21..24], &[2.0, 4.0, 6.0]); // yaw
+        assert_eq!(&rx[24 + 9..24 + 12], &p0); // row 1 (y) on y's columns
+        assert_eq!(&ra[48 + 15..48 + 18], &p2); // row 2 (z)
+        assert_eq!(&ry[21..24], &p0);
+        assert_eq!(fov_row_matrices(2, 3, &[2], &p0, &p2, &[0.0; 3], &[0.0; 3], &[0.0]).unwrap_err().arg(), "seg");
+        assert_eq!(fov_row_matrices(2, 3, &[0], &p0[..2], &p2, &[0.0; 3], &[0.0; 3], &[0.0]).unwrap_err().arg(), "p0");
     }
 }

@@ -1,6 +1,6 @@
 //! PyO3 wrapper of the field-of-view kernel (7): `h` and its gradient.
 #![allow(clippy::useless_conversion)]
-use numpy::{IntoPyArray, PyArray1, PyArray2, PyReadonlyArray1, PyReadonlyArray2};
+use numpy::{IntoPyArray, PyArray1, PyArray2, PyReadonlyArray1, PyReadonlyArray2, PyUntypedArrayMethods};
 use pyo3::prelude::*;
 
 use super::common::{contiguous, kernel_err, to_py_err};
@@ -124,8 +124,51 @@ fn fov_linearise_py<'py>(
     ))
 }
 
+/// Dense FoV row matrices (`avp.qp.fov.fov_rows`): rows (8) `(k, n)`, trust region (9) in
+/// position `(3k, n)`, in acceleration `(3k, n)` and in yaw `(k, n)`, `n = 4 n_segments n_coeffs`,
+/// from the points' segments `seg (k,)`, basis rows `p0`, `p2` `(k, n_coeffs)` and the
+/// gradients `gx`, `ga` `(k, 3)`, `gp (k,)`.
+#[pyfunction(name = "fov_row_matrices")]
+#[allow(clippy::type_complexity, clippy::too_many_arguments)]
+fn fov_row_matrices_py<'py>(
+    py: Python<'py>,
+    n_segments: usize,
+    seg: PyReadonlyArray1<'py, i64>,
+    p0: PyReadonlyArray2<'py, f64>,
+    p2: PyReadonlyArray2<'py, f64>,
+    gx: PyReadonlyArray2<'py, f64>,
+    ga: PyReadonlyArray2<'py, f64>,
+    gp: PyReadonlyArray1<'py, f64>,
+) -> PyResult<(
+    Bound<'py, PyArray2<f64>>,
+    Bound<'py, PyArray2<f64>>,
+    Bound<'py, PyArray2<f64>>,
+    Bound<'py, PyArray2<f64>>,
+)> {
+    let n_coeffs = p0.shape()[1];
+    let segs = seg
+        .as_slice()
+        .map_err(|_| kernel_err("seg", "must be a C-contiguous int64 array"))?;
+    let (p0s, p2s) = (contiguous("p0", p0.as_slice())?, contiguous("p2", p2.as_slice())?);
+    let (gxs, gas, gps) = (
+        contiguous("gx", gx.as_slice())?,
+        contiguous("ga", ga.as_slice())?,
+        contiguous("gp", gp.as_slice())?,
+    );
+    let (r8, rx, ra, ry) = guarded(|| crate::fov::fov_row_matrices(n_segments, n_coeffs, segs, p0s, p2s, gxs, gas, gps))
+        .map_err(to_py_err)?;
+    let (k, n) = (segs.len(), 4 * n_segments * n_coeffs);
+    let shape = |rows: usize, v: Vec<f64>| {
+        numpy::ndarray::Array2::from_shape_vec((rows, n), v)
+            .map(|a| a.into_pyarray(py))
+            .map_err(|e| kernel_err("kernel", format!("internal shape error: {e}")))
+    };
+    Ok((shape(k, r8)?, shape(3 * k, rx)?, shape(3 * k, ra)?, shape(k, ry)?))
+}
+
 pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(fov_gradient_py, m)?)?;
     m.add_function(wrap_pyfunction!(fov_linearise_py, m)?)?;
+    m.add_function(wrap_pyfunction!(fov_row_matrices_py, m)?)?;
     Ok(())
 }
