@@ -309,9 +309,9 @@ def solve_fov(
         tb = time.perf_counter()
         lin = perception.linearise_on(base, reference, target, cfg)
         ledger.build += time.perf_counter() - tb
-        n_vis = int(np.sum(lin.h0 <= 0.0))
-        desc = (f"{label}: {int(lin.placed.sum())}/{lin.times.size} FoV points placed "
-                f"({int(lin.progress.sum())} progress-only, {n_vis} visible at linearisation)")
+        n_vis = np.count_nonzero(lin.h0 <= 0.0)
+        desc = (f"{label}: {np.count_nonzero(lin.placed)}/{lin.times.size} FoV points placed "
+                f"({np.count_nonzero(lin.progress)} progress-only, {n_vis} visible at linearisation)")
         if optimum is not None and optimum.c_hat is not None and lin.hold_at_linearisation:
             held = "every row holds" if lin.placed.any() else "no row placed"
             log.append(f"{desc}; {held} at the solution without them: that solution, not re-solved")

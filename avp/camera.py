@@ -93,8 +93,13 @@ class Camera:
 
     @property
     def axis_B(self) -> Array:
-        """Optical axis ``c3`` in body coordinates."""
-        return self.R_BC[:, 2]
+        """Optical axis ``c3`` in body coordinates (contiguous, read-only)."""
+        axis: Array | None = self.__dict__.get("_axis_B")  # copied once, on first use
+        if axis is None:
+            axis = np.ascontiguousarray(self.R_BC[:, 2])
+            axis.setflags(write=False)
+            object.__setattr__(self, "_axis_B", axis)
+        return axis
 
     def axis(self, R_WB: npt.ArrayLike) -> Array:
         """Optical axis ``e_c = R_WB R_BC e3`` in W; ``R_WB`` of shape ``(..., 3, 3)``."""

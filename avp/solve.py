@@ -324,8 +324,8 @@ def _max_violation(qp: PerchingQp, c_hat: Array, G: Array, lo: Array, hi: Array)
     residual over ``max(1, |bound|)``; an infinite bound is never violated)."""
     A, b = qp.stacked_equalities()
     inv_b, inv_lo, inv_hi = qp.violation_scales()
-    worst = float(np.max(np.abs(A @ c_hat - b) * inv_b)) if b.size else 0.0
+    worst = float((np.abs(A @ c_hat - b) * inv_b).max()) if b.size else 0.0
     if G.shape[0]:
         Gc = G @ c_hat
-        worst = max(worst, float(np.max((Gc - hi) * inv_hi)), float(np.max((lo - Gc) * inv_lo)))
+        worst = max(worst, float(((Gc - hi) * inv_hi).max()), float(((lo - Gc) * inv_lo).max()))
     return max(0.0, worst)

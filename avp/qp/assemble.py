@@ -81,6 +81,26 @@ def _read_only(M: Array) -> Array:
     return M
 
 
+_COST_PRINTS: dict[int, tuple[Array, float]] = {}
+"""Fingerprints of the cost matrices (read-only, cached by :func:`avp.qp.cost.cost_matrix`), by
+identity; each entry keeps its matrix alive, so an id is not reused while it is here."""
+
+
+def _cost_fingerprint(P: Array) -> float:
+    """:func:`_fingerprint` of a cost matrix, computed once per read-only matrix object that owns
+    its data (nothing can change it)."""
+    if P.flags.writeable or P.base is not None:
+        return _fingerprint(P)
+    hit = _COST_PRINTS.get(id(P))
+    if hit is not None and hit[0] is P:
+        return hit[1]
+    value = _fingerprint(P)
+    if len(_COST_PRINTS) >= ELIMINATION_CACHE_SIZE:
+        _COST_PRINTS.clear()
+    _COST_PRINTS[id(P)] = (P, value)
+    return value
+
+
 def _fingerprint(M: Array) -> float:
     """A cheap, position-sensitive checksum of ``M`` (hits are confirmed by comparison)."""
     flat = M.reshape(-1)
@@ -103,7 +123,7 @@ def _close(M: Array, N: Array) -> bool:
 
 def _factor(A: Array, P: Array) -> _Factor:
     """Pivoted QR of ``A^T`` and the reduced Hessian, cached per ``(A, P)`` up to rounding."""
-    key = (A.shape, P.shape, f"{_fingerprint(A):.9e}", f"{_fingerprint(P):.9e}")
+    key = (A.shape, P.shape, f"{_fingerprint(A):.9e}", f"{_cost_fingerprint(P):.9e}")
     with _FACTORS_LOCK:
         for hit in _FACTORS.get(key, ()):
             if (hit.P is P or _close(hit.P, P)) and _close(hit.A, A):

@@ -94,7 +94,7 @@ def fov_gradient(
         rows(pp, (m,)),
         rows(aa, (m, 3)),
         np.ascontiguousarray(s, dtype=float),
-        np.ascontiguousarray(camera.axis_B),
+        camera.axis_B,
         math.cos(camera.half_fov),
         float(g),
     )
@@ -143,7 +143,7 @@ def fov_rows(inp: FovRowInputs) -> tuple[ConstraintBlock, ...]:
     k = inp.times.size
     if k == 0:
         return ()
-    fov, layout, n_v = inp.fov, inp.layout, inp.layout.n_variables
+    fov, layout = inp.fov, inp.layout
     seg, u = layout.locate(inp.knots_rel, inp.times)
     T = inp.knots_rel[seg + 1] - inp.knots_rel[seg]
     p0 = layout.basis(0, u)  # (k, C) position basis
@@ -239,7 +239,7 @@ def fov_blocks(
     # reach_fraction of that decrease is out of reach (a thin feasible set makes first-order
     # back-ends, proxqp and osqp, declare infeasibility)
     h0, reachable, gx, ga, gp, rhs, placed, progress, hold = _avp_rust.fov_linearise(
-        x0, psi0, a0, np.ascontiguousarray(target_point, dtype=float), np.ascontiguousarray(fov.camera.axis_B),
+        x0, psi0, a0, np.ascontiguousarray(target_point, dtype=float), fov.camera.axis_B,
         math.cos(fov.camera.half_fov), float(g), (fov.trust_position, fov.trust_acceleration, fov.trust_yaw),
         fov.margin, fov.reach_fraction, fov.progress_fraction, fov.point_policy.name.lower(),
     )
