@@ -21,6 +21,7 @@ __all__ = [
     "fov_row_matrices",
     "sturm_count",
     "trackability_rows",
+    "visibility_fractions",
 ]
 
 __version__: str
@@ -125,6 +126,21 @@ def fov_row_matrices(
     ``(k, n)``, ``n = 4 n_segments C``, from each point's segment ``seg``, basis rows ``p0``,
     ``p2`` ``(k, C)`` and gradients ``gx``, ``ga`` ``(k, 3)``, ``gp`` ``(k,)``. Raises
     ``KernelError`` on bad shapes or a segment outside ``0..n_segments``."""
+
+
+def visibility_fractions(
+    times: npt.NDArray[np.float64],
+    flat: npt.NDArray[np.float64],
+    s: npt.NDArray[np.float64],
+    axis_B: npt.NDArray[np.float64],
+    cos_half: float,
+    g: float,
+) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+    """Visibility of ``s`` from ``k`` plans (:func:`avp.metrics.visibility_many`, cone (7) only):
+    ``times (n,)`` (at least 2) and ``flat (2, n, k, 4)``, orders 0 and 2 of the plans' flat
+    outputs as ``eval_spline`` returns them for stacked coefficients. Returns the trapezoid
+    time fractions, path fractions and first times out of view (NaN: never) ``(k,)`` each.
+    Raises ``KernelError`` on bad shapes or non-finite ``s``, ``axis_B``."""
 
 # --- bound certificates (sturm.rs, exact.rs, certify.rs, bounds.rs) ---------------------------
 

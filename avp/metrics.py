@@ -11,7 +11,6 @@ import numpy as np
 from . import _avp_rust, frames
 from . import _validate as v
 from .camera import Camera
-from .qp.fov import fov_gradient
 from .trajectory import Trajectory
 from .types import PerchTarget
 
@@ -92,17 +91,18 @@ def visibility_many(
     t = first.sample(step)
     coeffs = first.coefficients if k == 1 else np.concatenate([tr.coefficients for tr in trajectories], axis=1)
     ev = _avp_rust.eval_spline(coeffs, first.knots, t, [0, 2]).reshape(2, t.size, k, 4)
+    if cam.horizontal_fov is None and cam.vertical_fov is None and not math.isfinite(cam.range) and t.size >= 2:
+        # The cone (7) alone: h <= 0 with the Rust FoV kernel's own arithmetic (the same test as
+        # Camera.sees; a degenerate attitude gives a NaN h: not seen), and the trapezoid sums,
+        # in one call for all samples of all plans
+        tf, pf, lost_at = _avp_rust.visibility_fractions(
+            t, ev, np.ascontiguousarray(target.point, dtype=float), cam.axis_B, math.cos(cam.half_fov), first.g)
+        return [Visibility(float(a), float(b), None if math.isnan(c) else float(c))
+                for a, b, c in zip(tf, pf, lost_at, strict=True)]
     x = ev[0, :, :, :3]  # (n, k, 3)
-    if cam.horizontal_fov is None and cam.vertical_fov is None and not math.isfinite(cam.range):
-        # The cone (7) alone: h <= 0 from the Rust kernel of the FoV rows, one call for all
-        # samples (the same test as Camera.sees; a degenerate attitude gives a NaN h: not seen).
-        grad = fov_gradient(x.reshape(-1, 3), ev[0, :, :, 3].reshape(-1), ev[1, :, :, :3].reshape(-1, 3),
-                            target.point, cam, first.g)
-        flags = ((grad.h <= 0.0) & (grad.distance > 1e-12)).astype(float).reshape(t.size, k)
-    else:
-        R = frames.attitude(ev[1, :, :, :3], ev[0, :, :, 3], first.g)  # (n, k, 3, 3), (11), (13)
-        flags = cam.sees(x, R, target.point).astype(float)
-        flags[~np.all(np.isfinite(R.reshape(t.size, k, -1)), axis=2)] = 0.0
+    R = frames.attitude(ev[1, :, :, :3], ev[0, :, :, 3], first.g)  # (n, k, 3, 3), (11), (13)
+    flags = cam.sees(x, R, target.point).astype(float)
+    flags[~np.all(np.isfinite(R.reshape(t.size, k, -1)), axis=2)] = 0.0
     dtimes = t[1:] - t[:-1]
     total_t = float(dtimes.sum())
     # per plan, contiguous rows: the same arithmetic whatever the batch (one plan or several)
@@ -110,11 +110,11 @@ def visibility_many(
     dx = x[1:] - x[:-1]
     ds = np.ascontiguousarray(np.sqrt(np.einsum("nki,nki->kn", dx, dx)))  # (k, n - 1) chords
     lost = flags[:-1] < 0.5
-    first = lost.argmax(axis=0)
+    first_lost = lost.argmax(axis=0)
     out = []
     for j in range(k):
         total_s = float(ds[j].sum())
-        tf = float(w[j] @ dtimes / total_t) if total_t > 0 else 0.0
-        pf = float(w[j] @ ds[j] / total_s) if total_s > 0 else tf
-        out.append(Visibility(tf, pf, float(t[first[j]]) if lost[first[j], j] else None))
+        tf_j = float(w[j] @ dtimes / total_t) if total_t > 0 else 0.0
+        pf_j = float(w[j] @ ds[j] / total_s) if total_s > 0 else tf_j
+        out.append(Visibility(tf_j, pf_j, float(t[first_lost[j]]) if lost[first_lost[j], j] else None))
     return out

@@ -91,7 +91,10 @@ def test_visibility_many_equals_one_at_a_time() -> None:
 @pytest.mark.parametrize("incline", [0, 45, 90, 120])
 def test_cone_only_fast_path_equals_the_camera_test(incline) -> None:
     """A cone-only camera is scored by the Rust FoV kernel, a camera with a range by
-    Camera.sees on the attitude (11), (13): with a range no sample reaches, both agree."""
+    Camera.sees on the attitude (11), (13): with a range no sample reaches, both agree. The
+    kernel sums the trapezoid weights one sample after the other, NumPy by BLAS dot products,
+    so the fractions agree to rounding (1e-12); one sample seen differently would move them by
+    about dt / T = 1e-3, and the first loss, a sample time, must be the same."""
     import avp
 
     target = PerchTarget.from_incline([0.0, 0.0, 1.5], math.radians(incline))
@@ -100,4 +103,6 @@ def test_cone_only_fast_path_equals_the_camera_test(incline) -> None:
     for half in (math.radians(20), math.radians(35), math.radians(60)):
         cone = visibility(traj, target, Camera(half_fov=half), dt=2e-3)
         generic = visibility(traj, target, Camera(half_fov=half, range=1e6), dt=2e-3)
-        assert cone == generic
+        assert cone.first_loss == generic.first_loss
+        assert cone.time_fraction == pytest.approx(generic.time_fraction, rel=1e-12, abs=1e-12)
+        assert cone.path_fraction == pytest.approx(generic.path_fraction, rel=1e-12, abs=1e-12)

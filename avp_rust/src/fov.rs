@@ -393,6 +393,106 @@ pub fn fov_row_matrices(
     Ok((row8, rx, ra, ryaw))
 }
 
+/// `h` of (7) and `|n_d|` at one point, without the gradient: the same operations as
+/// [`fov_point`] for these two values, so the sign of `h` is the same bit for bit.
+pub fn fov_value(x: V3, psi: f64, a: V3, s: V3, axis_b: V3, cos_half: f64, g: f64) -> (f64, f64) {
+    let n_d = [s[0] - x[0], s[1] - x[1], s[2] - x[2]];
+    let dist = norm(n_d);
+    let f = [a[0], a[1], a[2] + g];
+    let fn_ = norm(f);
+    let b3 = scale(f, 1.0 / fn_);
+    let (sp, cp) = psi.sin_cos();
+    let b2d = [-sp, cp, 0.0];
+    let v = cross(b2d, b3);
+    let vn = norm(v);
+    let b1 = scale(v, 1.0 / vn);
+    let b2 = cross(b3, b1);
+    let [d1, d2, d3] = axis_b;
+    let mut e_c = [0.0; 3];
+    for i in 0..3 {
+        e_c[i] = d1 * b1[i] + d2 * b2[i] + d3 * b3[i];
+    }
+    (cos_half * dist - dot(n_d, e_c), dist)
+}
+
+/// Visibility of the point `s` from `k` plans on the same knots (`avp.metrics.visibility_many`,
+/// cone (7) only). `flat` holds the plans' flat outputs at the increasing `times` `(n,)` as
+/// `(2, n, k, 4)`: position and yaw (order 0), then the acceleration (order 2; its yaw entry
+/// unused), the layout `avp._avp_rust.eval_spline` returns for orders `[0, 2]` on the plans'
+/// stacked coefficients. Per plan: the trapezoid-weighted fraction of the time and of the path
+/// length (chords between samples) with the point in view (`h <= 0`, `|n_d| > 1e-12`; a NaN
+/// `h` is not in view), and the first sample time (of the first `n - 1`) out of view, NaN when
+/// there is none. With a zero path length the path fraction is the time fraction.
+#[allow(clippy::too_many_arguments)]
+pub fn visibility_fractions(
+    times: &[f64],
+    flat: &[f64],
+    k: usize,
+    s: &[f64],
+    axis_b: &[f64],
+    cos_half: f64,
+    g: f64,
+) -> Result<Vec<(f64, f64, f64)>> {
+    let n = times.len();
+    for (arg, v, len) in [("flat", flat, 2 * n * k * 4), ("s", s, 3), ("axis_B", axis_b, 3)] {
+        if v.len() != len {
+            return Err(Error::Shape {
+                arg,
+                detail: format!("expected {len} values, got {}", v.len()),
+            });
+        }
+    }
+    if n < 2 {
+        return Err(Error::Shape {
+            arg: "times",
+            detail: format!("need at least 2 samples, got {n}"),
+        });
+    }
+    check_finite("s", s)?;
+    check_finite("axis_B", axis_b)?;
+    let (sv, d) = ([s[0], s[1], s[2]], [axis_b[0], axis_b[1], axis_b[2]]);
+    let at = |order: usize, i: usize, j: usize| &flat[((order * n + i) * k + j) * 4..][..4];
+    let pos = |i: usize, j: usize| {
+        let p = at(0, i, j);
+        [p[0], p[1], p[2]]
+    };
+    let mut total_t = 0.0;
+    for i in 0..n - 1 {
+        total_t += times[i + 1] - times[i];
+    }
+    let mut out = Vec::with_capacity(k);
+    for j in 0..k {
+        let seen = |i: usize| {
+            let (p, a) = (at(0, i, j), at(1, i, j));
+            let (h, dist) = fov_value([p[0], p[1], p[2]], p[3], [a[0], a[1], a[2]], sv, d, cos_half, g);
+            if h <= 0.0 && dist > 1e-12 {
+                1.0
+            } else {
+                0.0
+            }
+        };
+        let (mut in_t, mut in_s, mut total_s, mut first_lost) = (0.0, 0.0, 0.0, f64::NAN);
+        let mut f0 = seen(0);
+        for i in 0..n - 1 {
+            if f0 < 0.5 && first_lost.is_nan() {
+                first_lost = times[i];
+            }
+            let f1 = seen(i + 1);
+            let w = 0.5 * (f0 + f1);
+            let (p, q) = (pos(i, j), pos(i + 1, j));
+            let ds = norm([q[0] - p[0], q[1] - p[1], q[2] - p[2]]);
+            in_t += w * (times[i + 1] - times[i]);
+            in_s += w * ds;
+            total_s += ds;
+            f0 = f1;
+        }
+        let tf = if total_t > 0.0 { in_t / total_t } else { 0.0 };
+        let pf = if total_s > 0.0 { in_s / total_s } else { tf };
+        out.push((tf, pf, first_lost));
+    }
+    Ok(out)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -484,5 +584,27 @@ mod tests {
         assert_eq!(&ry[21..24], &p0);
         assert_eq!(fov_row_matrices(2, 3, &[2], &p0, &p2, &[0.0; 3], &[0.0; 3], &[0.0]).unwrap_err().arg(), "seg");
         assert_eq!(fov_row_matrices(2, 3, &[0], &p0[..2], &p2, &[0.0; 3], &[0.0; 3], &[0.0]).unwrap_err().arg(), "p0");
+    }
+
+    #[test]
+    fn value_matches_the_gradient_kernel_and_fractions_count_the_view() {
+        let (s, axis) = ([3.0, 0.0, 1.0], [1.0, 0.0, 0.0]);
+        for (x, psi, a) in [([0.0, 0.0, 1.0], 0.0, [0.0; 3]), ([0.5, -1.0, 2.0], 1.3, [2.0, -1.0, 0.5])] {
+            let p = fov_point(x, psi, a, s, axis, 0.8, 9.81);
+            assert_eq!(fov_value(x, psi, a, s, axis, 0.8, 9.81), (p.h, p.distance));
+        }
+        // one plan flying along x towards the pad, facing it for the first half, then yawed away
+        let times: Vec<f64> = (0..5).map(|i| i as f64).collect();
+        let yaws = [0.0, 0.0, 0.0, 3.0, 3.0];
+        let mut flat = vec![0.0; 2 * 5 * 4]; // (2, n = 5, k = 1, 4); accelerations zero
+        for i in 0..5 {
+            flat[i * 4..i * 4 + 4].copy_from_slice(&[i as f64 * 0.1, 0.0, 1.0, yaws[i]]);
+        }
+        let r = visibility_fractions(&times, &flat, 1, &s, &axis, 0.8, 9.81).unwrap();
+        // flags 1 1 1 0 0: trapezoid weights 1, 1, 0.5, 0 over four unit intervals
+        assert_eq!(r[0].0, 2.5 / 4.0);
+        assert!((r[0].1 - 2.5 / 4.0).abs() < 1e-15);
+        assert_eq!(r[0].2, 3.0);
+        assert_eq!(visibility_fractions(&times[..1], &flat[..8], 1, &s, &axis, 0.8, 9.81).unwrap_err().arg(), "times");
     }
 }

@@ -1,6 +1,9 @@
 //! PyO3 wrapper of the field-of-view kernel (7): `h` and its gradient.
 #![allow(clippy::useless_conversion)]
-use numpy::{IntoPyArray, PyArray1, PyArray2, PyReadonlyArray1, PyReadonlyArray2, PyUntypedArrayMethods};
+use numpy::{
+    IntoPyArray, PyArray1, PyArray2, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray4,
+    PyUntypedArrayMethods,
+};
 use pyo3::prelude::*;
 
 use super::common::{contiguous, kernel_err, to_py_err};
@@ -166,9 +169,38 @@ fn fov_row_matrices_py<'py>(
     Ok((shape(k, r8)?, shape(3 * k, rx)?, shape(3 * k, ra)?, shape(k, ry)?))
 }
 
+/// Visibility fractions of `k` plans (`avp.metrics.visibility_many`, cone only): `times (n,)`
+/// and `flat (2, n, k, 4)` (orders 0 and 2 of the plans' flat outputs, as `eval_spline` returns
+/// them for stacked coefficients). Returns `(time_fraction (k,), path_fraction (k,),
+/// first_lost (k,))` with NaN where the point never leaves the view.
+#[pyfunction(name = "visibility_fractions")]
+#[allow(clippy::type_complexity, clippy::too_many_arguments, non_snake_case)]
+fn visibility_fractions_py<'py>(
+    py: Python<'py>,
+    times: PyReadonlyArray1<'py, f64>,
+    flat: PyReadonlyArray4<'py, f64>,
+    s: PyReadonlyArray1<'py, f64>,
+    axis_B: PyReadonlyArray1<'py, f64>,
+    cos_half: f64,
+    g: f64,
+) -> PyResult<(Bound<'py, PyArray1<f64>>, Bound<'py, PyArray1<f64>>, Bound<'py, PyArray1<f64>>)> {
+    let shape = flat.shape().to_vec();
+    let ts = contiguous("times", times.as_slice())?;
+    if shape[0] != 2 || shape[1] != ts.len() || shape[3] != 4 {
+        return Err(kernel_err("flat", format!("expected shape (2, {}, k, 4), got {shape:?}", ts.len())));
+    }
+    let fl = contiguous("flat", flat.as_slice())?;
+    let (ss, ds) = (contiguous("s", s.as_slice())?, contiguous("axis_B", axis_B.as_slice())?);
+    let out = guarded(|| crate::fov::visibility_fractions(ts, fl, shape[2], ss, ds, cos_half, g))
+        .map_err(to_py_err)?;
+    let col = |f: fn(&(f64, f64, f64)) -> f64| out.iter().map(f).collect::<Vec<f64>>().into_pyarray(py);
+    Ok((col(|r| r.0), col(|r| r.1), col(|r| r.2)))
+}
+
 pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(fov_gradient_py, m)?)?;
     m.add_function(wrap_pyfunction!(fov_linearise_py, m)?)?;
     m.add_function(wrap_pyfunction!(fov_row_matrices_py, m)?)?;
+    m.add_function(wrap_pyfunction!(visibility_fractions_py, m)?)?;
     Ok(())
 }
