@@ -251,7 +251,13 @@ fn times_radius(g: f64, r: f64) -> f64 {
 
 /// The row terms of one point from its gradient (the operations in the order of the former
 /// NumPy code, so the rows are the same bits).
-pub fn row_terms(p: &FovPoint, x0: V3, psi0: f64, a0: V3, st: &LinearisationSettings) -> FovRowTerms {
+pub fn row_terms(
+    p: &FovPoint,
+    x0: V3,
+    psi0: f64,
+    a0: V3,
+    st: &LinearisationSettings,
+) -> FovRowTerms {
     let ok = p.h.is_finite()
         && p.d_a.iter().all(|v| v.is_finite())
         && p.d_psi.is_finite()
@@ -287,7 +293,16 @@ pub fn row_terms(p: &FovPoint, x0: V3, psi0: f64, a0: V3, st: &LinearisationSett
             progress = hopeless;
         }
     }
-    FovRowTerms { h0, reachable, gx, ga, gp, rhs, placed, progress }
+    FovRowTerms {
+        h0,
+        reachable,
+        gx,
+        ga,
+        gp,
+        rhs,
+        placed,
+        progress,
+    }
 }
 
 /// The linearised FoV rows (8) of `m` points (`x0`, `a0` flattened `(m, 3)`, `psi0` `(m,)`)
@@ -314,7 +329,11 @@ pub fn fov_linearise(
             });
         }
     }
-    for (arg, v) in [("margin", st.margin), ("reach_fraction", st.reach_fraction), ("progress_fraction", st.progress_fraction)] {
+    for (arg, v) in [
+        ("margin", st.margin),
+        ("reach_fraction", st.reach_fraction),
+        ("progress_fraction", st.progress_fraction),
+    ] {
         check_finite(arg, &[v])?;
     }
     let points = fov_gradient(x0, psi0, a0, s, axis_b, st.cos_half, st.g)?;
@@ -372,9 +391,17 @@ pub fn fov_row_matrices(
         });
     }
     let n = 4 * n_segments * n_coeffs;
-    let (mut row8, mut rx, mut ra, mut ryaw) = (vec![0.0; k * n], vec![0.0; 3 * k * n], vec![0.0; 3 * k * n], vec![0.0; k * n]);
+    let (mut row8, mut rx, mut ra, mut ryaw) = (
+        vec![0.0; k * n],
+        vec![0.0; 3 * k * n],
+        vec![0.0; 3 * k * n],
+        vec![0.0; k * n],
+    );
     for (i, &s) in seg.iter().enumerate() {
-        let (b0, b2) = (&p0[i * n_coeffs..][..n_coeffs], &p2[i * n_coeffs..][..n_coeffs]);
+        let (b0, b2) = (
+            &p0[i * n_coeffs..][..n_coeffs],
+            &p2[i * n_coeffs..][..n_coeffs],
+        );
         let col = |axis: usize| (axis * n_segments + s as usize) * n_coeffs;
         for axis in 0..3 {
             let (c, g_x, g_a) = (col(axis), gx[3 * i + axis], ga[3 * i + axis]);
@@ -434,7 +461,11 @@ pub fn visibility_fractions(
     g: f64,
 ) -> Result<Vec<(f64, f64, f64)>> {
     let n = times.len();
-    for (arg, v, len) in [("flat", flat, 2 * n * k * 4), ("s", s, 3), ("axis_B", axis_b, 3)] {
+    for (arg, v, len) in [
+        ("flat", flat, 2 * n * k * 4),
+        ("s", s, 3),
+        ("axis_B", axis_b, 3),
+    ] {
         if v.len() != len {
             return Err(Error::Shape {
                 arg,
@@ -464,7 +495,15 @@ pub fn visibility_fractions(
     for j in 0..k {
         let seen = |i: usize| {
             let (p, a) = (at(0, i, j), at(1, i, j));
-            let (h, dist) = fov_value([p[0], p[1], p[2]], p[3], [a[0], a[1], a[2]], sv, d, cos_half, g);
+            let (h, dist) = fov_value(
+                [p[0], p[1], p[2]],
+                p[3],
+                [a[0], a[1], a[2]],
+                sv,
+                d,
+                cos_half,
+                g,
+            );
             if h <= 0.0 && dist > 1e-12 {
                 1.0
             } else {
@@ -558,12 +597,24 @@ mod tests {
         let axis = [1.0, 0.0, 0.0];
         let st = settings(PointPolicy::Keep, [f64::INFINITY; 3]);
         // at the target (|n_d| = 0) and one regular point with a zero yaw gradient
-        let (t, _) = fov_linearise(&[3.0, 0.0, 1.0, 0.0, 0.0, 1.0], &[0.0, 0.0], &[0.0; 6], &[3.0, 0.0, 1.0], &axis, &st)
-            .unwrap();
+        let (t, _) = fov_linearise(
+            &[3.0, 0.0, 1.0, 0.0, 0.0, 1.0],
+            &[0.0, 0.0],
+            &[0.0; 6],
+            &[3.0, 0.0, 1.0],
+            &axis,
+            &st,
+        )
+        .unwrap();
         assert!(!t[0].placed && t[0].h0.is_infinite() && t[0].gx == [0.0; 3]);
         assert!(t[1].placed && !t[1].reachable.is_nan());
         let bad = LinearisationSettings { margin: -1.0, ..st };
-        assert_eq!(fov_linearise(&[0.0; 3], &[0.0], &[0.0; 3], &[1.0; 3], &axis, &bad).unwrap_err().arg(), "margin");
+        assert_eq!(
+            fov_linearise(&[0.0; 3], &[0.0], &[0.0; 3], &[1.0; 3], &axis, &bad)
+                .unwrap_err()
+                .arg(),
+            "margin"
+        );
         assert_eq!(PointPolicy::from_name("all").unwrap_err().arg(), "policy");
     }
 
@@ -571,8 +622,17 @@ mod tests {
     fn row_matrices_place_each_point_in_its_segment() {
         // 2 segments, 3 coefficients: n = 24; one point in segment 1
         let (p0, p2) = ([1.0, 2.0, 3.0], [4.0, 5.0, 6.0]);
-        let (r8, rx, ra, ry) =
-            fov_row_matrices(2, 3, &[1], &p0, &p2, &[1.0, 0.0, -1.0], &[0.5, 0.0, 0.0], &[2.0]).unwrap();
+        let (r8, rx, ra, ry) = fov_row_matrices(
+            2,
+            3,
+            &[1],
+            &p0,
+            &p2,
+            &[1.0, 0.0, -1.0],
+            &[0.5, 0.0, 0.0],
+            &[2.0],
+        )
+        .unwrap();
         assert_eq!((r8.len(), rx.len(), ra.len(), ry.len()), (24, 72, 72, 24));
         // axis x, segment 1: columns 3..6
         assert_eq!(&r8[3..6], &[1.0 + 2.0, 2.0 + 2.5, 3.0 + 3.0]);
@@ -582,14 +642,27 @@ mod tests {
         assert_eq!(&rx[24 + 9..24 + 12], &p0); // row 1 (y) on y's columns
         assert_eq!(&ra[48 + 15..48 + 18], &p2); // row 2 (z)
         assert_eq!(&ry[21..24], &p0);
-        assert_eq!(fov_row_matrices(2, 3, &[2], &p0, &p2, &[0.0; 3], &[0.0; 3], &[0.0]).unwrap_err().arg(), "seg");
-        assert_eq!(fov_row_matrices(2, 3, &[0], &p0[..2], &p2, &[0.0; 3], &[0.0; 3], &[0.0]).unwrap_err().arg(), "p0");
+        assert_eq!(
+            fov_row_matrices(2, 3, &[2], &p0, &p2, &[0.0; 3], &[0.0; 3], &[0.0])
+                .unwrap_err()
+                .arg(),
+            "seg"
+        );
+        assert_eq!(
+            fov_row_matrices(2, 3, &[0], &p0[..2], &p2, &[0.0; 3], &[0.0; 3], &[0.0])
+                .unwrap_err()
+                .arg(),
+            "p0"
+        );
     }
 
     #[test]
     fn value_matches_the_gradient_kernel_and_fractions_count_the_view() {
         let (s, axis) = ([3.0, 0.0, 1.0], [1.0, 0.0, 0.0]);
-        for (x, psi, a) in [([0.0, 0.0, 1.0], 0.0, [0.0; 3]), ([0.5, -1.0, 2.0], 1.3, [2.0, -1.0, 0.5])] {
+        for (x, psi, a) in [
+            ([0.0, 0.0, 1.0], 0.0, [0.0; 3]),
+            ([0.5, -1.0, 2.0], 1.3, [2.0, -1.0, 0.5]),
+        ] {
             let p = fov_point(x, psi, a, s, axis, 0.8, 9.81);
             assert_eq!(fov_value(x, psi, a, s, axis, 0.8, 9.81), (p.h, p.distance));
         }
@@ -605,6 +678,11 @@ mod tests {
         assert_eq!(r[0].0, 2.5 / 4.0);
         assert!((r[0].1 - 2.5 / 4.0).abs() < 1e-15);
         assert_eq!(r[0].2, 3.0);
-        assert_eq!(visibility_fractions(&times[..1], &flat[..8], 1, &s, &axis, 0.8, 9.81).unwrap_err().arg(), "times");
+        assert_eq!(
+            visibility_fractions(&times[..1], &flat[..8], 1, &s, &axis, 0.8, 9.81)
+                .unwrap_err()
+                .arg(),
+            "times"
+        );
     }
 }

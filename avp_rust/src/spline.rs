@@ -195,7 +195,10 @@ mod tests {
         let c: Vec<f64> = (0..3 * 4 * 10).map(|_| next()).collect();
         let k = vec![0.0, 0.37, 1.1, 1.5];
         let s = SplineView::new(&c, (3, 4, 10), &k).unwrap();
-        let times: Vec<f64> = (0..97).map(|i| -0.1 + 1.7 * i as f64 / 96.0).chain([0.37, 1.1, 1.5]).collect();
+        let times: Vec<f64> = (0..97)
+            .map(|i| -0.1 + 1.7 * i as f64 / 96.0)
+            .chain([0.37, 1.1, 1.5])
+            .collect();
         let orders = [0, 1, 2, 3, 4, 9, 10, 12];
         let out = evaluate(&s, &times, &orders).unwrap();
         let mut one = [0.0; 4];
@@ -204,7 +207,11 @@ mod tests {
                 s.eval_into(t, order, &mut one);
                 let got = &out[(oi * times.len() + ti) * 4..][..4];
                 for axis in 0..4 {
-                    assert_eq!(got[axis].to_bits(), one[axis].to_bits(), "order {order}, t {t}, axis {axis}");
+                    assert_eq!(
+                        got[axis].to_bits(),
+                        one[axis].to_bits(),
+                        "order {order}, t {t}, axis {axis}"
+                    );
                 }
             }
         }

@@ -103,8 +103,8 @@ fn fov_linearise_py<'py>(
         progress_fraction,
         policy,
     };
-    let (terms, hold) = guarded(|| crate::fov::fov_linearise(xs, ps, as_, ss, ds, &settings))
-        .map_err(to_py_err)?;
+    let (terms, hold) =
+        guarded(|| crate::fov::fov_linearise(xs, ps, as_, ss, ds, &settings)).map_err(to_py_err)?;
     let m = terms.len();
     let col = |f: fn(&crate::fov::FovRowTerms) -> f64| terms.iter().map(f).collect::<Vec<f64>>();
     let flag = |f: fn(&crate::fov::FovRowTerms) -> bool| terms.iter().map(f).collect::<Vec<bool>>();
@@ -152,21 +152,31 @@ fn fov_row_matrices_py<'py>(
     let segs = seg
         .as_slice()
         .map_err(|_| kernel_err("seg", "must be a C-contiguous int64 array"))?;
-    let (p0s, p2s) = (contiguous("p0", p0.as_slice())?, contiguous("p2", p2.as_slice())?);
+    let (p0s, p2s) = (
+        contiguous("p0", p0.as_slice())?,
+        contiguous("p2", p2.as_slice())?,
+    );
     let (gxs, gas, gps) = (
         contiguous("gx", gx.as_slice())?,
         contiguous("ga", ga.as_slice())?,
         contiguous("gp", gp.as_slice())?,
     );
-    let (r8, rx, ra, ry) = guarded(|| crate::fov::fov_row_matrices(n_segments, n_coeffs, segs, p0s, p2s, gxs, gas, gps))
-        .map_err(to_py_err)?;
+    let (r8, rx, ra, ry) = guarded(|| {
+        crate::fov::fov_row_matrices(n_segments, n_coeffs, segs, p0s, p2s, gxs, gas, gps)
+    })
+    .map_err(to_py_err)?;
     let (k, n) = (segs.len(), 4 * n_segments * n_coeffs);
     let shape = |rows: usize, v: Vec<f64>| {
         numpy::ndarray::Array2::from_shape_vec((rows, n), v)
             .map(|a| a.into_pyarray(py))
             .map_err(|e| kernel_err("kernel", format!("internal shape error: {e}")))
     };
-    Ok((shape(k, r8)?, shape(3 * k, rx)?, shape(3 * k, ra)?, shape(k, ry)?))
+    Ok((
+        shape(k, r8)?,
+        shape(3 * k, rx)?,
+        shape(3 * k, ra)?,
+        shape(k, ry)?,
+    ))
 }
 
 /// Visibility fractions of `k` plans (`avp.metrics.visibility_many`, cone only): `times (n,)`
@@ -183,17 +193,28 @@ fn visibility_fractions_py<'py>(
     axis_B: PyReadonlyArray1<'py, f64>,
     cos_half: f64,
     g: f64,
-) -> PyResult<(Bound<'py, PyArray1<f64>>, Bound<'py, PyArray1<f64>>, Bound<'py, PyArray1<f64>>)> {
+) -> PyResult<(
+    Bound<'py, PyArray1<f64>>,
+    Bound<'py, PyArray1<f64>>,
+    Bound<'py, PyArray1<f64>>,
+)> {
     let shape = flat.shape().to_vec();
     let ts = contiguous("times", times.as_slice())?;
     if shape[0] != 2 || shape[1] != ts.len() || shape[3] != 4 {
-        return Err(kernel_err("flat", format!("expected shape (2, {}, k, 4), got {shape:?}", ts.len())));
+        return Err(kernel_err(
+            "flat",
+            format!("expected shape (2, {}, k, 4), got {shape:?}", ts.len()),
+        ));
     }
     let fl = contiguous("flat", flat.as_slice())?;
-    let (ss, ds) = (contiguous("s", s.as_slice())?, contiguous("axis_B", axis_B.as_slice())?);
+    let (ss, ds) = (
+        contiguous("s", s.as_slice())?,
+        contiguous("axis_B", axis_B.as_slice())?,
+    );
     let out = guarded(|| crate::fov::visibility_fractions(ts, fl, shape[2], ss, ds, cos_half, g))
         .map_err(to_py_err)?;
-    let col = |f: fn(&(f64, f64, f64)) -> f64| out.iter().map(f).collect::<Vec<f64>>().into_pyarray(py);
+    let col =
+        |f: fn(&(f64, f64, f64)) -> f64| out.iter().map(f).collect::<Vec<f64>>().into_pyarray(py);
     Ok((col(|r| r.0), col(|r| r.1), col(|r| r.2)))
 }
 
