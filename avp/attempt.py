@@ -373,6 +373,11 @@ def solve_fov(
             if k == 0 and score < best_score - 1e-4:
                 log.append("SQP step 1 lowered the visibility: keeping the first solution")
             break
+        gain = (score - best_score) / 2
         best_out, best_traj, best_score, best_lin, steps = out, traj, score, lin, k + 1
+        if gain < cfg.fov.sqp_min_gain and k + 1 < cfg.fov.sqp_iterations:
+            log.append(f"SQP: the step raised the visibility by {gain:.4f} < fov.sqp_min_gain "
+                       f"{cfg.fov.sqp_min_gain:g}: no further step")
+            break
     return ledger.attempt(best_out, best_traj, sqp_steps=steps, linearisation=best_lin,
                           qp=base if steps == 0 else None)

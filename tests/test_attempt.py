@@ -5,8 +5,10 @@ from __future__ import annotations
 
 import math
 import pickle
+from dataclasses import replace
 
 import numpy as np
+import pytest
 from hypothesis import example, given, settings
 from hypothesis import strategies as st
 from scenarios import standard
@@ -15,6 +17,7 @@ import avp
 from avp import perception
 from avp.attempt import Attempt, solve_at, solve_fov
 from avp.config import FovPointPolicy
+from avp.errors import ConfigError
 from avp.qp.assemble import ConstraintBlock, build_perching_qp
 from avp.qp.fov import fov_blocks
 from avp.qp.layout import layout_for
@@ -189,3 +192,24 @@ def test_the_rows_check_on_synthetic_rows() -> None:
     assert not _rows_hold((block([0.0, -2.0], [2.0, -1.5 - 1e-6]),), c)  # an upper bound
     assert not _rows_hold((block([0.0, -2.0], [2.0, 0.0]), block([0.0, -2.0], [0.999, 0.0])), c)  # second block
     assert not _rows_hold((block([0.0, -2.0], [2.0, 0.0]),), np.array([np.nan, 0.0, 0.0]))  # NaN fails
+
+
+def test_sqp_min_gain_stops_a_first_plan_after_a_small_step() -> None:
+    """``fov.sqp_min_gain``: a further SQP step only after a kept step that gained at least that
+    much. A wall at 1.5 m takes several scored steps by default; with the largest threshold the
+    first kept step is the last, and it is the default's first step."""
+    state = avp.State.hover([-1.5, 0.0, 1.5])
+    target = avp.PerchTarget.from_incline([0.0, 0.0, 1.5], math.radians(90.0))
+
+    def scored(result: avp.PlanResult) -> list[str]:
+        return [line for line in result.log if line.startswith("SQP step") and "visibility" in line]
+
+    default = avp.plan_detailed(state, target, avp.PlannerConfig())
+    assert len(scored(default)) >= 2
+    cfg = avp.PlannerConfig()
+    capped = avp.plan_detailed(state, target, replace(cfg, fov=replace(cfg.fov, sqp_min_gain=1.0)))
+    assert scored(capped) == scored(default)[:1]
+    assert any("sqp_min_gain" in line for line in capped.log)
+    assert capped.status is default.status
+    with pytest.raises(ConfigError, match="fov.sqp_min_gain"):
+        avp.FovConfig(sqp_min_gain=-0.01)
