@@ -133,8 +133,11 @@ def thrust_rows(layout: DecisionLayout, knots_rel: Array, times: Any, config: Pl
     """Rows of ``a + d v`` at ``times`` (``(m, 3, n)``): the thrust direction minus ``g e3`` with
     the rotor drag ``d = config.limits.rotor_drag`` (``b3 || a + g e3 + d v``,
     :class:`~avp.config.VehicleLimits`); the acceleration rows when ``d = 0``."""
+    return _thrust_rows(layout, knots_rel, times, config.limits.rotor_drag)
+
+
+def _thrust_rows(layout: DecisionLayout, knots_rel: Array, times: Any, drag: float) -> Array:
     A = vector_rows(layout, knots_rel, 2, times)
-    drag = config.limits.rotor_drag
     return A + drag * vector_rows(layout, knots_rel, 1, times) if drag else A
 
 
@@ -173,8 +176,26 @@ def flip_rows(
 
 def band_times(config: PlannerConfig, tf: float) -> Array:
     """Sample times ``t_f - t_k + j dt``, ``0 <= j < round(t_k/dt)``, of (14), clipped to ``t >= 0``."""
-    t = tf - config.t_k + config.dt * np.arange(config.band_samples)
+    return _band_times(tf, config.t_k, config.dt, config.band_samples)
+
+
+def _band_times(tf: float, t_k: float, dt: float, samples: int) -> Array:
+    t = tf - t_k + dt * np.arange(samples)
     return np.asarray(t[t >= 0.0], dtype=np.float64)
+
+
+@lru_cache(maxsize=16)
+def _band_thrust_rows(n_segments: int, degree: int, knots_rel: bytes, t_k: float, dt: float, samples: int,
+                      drag: float) -> Array:
+    """Rows of ``a + d v`` at the band's sample times (:func:`band_times`), ``(m, 3, n)``,
+    read-only. They depend on the knots and the band's timing, not on the pad: the fractions of
+    one replan step (same start, same durations) and a plan's relaxations share them."""
+    layout = layout_for(n_segments, degree)
+    knots = np.frombuffer(knots_rel, dtype=float)
+    times = _band_times(float(knots[-1]), t_k, dt, samples)
+    A = _thrust_rows(layout, knots, times, drag) if times.size else np.zeros((0, 3, layout.n_variables))
+    A.setflags(write=False)
+    return A
 
 
 def pre_impact_rows(
@@ -198,10 +219,11 @@ def pre_impact_rows(
         mode = PreImpactMode.CONE  # OverhangFlip.cone_band: the box blocks overhangs
     if mode is PreImpactMode.OFF:
         return np.zeros((0, n)), np.zeros(0), np.zeros(0)
-    times = band_times(config, float(knots_rel[-1]))
-    if times.size == 0:
+    A = _band_thrust_rows(layout.n_segments, layout.degree, np.asarray(knots_rel, dtype=float).tobytes(),
+                          config.t_k, config.dt, config.band_samples, config.limits.rotor_drag)  # (m, 3, n)
+    if A.shape[0] == 0:
         return np.zeros((0, n)), np.zeros(0), np.zeros(0)
-    A = thrust_rows(layout, knots_rel, times, config)  # (m, 3, n)
+    times = A.shape[0]  # the number of samples (the tiles below)
     alpha = config.contact_alpha(target.incline)
     alpha_lo, alpha_hi = config.alpha_range if config.alpha_range is not None else (alpha, alpha)
     if mode is PreImpactMode.PAPER:
@@ -212,7 +234,7 @@ def pre_impact_rows(
         pad = np.maximum(0.0, config.band_min_width - (hi - lo)) / 2.0
         lo, hi = lo - pad, hi + pad
         G = A.reshape(-1, n)
-        return G, np.tile(lo, times.size), np.tile(hi, times.size)
+        return G, np.tile(lo, times), np.tile(hi, times)
     # CONE mode
     s1, s2, s3 = target.s1, target.s2, target.s3
     gz = config.g * E3
@@ -227,4 +249,4 @@ def pre_impact_rows(
     lower_k[0] = alpha_lo - s3 @ gz
     upper_k = -(W @ gz)
     upper_k[0] = (1.0 + config.q) * alpha_hi - s3 @ gz
-    return G, np.tile(lower_k, times.size), np.tile(upper_k, times.size)
+    return G, np.tile(lower_k, times), np.tile(upper_k, times)
