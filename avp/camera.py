@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from functools import cached_property
 from typing import Any
 
 import numpy as np
@@ -91,14 +92,11 @@ class Camera:
     def __hash__(self) -> int:
         return hash((self.R_BC.tobytes(), self.half_fov, self.horizontal_fov, self.vertical_fov, self.range))
 
-    @property
+    @cached_property
     def axis_B(self) -> Array:
-        """Optical axis ``c3`` in body coordinates (contiguous, read-only)."""
-        axis: Array | None = self.__dict__.get("_axis_B")  # copied once, on first use
-        if axis is None:
-            axis = np.ascontiguousarray(self.R_BC[:, 2])
-            axis.setflags(write=False)
-            object.__setattr__(self, "_axis_B", axis)
+        """Optical axis ``c3`` in body coordinates (a contiguous copy of the column, made once)."""
+        axis = np.ascontiguousarray(self.R_BC[:, 2])
+        axis.setflags(write=False)
         return axis
 
     def axis(self, R_WB: npt.ArrayLike) -> Array:

@@ -459,11 +459,10 @@ class FovConfig:
     sqp_min_gain:
         A first plan takes a further SQP step only when its last kept step raised the visibility
         (the mean of the time and path fractions, as the log prints it) by at least this much;
-        0 (the default): while it improves at all. A latency knob, off by default: on 600 random
-        perches (``benchmarks/sweep_sqp_gain.py``) ``0.01`` cut the p99 of ``plan()`` from 2.10
-        to 1.89 ms but lowered the visibility of 20 plans, 7 of them by more than half a point
-        and one by 3.2 points (a small second step can precede a large third); ``0.002`` lowered
-        6 plans by at most 0.05 points and left the p99 at 2.09 ms.
+        0 (the default): while it improves at all (a step is kept only when it raises the
+        visibility by more than 5e-5, so smaller values change nothing). A latency knob, off by
+        default because it lowers the visibility of some plans: ``docs/performance.md`` measures
+        the trade (``benchmarks/sweep_sqp_gain.py``).
     fallback_max_iter:
         Iteration cap given to iterative back-ends (proxqp, osqp) for the QPs with FoV rows, so an
         incompatible problem (16) is declared quickly; ``None``: the back-end's setting.

@@ -387,7 +387,7 @@ def _measured(traj: Trajectory, target: PerchTarget, cfg: PlannerConfig) -> str:
     tilt rate is ``|b3'| = |P j| / |f|`` (``P = I - b3 b3^T``, ``f = a + g e3``), which equals
     the roll-pitch part ``|(w_x, w_y)|`` of the body rates (22) without the attitude."""
     d = traj.derivatives(traj.sample(1e-3), (2, 3))
-    f = d[0, :, :3] + np.array([0.0, 0.0, cfg.g])
+    f = d[0, :, :3] + np.array([0.0, 0.0, traj.g])
     f_norm = np.linalg.norm(f, axis=1)
     b3 = f / f_norm[:, None]
     j = d[1, :, :3]

@@ -76,8 +76,9 @@ def contact_position(target: PerchTarget, workspace: Workspace) -> Array:
 
 
 _LAST_REGIONS: tuple[PerchTarget, Workspace, tuple[Region, ...]] | None = None
-"""The last :func:`regions_for` call (both arguments are immutable: frozen, read-only arrays),
-held by reference: one planning call asks for the same regions three times."""
+"""The last :func:`regions_for` call, held by reference (one planning call asks for the same
+regions three times). Both arguments are frozen dataclasses whose arrays the constructors make
+read-only copies of, and the regions' own arrays are read-only copies."""
 
 
 def regions_for(target: PerchTarget, workspace: Workspace) -> tuple[Region, ...]:
@@ -100,16 +101,19 @@ def _regions_for(target: PerchTarget, workspace: Workspace) -> tuple[Region, ...
     if workspace.ground_z is not None:
         planes.append(("ground", np.array([0.0, 0.0, 1.0]), float(workspace.ground_z)))
     planes += [(f"half-space {k}", h.normal, h.offset) for k, h in enumerate(workspace.half_spaces)]
-    out = [Region(name, "half-space", np.ascontiguousarray(n, dtype=np.float64), d, abs(float(n @ p_c) - d) <= TOUCH_TOL)
-           for name, n, d in planes]
-    out += [Region(f"sphere {k}", "sphere", np.ascontiguousarray(s.center, dtype=np.float64), float(s.radius))
-            for k, s in enumerate(workspace.spheres)]
+    out = [Region(name, "half-space", _frozen(n), d, abs(float(n @ p_c) - d) <= TOUCH_TOL) for name, n, d in planes]
+    out += [Region(f"sphere {k}", "sphere", _frozen(s.center), float(s.radius)) for k, s in enumerate(workspace.spheres)]
     if math.isfinite(workspace.max_speed):
-        out.append(Region("max speed", "speed", np.zeros(3), float(workspace.max_speed)))
-    for r in out:  # shared by later calls (regions_for): read-only, copied where it is a view
-        if r.normal.flags.writeable:
-            r.normal.setflags(write=False)
+        out.append(Region("max speed", "speed", _frozen(np.zeros(3)), float(workspace.max_speed)))
     return tuple(out)
+
+
+def _frozen(v: Array) -> Array:
+    """A read-only contiguous copy (the regions are shared by later calls, :func:`regions_for`;
+    the caller's own arrays are left as they are)."""
+    out = np.array(v, dtype=np.float64, order="C")
+    out.setflags(write=False)
+    return out
 
 
 def check_endpoints(state: State, target: PerchTarget, config: PlannerConfig) -> None:

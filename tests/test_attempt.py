@@ -211,5 +211,11 @@ def test_sqp_min_gain_stops_a_first_plan_after_a_small_step() -> None:
     assert scored(capped) == scored(default)[:1]
     assert any("sqp_min_gain" in line for line in capped.log)
     assert capped.status is default.status
-    with pytest.raises(ConfigError, match="fov.sqp_min_gain"):
-        avp.FovConfig(sqp_min_gain=-0.01)
+    # the first step is kept, not discarded: the plan of a one-step SQP, to the bit
+    one = avp.plan_detailed(state, target, replace(cfg, fov=replace(cfg.fov, sqp_iterations=1)))
+    assert capped.trajectory is not None and one.trajectory is not None
+    np.testing.assert_array_equal(capped.trajectory.coefficients, one.trajectory.coefficients)
+    assert not np.array_equal(capped.trajectory.coefficients, default.trajectory.coefficients)
+    for bad in (-0.01, 1.5):
+        with pytest.raises(ConfigError, match="fov.sqp_min_gain"):
+            avp.FovConfig(sqp_min_gain=bad)

@@ -306,6 +306,30 @@ def test_kernel_errors_carry_the_argument_name():
     assert exc.value.arg == "knots"
 
 
+
+def test_column_major_arrays_are_refused_not_misread():
+    """NumPy calls a Fortran-ordered 2-D array contiguous, but the kernels index rows: its values
+    would be read in the wrong order. Every wrapper refuses it with a KernelError naming it."""
+    rng = np.random.default_rng(0)
+    c = rng.normal(size=(2, 4, 6))
+    k = np.array([0.0, 0.4, 1.0])
+    t = np.linspace(0.0, 1.0, 5)
+    with pytest.raises(_avp_rust.KernelError) as exc:
+        _avp_rust.eval_spline(np.asfortranarray(c), k, t, [0])
+    assert exc.value.arg == "coeffs" and "C-contiguous" in exc.value.detail
+    x = np.asfortranarray(rng.normal(size=(4, 3)))
+    with pytest.raises(_avp_rust.KernelError) as exc:
+        _avp_rust.fov_gradient(x, np.zeros(4), np.zeros((4, 3)), np.ones(3), np.array([1.0, 0.0, 0.0]), 0.8, 9.81)
+    assert exc.value.arg == "x"
+    with pytest.raises(_avp_rust.KernelError) as exc:  # (3m, 1) has the length of (m, 3), not its shape
+        _avp_rust.fov_gradient(np.zeros((12, 1)), np.zeros(4), np.zeros((4, 3)), np.ones(3),
+                               np.array([1.0, 0.0, 0.0]), 0.8, 9.81)
+    assert exc.value.arg == "x"
+    # the same values in row-major order are accepted and equal the transposed reading's intent
+    ok = _avp_rust.eval_spline(np.ascontiguousarray(np.asfortranarray(c)), k, t, [0])
+    np.testing.assert_array_equal(ok, _avp_rust.eval_spline(c, k, t, [0]))
+
+
 # ---------------------------------------------------------------- certify_spline
 
 

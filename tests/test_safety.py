@@ -288,3 +288,18 @@ def test_grid_position_rows_equal_the_rows_at_the_sample_times() -> None:
         c = Z @ rng.normal(size=Z.shape[1])
         np.testing.assert_allclose(np.einsum("min,n->mi", cached, c), np.einsum("min,n->mi", direct, c),
                                    rtol=1e-9, atol=1e-9)
+
+
+def test_regions_leave_the_callers_arrays_writable() -> None:
+    """The regions are shared by later calls (read-only copies); the workspace's own vectors are
+    not frozen by planning with them."""
+    from avp.safety import regions_for
+
+    ws = avp.Workspace(half_spaces=(avp.HalfSpace(point=(0.0, 0.0, 3.0), normal=(0.0, 0.0, -1.0)),),
+                       spheres=(avp.Sphere(center=(1.0, 2.0, 1.0), radius=0.3),))
+    before = [ws.half_spaces[0].normal.flags.writeable, ws.spheres[0].center.flags.writeable]
+    target = avp.PerchTarget.from_incline([3.0, 0.0, 1.5], math.radians(90.0))
+    regions = regions_for(target, ws)
+    assert regions_for(target, ws) is regions  # the last call's regions, by identity
+    assert all(not r.normal.flags.writeable for r in regions)
+    assert [ws.half_spaces[0].normal.flags.writeable, ws.spheres[0].center.flags.writeable] == before

@@ -232,8 +232,10 @@ def fov_blocks(
     empty = np.zeros(0)
     if m == 0:
         return FovLinearisation(t, empty, empty, np.zeros(0, bool), np.zeros(0, bool), True)
-    # copies (kept by the rows, read-only): the caller's arrays may be views it reuses
-    x0, a0, psi0 = np.array(x0, dtype=float), np.array(a0, dtype=float), np.array(psi0, dtype=float)
+    # row-major copies, kept by the rows: the caller's arrays may be views it reuses
+    x0 = np.array(x0, dtype=float, order="C")
+    a0 = np.array(a0, dtype=float, order="C")
+    psi0 = np.array(psi0, dtype=float, order="C")
     # Rust: the gradient, the largest linearised decrease inside the box (9) (sum |grad_i| r_i),
     # the rows' right-hand sides and the point policy: a point whose row needs more than
     # reach_fraction of that decrease is out of reach (a thin feasible set makes first-order
@@ -246,7 +248,7 @@ def fov_blocks(
     # the rows themselves are built by fov_rows, on first access to the blocks
     knots = np.array(knots_rel, dtype=float)
     if placed.all():  # every point placed: the arrays as they are
-        rows = FovRowInputs(layout, knots, t.copy(), gx, ga, gp, rhs, x0, a0, psi0, fov)
+        rows = FovRowInputs(layout, knots, t, gx, ga, gp, rhs, x0, a0, psi0, fov)
     else:
         rows = FovRowInputs(layout, knots, t[placed], gx[placed], ga[placed], gp[placed], rhs[placed],
                             x0[placed], a0[placed], psi0[placed], fov)

@@ -8,6 +8,11 @@
 //! through those three normalisations (`avp.qp.fov` documents the formulas). Degenerate points
 //! (zero thrust, `b3 || b2_des`, `x = s`) give non-finite values, as in IEEE arithmetic; the
 //! caller filters them.
+//!
+//! Built on them: [`fov_linearise`] (the terms of the rows (8), the trust box (9)'s largest
+//! decrease, the point policy and whether every row holds at its linearisation point, in the
+//! order of operations of the NumPy code it replaced), [`fov_row_matrices`] (the dense rows
+//! (8)-(9)) and [`visibility_fractions`] (the visibility score of plans, cone only).
 use crate::error::{check_finite, Error, Result};
 
 type V3 = [f64; 3];
@@ -88,21 +93,58 @@ pub struct FovPoint {
     pub distance: f64,
 }
 
+/// The attitude (11), (13) at one point and the values its derivatives need: `b3 = f / |f|`
+/// (`f = a + g e3`), `b1 = (b2_des x b3) / |.|`, `b2 = b3 x b1`, `|f|`, `|b2_des x b3|` and
+/// `(sin psi, cos psi)`. The one home of this arithmetic for [`fov_point`] and [`fov_value`].
+struct Attitude {
+    b1: V3,
+    b2: V3,
+    b3: V3,
+    f_norm: f64,
+    v_norm: f64,
+    sin_cos: (f64, f64),
+}
+
+#[inline]
+fn attitude(psi: f64, a: V3, g: f64) -> Attitude {
+    let f = [a[0], a[1], a[2] + g];
+    let f_norm = norm(f);
+    let b3 = scale(f, 1.0 / f_norm);
+    let (sp, cp) = psi.sin_cos();
+    let v = cross([-sp, cp, 0.0], b3);
+    let v_norm = norm(v);
+    let b1 = scale(v, 1.0 / v_norm);
+    Attitude {
+        b1,
+        b2: cross(b3, b1),
+        b3,
+        f_norm,
+        v_norm,
+        sin_cos: (sp, cp),
+    }
+}
+
+/// The optical axis `e_c = d1 b1 + d2 b2 + d3 b3` in W.
+#[inline]
+fn optical_axis(att: &Attitude, axis_b: V3) -> V3 {
+    let [d1, d2, d3] = axis_b;
+    let mut e_c = [0.0; 3];
+    for (i, e) in e_c.iter_mut().enumerate() {
+        *e = d1 * att.b1[i] + d2 * att.b2[i] + d3 * att.b3[i];
+    }
+    e_c
+}
+
 /// `h` of (7) and its gradient at one point (`axis_b`: optical axis in body coordinates).
 pub fn fov_point(x: V3, psi: f64, a: V3, s: V3, axis_b: V3, cos_half: f64, g: f64) -> FovPoint {
     let n_d = [s[0] - x[0], s[1] - x[1], s[2] - x[2]];
     let dist = norm(n_d);
-    let f = [a[0], a[1], a[2] + g];
-    let fn_ = norm(f);
-    let b3 = scale(f, 1.0 / fn_);
+    let att = attitude(psi, a, g);
+    let (b1, b3, fn_, vn) = (att.b1, att.b3, att.f_norm, att.v_norm);
     let j_b3 = normalisation_jacobian(b3, fn_);
-    let (sp, cp) = psi.sin_cos();
+    let (sp, cp) = att.sin_cos;
     let b2d = [-sp, cp, 0.0];
     let b2d_psi = [-cp, -sp, 0.0];
-    let v = cross(b2d, b3);
-    let vn = norm(v);
-    let b1 = scale(v, 1.0 / vn);
-    let b2 = cross(b3, b1);
     let p1 = normalisation_jacobian(b1, vn);
     let dv_a = cross_mat(b2d, &j_b3);
     let dv_psi = cross(b2d_psi, b3);
@@ -113,11 +155,10 @@ pub fn fov_point(x: V3, psi: f64, a: V3, s: V3, axis_b: V3, cos_half: f64, g: f6
     let hb1 = cross_mat(b1, &j_b3);
     let j_b2_psi = cross(b3, j_b1_psi);
     let [d1, d2, d3] = axis_b;
-    let mut e_c = [0.0; 3];
+    let e_c = optical_axis(&att, axis_b);
     let mut de_psi = [0.0; 3];
     let mut de_a = [[0.0; 3]; 3];
     for i in 0..3 {
-        e_c[i] = d1 * b1[i] + d2 * b2[i] + d3 * b3[i];
         de_psi[i] = d1 * j_b1_psi[i] + d2 * j_b2_psi[i];
         for j in 0..3 {
             de_a[i][j] = d1 * j_b1_a[i][j] + d2 * (hb3[i][j] - hb1[i][j]) + d3 * j_b3[i][j];
@@ -316,16 +357,21 @@ pub fn fov_linearise(
     axis_b: &[f64],
     st: &LinearisationSettings,
 ) -> Result<(Vec<FovRowTerms>, bool)> {
+    if st.trust.iter().any(|r| r.is_nan() || *r < 0.0) {
+        return Err(Error::Invalid {
+            arg: "trust",
+            detail: "every radius must be >= 0 (inf: no limit)".into(),
+        });
+    }
     for (arg, v) in [
-        ("trust", &st.trust[..]),
-        ("margin", &[st.margin][..]),
-        ("reach_fraction", &[st.reach_fraction][..]),
-        ("progress_fraction", &[st.progress_fraction][..]),
+        ("margin", st.margin),
+        ("reach_fraction", st.reach_fraction),
+        ("progress_fraction", st.progress_fraction),
     ] {
-        if v.iter().any(|r| r.is_nan() || *r < 0.0) {
+        if v.is_nan() || v < 0.0 {
             return Err(Error::Invalid {
                 arg,
-                detail: "must be >= 0 (a trust radius may be inf)".into(),
+                detail: "must be >= 0".into(),
             });
         }
     }
@@ -350,6 +396,10 @@ pub fn fov_linearise(
             .all(|t| t.h0 + st.margin <= 1e-9 * (1.0 + t.rhs.abs()));
     Ok((terms, hold))
 }
+
+/// Largest row width (columns) and point count [`fov_row_matrices`] accepts: far above any
+/// spline here (4 axes x 3 segments x 8 coefficients = 96), far below an allocation that fails.
+pub const MAX_ROW_WIDTH: usize = 1 << 16;
 
 /// Dense FoV row matrices of `k` placed points (`avp.qp.fov.fov_rows`), for a decision vector
 /// laid out `(axis * n_segments + segment) * n_coeffs + j` over 4 axes (x, y, z, yaw):
@@ -384,25 +434,43 @@ pub fn fov_row_matrices(
             });
         }
     }
-    if let Some(&bad) = seg.iter().find(|&&s| s < 0 || s as usize >= n_segments) {
+    // the matrices hold 8 k n values: refuse sizes no spline of this library has (and overflow)
+    let n = n_segments
+        .checked_mul(n_coeffs)
+        .and_then(|c| c.checked_mul(4))
+        .filter(|&n| n <= MAX_ROW_WIDTH)
+        .ok_or_else(|| Error::Invalid {
+            arg: "n_segments",
+            detail: format!(
+                "{n_segments} segments of {n_coeffs} coefficients exceed {MAX_ROW_WIDTH} columns"
+            ),
+        })?;
+    if k > MAX_ROW_WIDTH {
         return Err(Error::Invalid {
             arg: "seg",
-            detail: format!("segment {bad} outside 0..{n_segments}"),
+            detail: format!("{k} points exceed {MAX_ROW_WIDTH}"),
         });
     }
-    let n = 4 * n_segments * n_coeffs;
+    let segs: Vec<usize> = seg
+        .iter()
+        .map(|&s| usize::try_from(s).ok().filter(|&s| s < n_segments))
+        .collect::<Option<_>>()
+        .ok_or_else(|| Error::Invalid {
+            arg: "seg",
+            detail: format!("a segment outside 0..{n_segments}"),
+        })?;
     let (mut row8, mut rx, mut ra, mut ryaw) = (
         vec![0.0; k * n],
         vec![0.0; 3 * k * n],
         vec![0.0; 3 * k * n],
         vec![0.0; k * n],
     );
-    for (i, &s) in seg.iter().enumerate() {
+    for (i, &s) in segs.iter().enumerate() {
         let (b0, b2) = (
             &p0[i * n_coeffs..][..n_coeffs],
             &p2[i * n_coeffs..][..n_coeffs],
         );
-        let col = |axis: usize| (axis * n_segments + s as usize) * n_coeffs;
+        let col = |axis: usize| (axis * n_segments + s) * n_coeffs;
         for axis in 0..3 {
             let (c, g_x, g_a) = (col(axis), gx[3 * i + axis], ga[3 * i + axis]);
             for j in 0..n_coeffs {
@@ -425,20 +493,7 @@ pub fn fov_row_matrices(
 pub fn fov_value(x: V3, psi: f64, a: V3, s: V3, axis_b: V3, cos_half: f64, g: f64) -> (f64, f64) {
     let n_d = [s[0] - x[0], s[1] - x[1], s[2] - x[2]];
     let dist = norm(n_d);
-    let f = [a[0], a[1], a[2] + g];
-    let fn_ = norm(f);
-    let b3 = scale(f, 1.0 / fn_);
-    let (sp, cp) = psi.sin_cos();
-    let b2d = [-sp, cp, 0.0];
-    let v = cross(b2d, b3);
-    let vn = norm(v);
-    let b1 = scale(v, 1.0 / vn);
-    let b2 = cross(b3, b1);
-    let [d1, d2, d3] = axis_b;
-    let mut e_c = [0.0; 3];
-    for i in 0..3 {
-        e_c[i] = d1 * b1[i] + d2 * b2[i] + d3 * b3[i];
-    }
+    let e_c = optical_axis(&attitude(psi, a, g), axis_b);
     (cos_half * dist - dot(n_d, e_c), dist)
 }
 
@@ -481,6 +536,8 @@ pub fn visibility_fractions(
     }
     check_finite("s", s)?;
     check_finite("axis_B", axis_b)?;
+    check_finite("cos_half", &[cos_half])?;
+    check_finite("g", &[g])?;
     let (sv, d) = ([s[0], s[1], s[2]], [axis_b[0], axis_b[1], axis_b[2]]);
     let at = |order: usize, i: usize, j: usize| &flat[((order * n + i) * k + j) * 4..][..4];
     let pos = |i: usize, j: usize| {
@@ -654,6 +711,11 @@ mod tests {
                 .arg(),
             "p0"
         );
+        let zero3 = [0.0; 3];
+        let huge = fov_row_matrices(1 << 40, 3, &[0], &p0, &p2, &zero3, &zero3, &[0.0]);
+        assert_eq!(huge.unwrap_err().arg(), "n_segments"); // an error, not an allocation abort
+        let negative = fov_row_matrices(2, 3, &[-1], &p0, &p2, &zero3, &zero3, &[0.0]);
+        assert_eq!(negative.unwrap_err().arg(), "seg");
     }
 
     #[test]

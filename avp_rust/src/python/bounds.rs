@@ -26,7 +26,7 @@ fn sturm_count_py(
     a: f64,
     b: f64,
 ) -> PyResult<usize> {
-    let c = contiguous("coeffs", coeffs.as_slice())?;
+    let c = contiguous("coeffs", &coeffs)?;
     py.detach(|| guarded(|| sturm::sturm_count(c, a, b)))
         .map_err(to_py_err)
 }
@@ -64,7 +64,7 @@ fn certify_below_py(
     exact: bool,
     budget: f64,
 ) -> PyResult<(i8, f64)> {
-    let c = contiguous("coeffs", coeffs.as_slice())?;
+    let c = contiguous("coeffs", &coeffs)?;
     let budget = budget_arg(budget)?;
     let (cert, _) = py
         .detach(|| {
@@ -100,7 +100,7 @@ fn certify_below_many_py<'py>(
 )> {
     let shape = coeffs.shape();
     let (n, m) = (shape[0], shape[1]);
-    let c = contiguous("coeffs", coeffs.as_slice())?;
+    let c = contiguous("coeffs", &coeffs)?;
     let budget = budget_arg(budget)?;
     let method = method_arg(method)?;
     if m == 0 && n > 0 {
@@ -156,7 +156,7 @@ fn certify_spline_py<'py>(
     budget: f64,
 ) -> PyResult<(Bound<'py, PyArray2<i8>>, Bound<'py, PyArray2<f64>>)> {
     let view = spline_view(&coeffs, &knots)?;
-    let l = contiguous("limits", limits.as_slice())?;
+    let l = contiguous("limits", &limits)?;
     let limits = Limits::from_slice(l).map_err(to_py_err)?;
     let budget = budget_arg(budget)?;
     let verdicts = py

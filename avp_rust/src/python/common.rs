@@ -1,7 +1,8 @@
 //! What every wrapper family shares: the [`KernelError`] exception, error conversion and the
 //! NumPy-array-to-slice helpers. The families (`spline`, `fov`, `bounds`, `regions`) import only
 //! from here, never from each other.
-use numpy::{PyReadonlyArray1, PyReadonlyArray3, PyUntypedArrayMethods};
+use numpy::ndarray::Dimension;
+use numpy::{Element, PyReadonlyArray, PyReadonlyArray1, PyReadonlyArray3, PyUntypedArrayMethods};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 
@@ -35,11 +36,23 @@ pub(crate) fn to_py_err(e: Error) -> PyErr {
     kernel_err(e.arg(), e.detail())
 }
 
-pub(crate) fn contiguous<'a>(
+/// The array's data as a row-major slice. A column-major (Fortran-ordered) array is rejected:
+/// NumPy's `as_slice` accepts it, but the kernels index rows, so its values would be read in the
+/// wrong order.
+pub(crate) fn contiguous<'a, T: Element, D: Dimension>(
     arg: &'static str,
-    slice: std::result::Result<&'a [f64], numpy::NotContiguousError>,
-) -> PyResult<&'a [f64]> {
-    slice.map_err(|_| kernel_err(arg, "must be a C-contiguous float64 array"))
+    arr: &'a PyReadonlyArray<'_, T, D>,
+) -> PyResult<&'a [T]> {
+    let bad = || {
+        kernel_err(
+            arg,
+            "must be a C-contiguous (row-major) array; pass np.ascontiguousarray(...)",
+        )
+    };
+    if !arr.is_c_contiguous() {
+        return Err(bad());
+    }
+    arr.as_slice().map_err(|_| bad())
 }
 
 /// Borrows a `(segments, axes, coeffs)` array and its knots as a validated [`SplineView`].
@@ -49,7 +62,7 @@ pub(crate) fn spline_view<'a>(
 ) -> PyResult<SplineView<'a>> {
     let shape = coeffs.shape();
     let shape = (shape[0], shape[1], shape[2]);
-    let c = contiguous("coeffs", coeffs.as_slice())?;
-    let k = contiguous("knots", knots.as_slice())?;
+    let c = contiguous("coeffs", coeffs)?;
+    let k = contiguous("knots", knots)?;
     SplineView::new(c, shape, k).map_err(to_py_err)
 }

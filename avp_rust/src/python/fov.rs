@@ -1,4 +1,5 @@
-//! PyO3 wrapper of the field-of-view kernel (7): `h` and its gradient.
+//! PyO3 wrappers of the field-of-view kernels (7)-(9): `h` and its gradient, the linearised
+//! rows' terms, the dense rows and the visibility fractions (`crate::fov`).
 #![allow(clippy::useless_conversion)]
 use numpy::{
     IntoPyArray, PyArray1, PyArray2, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray4,
@@ -8,6 +9,18 @@ use pyo3::prelude::*;
 
 use super::common::{contiguous, kernel_err, to_py_err};
 use crate::error::guarded;
+
+/// Rejects a 2-D array whose rows are not 3-vectors (a `(3m, 1)` array has the right length
+/// but is not `(m, 3)`).
+fn rows_of_three(arg: &'static str, a: &PyReadonlyArray2<'_, f64>) -> PyResult<()> {
+    match a.shape()[1] {
+        3 => Ok(()),
+        c => Err(kernel_err(
+            arg,
+            format!("wrong shape: expected (m, 3), got (m, {c})"),
+        )),
+    }
+}
 
 /// `h` of the FoV cone (7) and its gradient at `m` points: `x (m, 3)`, `psi (m,)`, `a (m, 3)`,
 /// target `s (3,)`, optical axis `axis_B (3,)`. Returns `(h (m,), d_x (m, 3), d_psi (m,),
@@ -30,11 +43,13 @@ fn fov_gradient_py<'py>(
     Bound<'py, PyArray2<f64>>,
     Bound<'py, PyArray1<f64>>,
 )> {
-    let xs = contiguous("x", x.as_slice())?;
-    let ps = contiguous("psi", psi.as_slice())?;
-    let as_ = contiguous("a", a.as_slice())?;
-    let ss = contiguous("s", s.as_slice())?;
-    let ds = contiguous("axis_B", axis_B.as_slice())?;
+    rows_of_three("x", &x)?;
+    rows_of_three("a", &a)?;
+    let xs = contiguous("x", &x)?;
+    let ps = contiguous("psi", &psi)?;
+    let as_ = contiguous("a", &a)?;
+    let ss = contiguous("s", &s)?;
+    let ds = contiguous("axis_B", &axis_B)?;
     let pts = guarded(|| crate::fov::fov_gradient(xs, ps, as_, ss, ds, cos_half, g))
         .map_err(to_py_err)?;
     let m = pts.len();
@@ -88,11 +103,13 @@ fn fov_linearise_py<'py>(
     Bound<'py, PyArray1<bool>>,
     bool,
 )> {
-    let xs = contiguous("x0", x0.as_slice())?;
-    let ps = contiguous("psi0", psi0.as_slice())?;
-    let as_ = contiguous("a0", a0.as_slice())?;
-    let ss = contiguous("s", s.as_slice())?;
-    let ds = contiguous("axis_B", axis_B.as_slice())?;
+    rows_of_three("x0", &x0)?;
+    rows_of_three("a0", &a0)?;
+    let xs = contiguous("x0", &x0)?;
+    let ps = contiguous("psi0", &psi0)?;
+    let as_ = contiguous("a0", &a0)?;
+    let ss = contiguous("s", &s)?;
+    let ds = contiguous("axis_B", &axis_B)?;
     let policy = crate::fov::PointPolicy::from_name(policy).map_err(to_py_err)?;
     let settings = crate::fov::LinearisationSettings {
         cos_half,
@@ -148,18 +165,25 @@ fn fov_row_matrices_py<'py>(
     Bound<'py, PyArray2<f64>>,
     Bound<'py, PyArray2<f64>>,
 )> {
+    rows_of_three("gx", &gx)?;
+    rows_of_three("ga", &ga)?;
+    if p2.shape() != p0.shape() {
+        return Err(kernel_err(
+            "p2",
+            format!(
+                "wrong shape: expected {:?} as p0, got {:?}",
+                p0.shape(),
+                p2.shape()
+            ),
+        ));
+    }
     let n_coeffs = p0.shape()[1];
-    let segs = seg
-        .as_slice()
-        .map_err(|_| kernel_err("seg", "must be a C-contiguous int64 array"))?;
-    let (p0s, p2s) = (
-        contiguous("p0", p0.as_slice())?,
-        contiguous("p2", p2.as_slice())?,
-    );
+    let segs = contiguous("seg", &seg)?;
+    let (p0s, p2s) = (contiguous("p0", &p0)?, contiguous("p2", &p2)?);
     let (gxs, gas, gps) = (
-        contiguous("gx", gx.as_slice())?,
-        contiguous("ga", ga.as_slice())?,
-        contiguous("gp", gp.as_slice())?,
+        contiguous("gx", &gx)?,
+        contiguous("ga", &ga)?,
+        contiguous("gp", &gp)?,
     );
     let (r8, rx, ra, ry) = guarded(|| {
         crate::fov::fov_row_matrices(n_segments, n_coeffs, segs, p0s, p2s, gxs, gas, gps)
@@ -199,18 +223,15 @@ fn visibility_fractions_py<'py>(
     Bound<'py, PyArray1<f64>>,
 )> {
     let shape = flat.shape().to_vec();
-    let ts = contiguous("times", times.as_slice())?;
+    let ts = contiguous("times", &times)?;
     if shape[0] != 2 || shape[1] != ts.len() || shape[3] != 4 {
         return Err(kernel_err(
             "flat",
             format!("expected shape (2, {}, k, 4), got {shape:?}", ts.len()),
         ));
     }
-    let fl = contiguous("flat", flat.as_slice())?;
-    let (ss, ds) = (
-        contiguous("s", s.as_slice())?,
-        contiguous("axis_B", axis_B.as_slice())?,
-    );
+    let fl = contiguous("flat", &flat)?;
+    let (ss, ds) = (contiguous("s", &s)?, contiguous("axis_B", &axis_B)?);
     let out = guarded(|| crate::fov::visibility_fractions(ts, fl, shape[2], ss, ds, cos_half, g))
         .map_err(to_py_err)?;
     let col =

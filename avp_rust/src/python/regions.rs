@@ -12,7 +12,7 @@ use crate::regions::{self, Region, RegionVerdict};
 type Verdicts<'py> = (Bound<'py, PyArray1<i8>>, Bound<'py, PyArray1<f64>>, f64);
 
 fn vec3(arg: &'static str, v: &PyReadonlyArray1<'_, f64>) -> PyResult<[f64; 3]> {
-    let s = contiguous(arg, v.as_slice())?;
+    let s = contiguous(arg, v)?;
     <[f64; 3]>::try_from(s).map_err(|_| {
         kernel_err(
             arg,

@@ -23,7 +23,7 @@ fn eval_spline_py<'py>(
     orders: Vec<usize>,
 ) -> PyResult<Bound<'py, PyArray3<f64>>> {
     let view = spline_view(&coeffs, &knots)?;
-    let t = contiguous("times", times.as_slice())?;
+    let t = contiguous("times", &times)?;
     if let Some(&bad) = orders.iter().find(|&&o| o > 64) {
         return Err(kernel_err(
             "orders",
@@ -66,7 +66,7 @@ fn anticipate_py<'py>(
             ),
         ));
     }
-    let o = contiguous("odometry", odometry.as_slice())?;
+    let o = contiguous("odometry", &odometry)?;
     let out =
         guarded(|| crate::anticipation::anticipate(&view, o, t_rp, t_ex)).map_err(to_py_err)?;
     let arr = numpy::ndarray::Array2::from_shape_vec((crate::anticipation::ORDERS, n_axes), out)
