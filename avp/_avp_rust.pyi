@@ -111,7 +111,6 @@ def fov_linearise(
     ``h0 = inf``. ``hold``: every placed row holds at the linearisation point. Raises
     ``KernelError`` on bad shapes, a negative radius, margin or fraction, or an unknown policy."""
 
-
 def fov_row_matrices(
     n_segments: int,
     seg: npt.NDArray[np.int64],
@@ -120,13 +119,18 @@ def fov_row_matrices(
     gx: npt.NDArray[np.float64],
     ga: npt.NDArray[np.float64],
     gp: npt.NDArray[np.float64],
-) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+) -> tuple[
+    npt.NDArray[np.float64],
+    npt.NDArray[np.float64],
+    npt.NDArray[np.float64],
+    npt.NDArray[np.float64],
+]:
     """Dense FoV rows of ``k`` placed points (:func:`avp.qp.fov.fov_rows`): rows (8) ``(k, n)``
     and the trust-region (9) rows in position ``(3k, n)``, acceleration ``(3k, n)`` and yaw
     ``(k, n)``, ``n = 4 n_segments C``, from each point's segment ``seg``, basis rows ``p0``,
     ``p2`` ``(k, C)`` and gradients ``gx``, ``ga`` ``(k, 3)``, ``gp`` ``(k,)``. Raises
-    ``KernelError`` on bad shapes or a segment outside ``0..n_segments``."""
-
+    ``KernelError`` on bad shapes, a segment outside ``0..n_segments`` or rows wider than
+    65536 columns."""
 
 def visibility_fractions(
     times: npt.NDArray[np.float64],
@@ -140,7 +144,7 @@ def visibility_fractions(
     ``times (n,)`` (at least 2) and ``flat (2, n, k, 4)``, orders 0 and 2 of the plans' flat
     outputs as ``eval_spline`` returns them for stacked coefficients. Returns the trapezoid
     time fractions, path fractions and first times out of view (NaN: never) ``(k,)`` each.
-    Raises ``KernelError`` on bad shapes or non-finite ``s``, ``axis_B``."""
+    Raises ``KernelError`` on bad shapes or non-finite ``s``, ``axis_B``, ``cos_half``, ``g``."""
 
 # --- bound certificates (sturm.rs, exact.rs, certify.rs, bounds.rs) ---------------------------
 

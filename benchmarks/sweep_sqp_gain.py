@@ -6,7 +6,7 @@ Plans the same random perches (incline 20-100 deg, 1.2-8 m ahead, heights 1-2.5 
 offsets up to 1.5 m, seeded) once per threshold and prints the median / p95 / p99 CPU time of
 ``plan_detailed``, the scored SQP steps, and against the first threshold how many plans changed
 status and how much their visibility (the mean of the time and path fractions on the SQP's
-200-sample grid) moved.
+200-sample grid, ``avp.perception._SCORE_GRID``) moved.
 """
 
 from __future__ import annotations
@@ -20,6 +20,7 @@ import numpy as np
 
 import avp
 from avp.metrics import visibility
+from avp.perception import _SCORE_GRID
 
 
 def main() -> None:
@@ -53,7 +54,7 @@ def main() -> None:
             if traj is None:
                 vis.append(math.nan)
                 continue
-            v = visibility(traj, target, cfg.fov.camera, dt=traj.duration / 200)
+            v = visibility(traj, target, cfg.fov.camera, dt=traj.duration / _SCORE_GRID)
             vis.append((v.time_fraction + v.path_fraction) / 2)
             steps += sum(1 for line in result.log if line.startswith("SQP step") and "visibility" in line)
         ms = np.array(cpu) * 1e3
@@ -65,6 +66,9 @@ def main() -> None:
         vis, status = results[gain]
         d = vis - base_vis
         d = d[np.isfinite(d)]
+        if d.size == 0:
+            print(f"sqp_min_gain {gain:g}: no plan to compare")
+            continue
         same = sum(a == b for a, b in zip(status, base_status, strict=True))
         print(f"sqp_min_gain {gain:g} against {args.gains[0]:g}: same status {same}/{len(cases)}; visibility "
               f"(points) mean {d.mean() * 100:+.3f}, lowest {d.min() * 100:+.2f}, lower in {int(np.sum(d < -1e-9))}, "

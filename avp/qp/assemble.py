@@ -88,7 +88,8 @@ identity; each entry keeps its matrix alive, so an id is not reused while it is 
 
 def _cost_fingerprint(P: Array) -> float:
     """:func:`_fingerprint` of a cost matrix, computed once per read-only matrix object that owns
-    its data (nothing can change it)."""
+    its data (the cached cost matrices, which nothing writes; the factor's own ``hit.P is P``
+    shortcut relies on the same)."""
     if P.flags.writeable or P.base is not None:
         return _fingerprint(P)
     hit = _COST_PRINTS.get(id(P))
