@@ -59,6 +59,18 @@ pub fn guarded<T>(kernel: impl FnOnce() -> Result<T>) -> Result<T> {
 }
 
 /// Fails with [`Error::NonFinite`] when any value is NaN or infinite.
+/// A [`Error::Shape`] naming `arg` unless it holds exactly `expected` values.
+pub fn check_len(arg: &'static str, len: usize, expected: usize) -> Result<()> {
+    if len == expected {
+        Ok(())
+    } else {
+        Err(Error::Shape {
+            arg,
+            detail: format!("expected {expected} values, got {len}"),
+        })
+    }
+}
+
 pub fn check_finite(arg: &'static str, values: &[f64]) -> Result<()> {
     if values.iter().all(|v| v.is_finite()) {
         Ok(())

@@ -13,7 +13,7 @@
 //! decrease, the point policy and whether every row holds at its linearisation point, in the
 //! order of operations of the NumPy code it replaced), [`fov_row_matrices`] (the dense rows
 //! (8)-(9)) and [`visibility_fractions`] (the visibility score of plans, cone only).
-use crate::error::{check_finite, Error, Result};
+use crate::error::{check_finite, check_len, Error, Result};
 
 type V3 = [f64; 3];
 type M3 = [[f64; 3]; 3];
@@ -202,12 +202,7 @@ pub fn fov_gradient(
         ("s", s, 3),
         ("axis_B", axis_b, 3),
     ] {
-        if v.len() != n {
-            return Err(Error::Shape {
-                arg,
-                detail: format!("expected {n} values, got {}", v.len()),
-            });
-        }
+        check_len(arg, v.len(), n)?;
     }
     check_finite("s", s)?;
     check_finite("axis_B", axis_b)?;
@@ -427,12 +422,7 @@ pub fn fov_row_matrices(
         ("ga", ga, 3 * k),
         ("gp", gp, k),
     ] {
-        if v.len() != n {
-            return Err(Error::Shape {
-                arg,
-                detail: format!("expected {n} values, got {}", v.len()),
-            });
-        }
+        check_len(arg, v.len(), n)?;
     }
     // the matrices hold 8 k n values: refuse sizes no spline of this library has (and overflow)
     let n = n_segments
@@ -521,12 +511,7 @@ pub fn visibility_fractions(
         ("s", s, 3),
         ("axis_B", axis_b, 3),
     ] {
-        if v.len() != len {
-            return Err(Error::Shape {
-                arg,
-                detail: format!("expected {len} values, got {}", v.len()),
-            });
-        }
+        check_len(arg, v.len(), len)?;
     }
     if n < 2 {
         return Err(Error::Shape {
