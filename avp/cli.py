@@ -176,7 +176,8 @@ def _common_parser() -> argparse.ArgumentParser:
     c.add_argument("--thrust-rate-max", type=float, help=f"thrust rate limit, N/s (default {lim.thrust_rate_max})")
     c.add_argument("--tilt-rate-max", type=float, help=f"tilt rate limit, rad/s (default {lim.tilt_rate_max:g})")
     c.add_argument("--body-rate-max", type=float, help=f"body rate limit, rad/s (default {lim.body_rate_max})")
-    alpha = "max(4, g cos(incline))" if PlannerConfig.alpha is None else f"{PlannerConfig.alpha:g}"
+    alpha = (f"max({PlannerConfig.alpha_nominal:g}, g cos(incline))" if PlannerConfig.alpha is None
+             else f"{PlannerConfig.alpha:g}")
     c.add_argument("--alpha", type=float, help=f"mass-normalised thrust at contact, m/s^2 (default {alpha})")
     c.add_argument("--contact-normal", type=_free_float, metavar="V|free",
                    help=f"v.s3 at contact, m/s, negative into the pad (default {cv.normal:g})")

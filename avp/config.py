@@ -535,12 +535,21 @@ class PlannerConfig:
         Highest derivative continuous at interior knots (4 = snap).
     alpha:
         Mass-normalised thrust at contact (m/s^2) in (12): ``a(t_f) = alpha s3 - g e3``.
-        ``None`` (default): :data:`ALPHA_NOMINAL` on steep pads, raised to ``g cos(incline)`` on
+        ``None`` (default): ``alpha_nominal`` on steep pads, raised to ``g cos(incline)`` on
         flatter ones (:meth:`contact_alpha`), so the acceleration along the normal at contact,
         ``alpha - g cos(incline)``, is never negative. With a smaller thrust a vehicle that
         arrives slowly (0.3 m/s) must have come from behind the pad: on a floor, alpha = 4 puts
         the path 2 cm below the floor 0.15 s before contact, and no trajectory meets the band
         (14) with the perch-plane clearance.
+    alpha_nominal:
+        The contact thrust on steep pads when ``alpha`` is ``None`` (m/s^2, mass-normalised):
+        :data:`ALPHA_NOMINAL` (4, the paper's experiments) by default. A vehicle whose rotors lag
+        or sit near their floor in the final pitch-up wants more: the moment a quadrotor can
+        produce shrinks with its thrust, and the trackability limit of a replan scales with it
+        (``ReplanConfig.snap_thrust_max``). In the realistic simulator (20 ms motor lag) 6 raised
+        AVP's perches on a wall at 7.5 m from 83 to 92 of 100 (and from 82 to 94 on 100 seeds
+        not used before); ``avp.sim`` flies 6 (``SimScenario.alpha_nominal``,
+        ``docs/simulation.md``).
     alpha_range:
         If given, ``(lo, hi)``: the contact thrust is a decision variable in that range (the
         terminal acceleration is only required to be along ``s3``), as Gao et al., "Adaptive
@@ -574,6 +583,7 @@ class PlannerConfig:
     yaw_cost_order: int = 3
     continuity_order: int = 4
     alpha: float | None = None
+    alpha_nominal: float = ALPHA_NOMINAL
     alpha_range: tuple[float, float] | None = None
     q: float = 0.1
     t_k: float = 0.15
@@ -611,6 +621,7 @@ class PlannerConfig:
             raise ConfigError("config.degree", f"must be >= {2 * self.position_cost_order - 1} for a cost of order {self.position_cost_order}")
         if self.alpha is not None:
             object.__setattr__(self, "alpha", v.positive_float("config.alpha", self.alpha))
+        object.__setattr__(self, "alpha_nominal", v.positive_float("config.alpha_nominal", self.alpha_nominal))
         if not (math.isfinite(self.q) and self.q >= 0):
             raise ConfigError("config.q", f"must be finite and >= 0, got {self.q}")
         v.positive_float("config.t_k", self.t_k)
@@ -654,12 +665,12 @@ class PlannerConfig:
 
     def contact_alpha(self, incline: float) -> float:
         """The contact thrust ``alpha`` (m/s^2) used for a pad of this ``incline`` (rad): the
-        configured value, or with ``alpha=None`` ``max(ALPHA_NOMINAL, g cos(incline))`` kept
+        configured value, or with ``alpha=None`` ``max(alpha_nominal, g cos(incline))`` kept
         strictly inside the thrust limits (``ConfigError`` when the limits leave no room)."""
         if self.alpha is not None:
             return float(self.alpha)
         lo, hi = self.limits.accel_min, self.limits.accel_max
-        want = max(ALPHA_NOMINAL, self.g * math.cos(incline))
+        want = max(self.alpha_nominal, self.g * math.cos(incline))
         margin = 0.02 * (hi - lo)
         alpha = min(max(want, lo + margin), hi - margin)
         if alpha < want - 1e-9:

@@ -250,7 +250,7 @@ def load_settings(path: str | Path | None = None, overrides: Mapping[str, Any] |
 
 UNITS: dict[str, str] = {
     # PlannerConfig
-    "PlannerConfig.alpha": "m/s^2", "PlannerConfig.alpha_range": "m/s^2", "PlannerConfig.t_k": "s",
+    "PlannerConfig.alpha": "m/s^2", "PlannerConfig.alpha_nominal": "m/s^2", "PlannerConfig.alpha_range": "m/s^2", "PlannerConfig.t_k": "s",
     "PlannerConfig.dt": "s", "PlannerConfig.band_min_width": "m/s^2", "PlannerConfig.cone_half_angle": "rad",
     "PlannerConfig.min_distance": "m", "PlannerConfig.g": "m/s^2",
     # VehicleLimits

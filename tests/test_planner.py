@@ -189,3 +189,19 @@ def test_random_problems_meet_every_equality(problem: tuple[avp.State, avp.Perch
     assert abs(d0[0, 3] - state.yaw) < 1e-9 and abs(d0[1, 3] - state.yaw_rate) < 1e-9
     # terminal yaw (13): R_WB(tf) equals R_WS, not only b3 = s3
     assert avp.frames.rotation_error_angle(traj.attitude(traj.tf), target.R_WS) < ANGLE_TOL
+
+
+def test_alpha_nominal_sets_the_contact_thrust_on_steep_pads_only() -> None:
+    """``alpha_nominal`` is the contact thrust on steep pads; flatter pads keep ``g cos(incline)``
+    when that is larger, and a plan meets it at contact."""
+    cfg = avp.PlannerConfig(alpha_nominal=6.0)
+    assert avp.PlannerConfig().alpha_nominal == avp.config.ALPHA_NOMINAL == 4.0
+    assert cfg.contact_alpha(math.radians(90.0)) == 6.0
+    assert cfg.contact_alpha(math.radians(60.0)) == 6.0  # g cos 60 deg = 4.9 is below it
+    assert cfg.contact_alpha(math.radians(45.0)) == pytest.approx(cfg.g * math.cos(math.radians(45.0)))
+    target = avp.PerchTarget.from_incline([3.5, 0.0, 1.5], math.radians(90.0))
+    traj = avp.plan(avp.State.hover([0.0, 0.0, 1.5]), target, cfg)
+    assert abs(traj.thrust(traj.tf) - 6.0) < 1e-6
+    for bad in (0.0, -1.0, math.nan):
+        with pytest.raises(avp.ConfigError, match="config.alpha_nominal"):
+            avp.PlannerConfig(alpha_nominal=bad)

@@ -153,3 +153,22 @@ def test_an_aim_beyond_the_success_window_is_refused():
     with pytest.raises(ConfigError, match="static pad"):
         SimScenario(aim_slope=0.05, platform=PlatformMotion(speed=1.0))
     assert SimScenario(aim_normal=np.float32(0.01)).aim_normal == pytest.approx(0.01)
+
+
+def test_the_simulated_user_asks_for_its_contact_thrust():
+    """``SimConfig.alpha_nominal`` reaches the planner configuration :func:`simulate` builds (the
+    scenario carries it); a scenario without it gets the planner's default."""
+    import pytest
+
+    from avp.errors import ConfigError
+    from avp.sim.evaluate import SimConfig
+    from avp.sim.run import _shared
+
+    sc = SimConfig().scenario(90.0, 4.5)
+    assert sc.alpha_nominal == SimConfig().alpha_nominal == 6.0
+    assert _shared(sc, None)[1].contact_alpha(sc.incline) == 6.0
+    assert _shared(SimScenario(distance=4.5), None)[1].alpha_nominal == avp.config.ALPHA_NOMINAL
+    r = simulate(sc, Mode.ONE_SHOT, seed=0, max_time=0.05)
+    assert abs(r.first_plan.thrust(r.first_plan.tf) - 6.0) < 1e-6
+    with pytest.raises(ConfigError, match="scenario.alpha_nominal"):
+        SimScenario(alpha_nominal=-2.0)

@@ -97,11 +97,14 @@ def sim_config(
     limits: VehicleLimits | None = None,
     camera: Camera | None = None,
     ground_z: float | None = None,
+    alpha_nominal: float | None = None,
 ) -> PlannerConfig:
     """The planner configuration :func:`simulate` uses by default: :class:`PlannerConfig`'s
     defaults with the simulated vehicle's ``limits`` and camera (the same objects), optionally
-    with another tilt-rate limit, and the planner's ground limit ``ground_z`` (m; :func:`simulate`
-    passes the world's ground plus :data:`GROUND_CLEARANCE`).
+    with another tilt-rate limit, the planner's ground limit ``ground_z`` (m; :func:`simulate`
+    passes the world's ground plus :data:`GROUND_CLEARANCE`) and the contact thrust on steep pads
+    ``alpha_nominal`` (m/s^2; ``None``: the planner's default; :func:`simulate` passes the
+    scenario's).
 
     Both defaults come from closed-loop runs here: without a rate bound, replans from a noisy
     state close to contact certified only after the relaxations and spun at 100+ rad/s (126
@@ -114,7 +117,8 @@ def sim_config(
         lim = dataclasses.replace(lim, tilt_rate_max=float(tilt_rate_max))
     fov = base.fov if camera is None else dataclasses.replace(base.fov, camera=camera)
     workspace = base.workspace if ground_z is None else dataclasses.replace(base.workspace, ground_z=float(ground_z))
-    return dataclasses.replace(base, limits=lim, fov=fov, workspace=workspace)
+    alpha = base.alpha_nominal if alpha_nominal is None else float(alpha_nominal)
+    return dataclasses.replace(base, limits=lim, fov=fov, workspace=workspace, alpha_nominal=alpha)
 
 
 class Mode(Enum):
@@ -237,6 +241,10 @@ class SimScenario:
         plane, one estimated too deep is met early, and the slide then carries the contact up
         the slope (about 6.7 cm per cm on a wall). Aiming deeper and lower centres the contacts
         on the success window (docs/simulation.md has the measurements). 0: aim at the estimate.
+    alpha_nominal:
+        The contact thrust on steep pads the user-side configuration asks of the planner
+        (``PlannerConfig.alpha_nominal``, m/s^2) when :func:`simulate` builds the planner's
+        configuration; ``None``: the planner's default (4, the paper's). ``SimConfig`` flies 6.
     replan_rate_hz:
         Rate of :meth:`Replanner.step` calls in AVP mode.
     timeout:
@@ -283,6 +291,7 @@ class SimScenario:
     filter_estimate_scale: bool = False
     aim_normal: float = 0.0
     aim_slope: float = 0.0
+    alpha_nominal: float | None = None
     replan_rate_hz: float = 30.0
     timeout: float = 0.5
     after_plan: AfterPlan = AfterPlan.HOLD_ACCELERATION
@@ -308,6 +317,8 @@ class SimScenario:
                 raise ConfigError(f"scenario.{name}", f"an aim of {val} m leaves the success window "
                                   f"({window} m); aim inside it")
             object.__setattr__(self, name, val)
+        if self.alpha_nominal is not None:
+            object.__setattr__(self, "alpha_nominal", v.positive_float("scenario.alpha_nominal", self.alpha_nominal))
         if self.platform is not None and (self.aim_normal or self.aim_slope):
             raise ConfigError("scenario.aim_normal", "the aim is defined for a static pad; set aim_normal = "
                               "aim_slope = 0 with a platform")
@@ -520,7 +531,8 @@ def _estimate_target(est: TargetEstimator, sc: SimScenario) -> PerchTarget | Non
 def _shared(sc: SimScenario, config: PlannerConfig | None) -> tuple[SimScenario, PlannerConfig]:
     """Scenario and planner configuration sharing one vehicle and one camera object."""
     if config is None:
-        return sc, sim_config(limits=sc.vehicle.limits, camera=sc.camera.camera, ground_z=sc.planner_ground_z)
+        return sc, sim_config(limits=sc.vehicle.limits, camera=sc.camera.camera, ground_z=sc.planner_ground_z,
+                              alpha_nominal=sc.alpha_nominal)
     vehicle = sc.vehicle if sc.vehicle.limits is config.limits else dataclasses.replace(sc.vehicle, limits=config.limits)
     camera = sc.camera if sc.camera.camera is config.fov.camera else dataclasses.replace(sc.camera, camera=config.fov.camera)
     return dataclasses.replace(sc, vehicle=vehicle, camera=camera), config
