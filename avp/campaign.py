@@ -138,6 +138,8 @@ class Runner:
         if "ground_z" not in planner_data.get("workspace", {}) and scenario.planner_ground_z is not None:
             config = dataclasses.replace(config, workspace=dataclasses.replace(
                 config.workspace, ground_z=scenario.planner_ground_z))
+        if "alpha_nominal" not in planner_data and scenario.alpha_nominal is not None:
+            config = dataclasses.replace(config, alpha_nominal=scenario.alpha_nominal)
         own_drag = "rotor_drag" in planner_data.get("limits", {})
         res = simulate(scenario, trial.mode, seed=trial.seed, config=config, replan=s.replan,
                        plan_drag=not own_drag)

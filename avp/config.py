@@ -677,8 +677,8 @@ class PlannerConfig:
             raise ConfigError(
                 "limits.thrust_max",
                 f"{hi:.2f} m/s^2 (thrust_max / mass) leaves no contact thrust of at least "
-                f"g cos(incline) = {want:.2f} m/s^2 for a {math.degrees(incline):.1f} deg pad; raise "
-                "the thrust limit or set config.alpha explicitly",
+                f"max(alpha_nominal, g cos(incline)) = {want:.2f} m/s^2 for a {math.degrees(incline):.1f} deg "
+                "pad; raise the thrust limit, lower config.alpha_nominal or set config.alpha explicitly",
             )
         return alpha
 

@@ -155,3 +155,24 @@ def test_runner_plans_above_the_simulated_ground_unless_configured() -> None:
     data = {"scenario": scenario, "planner": {"workspace": {"ground_z": -100.0}}}
     _, dived = campaign.Runner(data, keep_result=True)(trial)
     assert dived.outcome == "crash: ground", dived.outcome
+
+
+def test_the_scenarios_contact_thrust_reaches_the_campaigns_planner(monkeypatch) -> None:
+    """``[scenario] alpha_nominal`` is the planner's contact thrust in a campaign (as
+    ``simulate``'s own configuration takes it), unless ``[planner]`` sets it."""
+    import avp.sim.run
+
+    seen: list[float] = []
+
+    def fake_simulate(scenario, mode, *, seed, config, replan, plan_drag):
+        seen.append(config.contact_alpha(scenario.incline))
+        raise RuntimeError("stop")  # only the configuration is under test
+
+    monkeypatch.setattr(avp.sim.run, "simulate", fake_simulate)
+    trial = TRIALS[0]
+    for data, want in (({"scenario": {"alpha_nominal": 6.0}}, 6.0),
+                       ({"scenario": {"alpha_nominal": 6.0}, "planner": {"alpha_nominal": 5.0}}, 5.0),
+                       ({}, 4.0)):
+        with pytest.raises(RuntimeError, match="stop"):
+            campaign.Runner(data)(trial)
+        assert seen[-1] == want

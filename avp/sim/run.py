@@ -244,7 +244,9 @@ class SimScenario:
     alpha_nominal:
         The contact thrust on steep pads the user-side configuration asks of the planner
         (``PlannerConfig.alpha_nominal``, m/s^2) when :func:`simulate` builds the planner's
-        configuration; ``None``: the planner's default (4, the paper's). ``SimConfig`` flies 6.
+        configuration (and the campaign runner's, unless its ``[planner]`` table sets it); a
+        ``config`` passed to :func:`simulate` is used as given. ``None``: the planner's default
+        (4, the paper's). ``SimConfig`` flies 6.
     replan_rate_hz:
         Rate of :meth:`Replanner.step` calls in AVP mode.
     timeout:
