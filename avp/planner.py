@@ -24,7 +24,7 @@ from .errors import (
     SolverError,
     WorkspaceNotCertifiedError,
 )
-from .frames import MAX_CONTACT_ROLL, contact_frame_error
+from .frames import MAX_CONTACT_ROLL, contact_frame_error, thrust_vector
 from .platform import MovingTarget
 from .qp.assemble import ConstraintBlock
 from .qp.layout import DecisionLayout, layout_for
@@ -387,7 +387,7 @@ def _measured(traj: Trajectory, target: PerchTarget, cfg: PlannerConfig) -> str:
     tilt rate is ``|b3'| = |P j| / |f|`` (``P = I - b3 b3^T``, ``f = a + g e3``), which equals
     the roll-pitch part ``|(w_x, w_y)|`` of the body rates (22) without the attitude."""
     d = traj.derivatives(traj.sample(1e-3), (2, 3))
-    f = d[0, :, :3] + np.array([0.0, 0.0, traj.g])
+    f = thrust_vector(d[0, :, :3], traj.g)
     f_norm = np.linalg.norm(f, axis=1)
     b3 = f / f_norm[:, None]
     j = d[1, :, :3]

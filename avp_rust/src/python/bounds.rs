@@ -11,7 +11,7 @@ use pyo3::prelude::*;
 
 use crate::error::guarded;
 
-use super::common::{contiguous, kernel_err, spline_view, to_py_err};
+use super::common::{contiguous, kernel_err, matrix, spline_view, to_py_err};
 use crate::bounds::{self, BoundKind, Limits, ALL_BOUNDS};
 use crate::certify::{self, ExactMethod};
 use crate::descartes::Budget;
@@ -240,9 +240,7 @@ fn trackability_rows_py<'py>(
     let (rows, n, width) =
         guarded(|| trackability::trackability_rows(&view, snap_max, ratio_max, g))
             .map_err(to_py_err)?;
-    let arr = Array2::from_shape_vec((n, width), rows)
-        .map_err(|e| kernel_err("coeffs", format!("internal shape error: {e}")))?;
-    Ok(arr.into_pyarray(py))
+    matrix(py, n, width, rows)
 }
 
 pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {

@@ -2,7 +2,10 @@
 //! NumPy-array-to-slice helpers. The families (`spline`, `fov`, `bounds`, `regions`) import only
 //! from here, never from each other.
 use numpy::ndarray::Dimension;
-use numpy::{Element, PyReadonlyArray, PyReadonlyArray1, PyReadonlyArray3, PyUntypedArrayMethods};
+use numpy::{
+    Element, IntoPyArray, PyArray2, PyReadonlyArray, PyReadonlyArray1, PyReadonlyArray3,
+    PyUntypedArrayMethods,
+};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 
@@ -53,6 +56,18 @@ pub(crate) fn contiguous<'a, T: Element, D: Dimension>(
         return Err(bad());
     }
     arr.as_slice().map_err(|_| bad())
+}
+
+/// A kernel's row-major output `v` as a `(rows, cols)` NumPy array.
+pub(crate) fn matrix<'py>(
+    py: Python<'py>,
+    rows: usize,
+    cols: usize,
+    v: Vec<f64>,
+) -> PyResult<Bound<'py, PyArray2<f64>>> {
+    numpy::ndarray::Array2::from_shape_vec((rows, cols), v)
+        .map(|a| a.into_pyarray(py))
+        .map_err(|e| kernel_err("kernel", format!("internal shape error: {e}")))
 }
 
 /// Borrows a `(segments, axes, coeffs)` array and its knots as a validated [`SplineView`].

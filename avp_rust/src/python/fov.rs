@@ -7,7 +7,7 @@ use numpy::{
 };
 use pyo3::prelude::*;
 
-use super::common::{contiguous, kernel_err, to_py_err};
+use super::common::{contiguous, kernel_err, matrix, to_py_err};
 use crate::error::guarded;
 
 /// Rejects a 2-D array whose rows are not 3-vectors (a `(3m, 1)` array has the right length
@@ -58,15 +58,11 @@ fn fov_gradient_py<'py>(
     let dist: Vec<f64> = pts.iter().map(|p| p.distance).collect();
     let dx: Vec<f64> = pts.iter().flat_map(|p| p.d_x).collect();
     let da: Vec<f64> = pts.iter().flat_map(|p| p.d_a).collect();
-    let shape = |v: Vec<f64>| {
-        numpy::ndarray::Array2::from_shape_vec((m, 3), v)
-            .map_err(|e| kernel_err("kernel", format!("internal shape error: {e}")))
-    };
     Ok((
         h.into_pyarray(py),
-        shape(dx)?.into_pyarray(py),
+        matrix(py, m, 3, dx)?,
         dpsi.into_pyarray(py),
-        shape(da)?.into_pyarray(py),
+        matrix(py, m, 3, da)?,
         dist.into_pyarray(py),
     ))
 }
@@ -125,17 +121,13 @@ fn fov_linearise_py<'py>(
     let m = terms.len();
     let col = |f: fn(&crate::fov::FovRowTerms) -> f64| terms.iter().map(f).collect::<Vec<f64>>();
     let flag = |f: fn(&crate::fov::FovRowTerms) -> bool| terms.iter().map(f).collect::<Vec<bool>>();
-    let shape = |v: Vec<f64>| {
-        numpy::ndarray::Array2::from_shape_vec((m, 3), v)
-            .map_err(|e| kernel_err("kernel", format!("internal shape error: {e}")))
-    };
     let gx: Vec<f64> = terms.iter().flat_map(|t| t.gx).collect();
     let ga: Vec<f64> = terms.iter().flat_map(|t| t.ga).collect();
     Ok((
         col(|t| t.h0).into_pyarray(py),
         col(|t| t.reachable).into_pyarray(py),
-        shape(gx)?.into_pyarray(py),
-        shape(ga)?.into_pyarray(py),
+        matrix(py, m, 3, gx)?,
+        matrix(py, m, 3, ga)?,
         col(|t| t.gp).into_pyarray(py),
         col(|t| t.rhs).into_pyarray(py),
         flag(|t| t.placed).into_pyarray(py),
@@ -190,16 +182,11 @@ fn fov_row_matrices_py<'py>(
     })
     .map_err(to_py_err)?;
     let (k, n) = (segs.len(), 4 * n_segments * n_coeffs);
-    let shape = |rows: usize, v: Vec<f64>| {
-        numpy::ndarray::Array2::from_shape_vec((rows, n), v)
-            .map(|a| a.into_pyarray(py))
-            .map_err(|e| kernel_err("kernel", format!("internal shape error: {e}")))
-    };
     Ok((
-        shape(k, r8)?,
-        shape(3 * k, rx)?,
-        shape(3 * k, ra)?,
-        shape(k, ry)?,
+        matrix(py, k, n, r8)?,
+        matrix(py, 3 * k, n, rx)?,
+        matrix(py, 3 * k, n, ra)?,
+        matrix(py, k, n, ry)?,
     ))
 }
 

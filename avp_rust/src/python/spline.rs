@@ -6,7 +6,7 @@ use numpy::{
 };
 use pyo3::prelude::*;
 
-use super::common::{contiguous, kernel_err, spline_view, to_py_err};
+use super::common::{contiguous, kernel_err, matrix, spline_view, to_py_err};
 use crate::error::guarded;
 use crate::spline;
 
@@ -69,9 +69,7 @@ fn anticipate_py<'py>(
     let o = contiguous("odometry", &odometry)?;
     let out =
         guarded(|| crate::anticipation::anticipate(&view, o, t_rp, t_ex)).map_err(to_py_err)?;
-    let arr = numpy::ndarray::Array2::from_shape_vec((crate::anticipation::ORDERS, n_axes), out)
-        .map_err(|e| kernel_err("kernel", format!("internal shape error: {e}")))?;
-    Ok(arr.into_pyarray(py))
+    matrix(py, crate::anticipation::ORDERS, n_axes, out)
 }
 
 pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
