@@ -58,6 +58,14 @@ def finite_float(field: str, value: Any) -> float:
     return out
 
 
+def nonnegative_float(field: str, value: Any) -> float:
+    """``value`` as a finite float >= 0."""
+    out = finite_float(field, value)
+    if out < 0.0:
+        raise ConfigError(field, f"must be >= 0, got {out}")
+    return out
+
+
 def positive_float(field: str, value: Any, *, allow_inf: bool = False) -> float:
     """``value`` as a float > 0 (``inf`` allowed when ``allow_inf``, meaning "no limit")."""
     try:

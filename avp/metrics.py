@@ -45,6 +45,7 @@ def visibility(
     target: PerchTarget,
     camera: Camera | None = None,
     dt: float = 1e-3,
+    rotor_drag: float = 0.0,
 ) -> Visibility:
     """Fraction of time and of path length with the target point inside ``camera``'s FoV.
 
@@ -64,8 +65,11 @@ def visibility(
         :class:`~avp.camera.Camera` (default: front camera, 35 deg half-angle).
     dt:
         Sampling step (s).
+    rotor_drag:
+        Mass-normalised rotor drag ``d`` (1/s, :class:`~avp.config.VehicleLimits`): the attitude
+        is the one of the thrust ``a + g e3 + d v`` (0: the drag-free map (11)).
     """
-    return visibility_many((trajectory,), target, camera, dt)[0]
+    return visibility_many((trajectory,), target, camera, dt, rotor_drag)[0]
 
 
 def visibility_many(
@@ -73,6 +77,7 @@ def visibility_many(
     target: PerchTarget,
     camera: Camera | None = None,
     dt: float = 1e-3,
+    rotor_drag: float = 0.0,
 ) -> list[Visibility]:
     """:func:`visibility` of several plans in one pass.
 
@@ -82,15 +87,21 @@ def visibility_many(
     """
     cam = Camera() if camera is None else camera
     step = v.positive_float("dt", dt)
+    drag = v.nonnegative_float("rotor_drag", rotor_drag)
     if not trajectories:
         return []
     first = trajectories[0]
     if any(not np.array_equal(tr.knots, first.knots) or tr.g != first.g for tr in trajectories[1:]):
-        return [visibility_many((tr,), target, cam, step)[0] for tr in trajectories]
+        return [visibility_many((tr,), target, cam, step, drag)[0] for tr in trajectories]
     k = len(trajectories)
     t = first.sample(step)
     coeffs = first.coefficients if k == 1 else np.concatenate([tr.coefficients for tr in trajectories], axis=1)
-    ev = _avp_rust.eval_spline(coeffs, first.knots, t, [0, 2]).reshape(2, t.size, k, 4)
+    if drag:  # position and the thrust's a + d v (VehicleLimits.rotor_drag)
+        pva = _avp_rust.eval_spline(coeffs, first.knots, t, [0, 1, 2]).reshape(3, t.size, k, 4)
+        pva[2, :, :, :3] += drag * pva[1, :, :, :3]
+        ev = np.ascontiguousarray(pva[[0, 2]])
+    else:
+        ev = _avp_rust.eval_spline(coeffs, first.knots, t, [0, 2]).reshape(2, t.size, k, 4)
     if cam.horizontal_fov is None and cam.vertical_fov is None and not math.isfinite(cam.range) and t.size >= 2:
         # The cone (7) alone: h <= 0 with the Rust FoV kernel's own arithmetic (the same test as
         # Camera.sees; a degenerate attitude gives a NaN h: not seen), and the trapezoid sums,

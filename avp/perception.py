@@ -51,6 +51,8 @@ def linearise_on(
 
     The relative time ``t`` of the new plan (final time ``tf``) maps to the reference's
     ``t0_new + t (tf_ref - t0_new)/tf``: the same absolute time when both plans end together.
+    With ``cfg.limits.rotor_drag = d`` the attitude is the one of the thrust ``a + g e3 + d v``
+    (the rows' acceleration variable is ``a + d v``: :func:`~avp.qp.fov.fov_blocks`).
     """
     knots = qp.knots_rel
     tf = float(knots[-1])
@@ -60,9 +62,15 @@ def linearise_on(
                           target.point, cfg.fov, cfg.g)
     start = max(qp.t0, reference.t0)
     t_ref = np.clip(qp.t0 + times * (reference.tf - start) / tf, reference.t0, reference.tf)
-    d = reference.derivatives(t_ref, (0, 2))
-    return fov_blocks(qp.layout, knots, times, d[0, :, :3], d[0, :, 3], d[1, :, :3],
-                      target.point, cfg.fov, cfg.g)
+    drag = cfg.limits.rotor_drag
+    if drag:  # the attitude of the thrust a + g e3 + d v (VehicleLimits.rotor_drag)
+        d = reference.derivatives(t_ref, (0, 1, 2))
+        a0 = d[2, :, :3] + drag * d[1, :, :3]
+    else:
+        d = reference.derivatives(t_ref, (0, 2))
+        a0 = d[1, :, :3]
+    return fov_blocks(qp.layout, knots, times, d[0, :, :3], d[0, :, 3], a0,
+                      target.point, cfg.fov, cfg.g, rotor_drag=drag)
 
 
 def _fov_config(cfg: PlannerConfig) -> PlannerConfig:
@@ -74,7 +82,8 @@ def _fov_config(cfg: PlannerConfig) -> PlannerConfig:
 
 def _scores(trajs: tuple[Trajectory, ...], target: PerchTarget, cfg: PlannerConfig) -> list[float]:
     """Visibility time + path fraction of plans on the same knots, in one vectorised pass."""
-    vis = visibility_many(trajs, target, cfg.fov.camera, dt=trajs[0].duration / _SCORE_GRID)
+    vis = visibility_many(trajs, target, cfg.fov.camera, dt=trajs[0].duration / _SCORE_GRID,
+                          rotor_drag=cfg.limits.rotor_drag)
     return [v.time_fraction + v.path_fraction for v in vis]
 
 

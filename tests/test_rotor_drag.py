@@ -93,3 +93,96 @@ def test_bad_rotor_drag_is_a_typed_error():
     for bad in (-0.1, math.nan, math.inf):
         with pytest.raises(ConfigError, match="limits.rotor_drag"):
             avp.VehicleLimits(rotor_drag=bad)
+
+
+# -- the camera's attitude with drag: FoV rows (8)-(9) and the visibility score -------------------
+
+
+def _off_axis_cosine(x, psi, acc, s, camera, g=9.81, scale=None):
+    """cos(half_fov) - cos(angle between the optical axis and the target): h/|n_d| of (7),
+    from the attitude of the thrust acc + g e3 (sampled geometry, not the FoV kernel); with
+    ``scale``, h divided by that distance instead (the rows divide by |n_d| at z0)."""
+    R = avp.frames.attitude(acc, psi, g)
+    axis = camera.axis(R)
+    n = s - x
+    dist = float(np.linalg.norm(n))
+    return (math.cos(camera.half_fov) * dist - float(axis @ n)) / (dist if scale is None else scale)
+
+
+@pytest.mark.parametrize("drag", [0.2, 0.45])
+def test_fov_rows_take_the_camera_attitude_of_the_drag_aware_thrust(drag):
+    """With d the FoV rows are linearised in a + d v: at the linearisation point they equal the
+    off-axis cosine of the thrust a + g e3 + d v's attitude, and along a small step of the
+    decision vector they predict it to second order (a basis without d b1 would be off to first
+    order in the velocity change)."""
+    from avp.perception import linearise_on
+    from avp.qp.assemble import build_perching_qp
+
+    cfg = _config(drag, fov=avp.FovConfig(point_policy=avp.FovPointPolicy.KEEP))
+    state = avp.State.hover([0.0, 0.0, 1.0])
+    target = avp.PerchTarget.from_incline([4.0, 0.0, 1.0], math.pi / 2)
+    ref = avp.plan_detailed(state, target, dataclasses.replace(cfg, fov=avp.FovConfig(enabled=False)))
+    qp = build_perching_qp(state, target, cfg, ref.durations)
+    lin = linearise_on(qp, ref.trajectory, target, cfg)
+    rows = lin.blocks[0]
+    assert rows.name == "fov rows (8)" and lin.placed.sum() >= 6  # the last point: at the pad
+    cam = cfg.fov.camera
+    t_abs = state.time + lin.times[lin.placed]
+
+    dist0 = np.linalg.norm(target.point - ref.trajectory.derivatives(t_abs, (0,))[0, :, :3], axis=1)
+
+    def h_true(traj):
+        d = traj.derivatives(t_abs, (0, 1, 2))
+        return np.array([_off_axis_cosine(d[0, i, :3], d[0, i, 3], d[2, i, :3] + drag * d[1, i, :3],
+                                          target.point, cam, scale=dist0[i]) for i in range(t_abs.size)])
+
+    c0 = ref.qp.c_hat
+    h0 = h_true(ref.trajectory)
+    np.testing.assert_allclose(rows.matrix @ c0 - rows.upper, h0, atol=1e-9)
+    d = ref.trajectory.derivatives(t_abs, (0, 2))
+    drag_free = np.array([_off_axis_cosine(d[0, i, :3], d[0, i, 3], d[1, i, :3], target.point, cam)
+                          for i in range(t_abs.size)])
+    assert np.max(np.abs(drag_free - h0)) > 1e-3  # the drag moves the camera: the test can tell
+    # the same points and a0 = a + d v, but a basis without d b1 (the rows of a drag-free model)
+    from avp.qp.fov import fov_blocks
+
+    dd = ref.trajectory.derivatives(state.time + lin.times, (0, 1, 2))
+    wrong = fov_blocks(qp.layout, qp.knots_rel, lin.times, dd[0, :, :3], dd[0, :, 3],
+                       dd[2, :, :3] + drag * dd[1, :, :3], target.point, cfg.fov, cfg.g).blocks[0]
+    rng = np.random.default_rng(int(100 * drag))
+    dc = rng.normal(size=c0.size)
+    dc *= np.linalg.norm(c0) / np.linalg.norm(dc)
+
+    def errors(block):
+        out = []
+        for eps in (2e-3, 1e-3, 5e-4):
+            c = c0 + eps * dc
+            out.append(np.max(np.abs(block.matrix @ c - block.upper - h_true(qp.trajectory(c, cfg.g)))))
+        return out
+
+    right, bad = errors(rows), errors(wrong)
+    assert right[1] / right[2] > 3.0 and right[0] / right[1] > 3.0  # second order: halving eps quarters it
+    assert bad[2] > 10 * right[2] and bad[1] / bad[2] < 2.5  # first order without d b1
+
+
+def test_visibility_with_drag_uses_the_drag_aware_attitude():
+    """visibility(..., rotor_drag=d) counts the samples whose thrust a + g e3 + d v's attitude
+    sees the pad (dense sampling against Camera.sees), and differs from the drag-free score on a
+    plan that runs the pad near the edge of the cone."""
+    from avp.metrics import visibility
+
+    state = avp.State.hover([0.0, 0.0, 1.0])
+    target = avp.PerchTarget.from_incline([6.0, 0.0, 1.0], math.pi / 2)
+    tr = avp.plan(state, target, avp.PlannerConfig(fov=avp.FovConfig(enabled=False)))
+    cam = avp.Camera()
+    for drag in (0.0, 0.3, 0.6):
+        v = visibility(tr, target, cam, dt=1e-3, rotor_drag=drag)
+        t = tr.sample(1e-3)
+        d = tr.derivatives(t, (0, 1, 2))
+        R = avp.frames.attitude(d[2, :, :3] + drag * d[1, :, :3], d[0, :, 3])
+        seen = cam.sees(d[0, :, :3], R, target.point).astype(float)
+        want = float(np.sum(0.5 * (seen[1:] + seen[:-1]) * np.diff(t)) / (t[-1] - t[0]))
+        assert v.time_fraction == pytest.approx(want, abs=1e-9)
+    assert visibility(tr, target, cam, rotor_drag=0.6).time_fraction != visibility(tr, target, cam).time_fraction
+    with pytest.raises(ConfigError, match="rotor_drag"):
+        visibility(tr, target, cam, rotor_drag=-0.1)

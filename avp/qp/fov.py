@@ -129,6 +129,7 @@ class FovRowInputs:
     a0: Array  # (k, 3)
     psi0: Array  # (k,)
     fov: FovConfig
+    rotor_drag: float = 0.0  # 1/s: the rows' acceleration variable is a + d v (fov_blocks)
 
 
 def fov_rows(inp: FovRowInputs) -> tuple[ConstraintBlock, ...]:
@@ -148,6 +149,8 @@ def fov_rows(inp: FovRowInputs) -> tuple[ConstraintBlock, ...]:
     T = inp.knots_rel[seg + 1] - inp.knots_rel[seg]
     p0 = layout.basis(0, u)  # (k, C) position basis
     p2 = layout.basis(2, u) / (T**2)[:, None]  # (k, C) acceleration basis
+    if inp.rotor_drag:  # the basis of a + d v (fov_blocks)
+        p2 = p2 + inp.rotor_drag * layout.basis(1, u) / T[:, None]
     row8, Rx, Ra, Ryaw = _avp_rust.fov_row_matrices(
         layout.n_segments, np.ascontiguousarray(seg, dtype=np.int64), np.ascontiguousarray(p0), np.ascontiguousarray(p2),
         np.ascontiguousarray(inp.gx), np.ascontiguousarray(inp.ga), np.ascontiguousarray(inp.gp),
@@ -205,6 +208,7 @@ def fov_blocks(
     target_point: Array,
     fov: FovConfig,
     g: float = GRAVITY,
+    rotor_drag: float = 0.0,
 ) -> FovLinearisation:
     """FoV rows (8) and box trust region (9) linearised at ``(x0, psi0, a0)`` at ``times``.
 
@@ -221,6 +225,11 @@ def fov_blocks(
         ``s`` (W).
     fov:
         :class:`~avp.camera.FovConfig` (trust region, policy, camera).
+    rotor_drag:
+        Mass-normalised rotor drag ``d`` (1/s, :class:`~avp.config.VehicleLimits`). With drag the
+        thrust axis is ``b3 || a + g e3 + d v`` (Faessler et al.), so the attitude (11), (13) and
+        the rows are taken in ``a + d v``: ``a0`` is that sum at the points, the rows' acceleration
+        columns carry ``b2 + d b1`` and the trust region (9) in ``a`` bounds it. 0: ``a`` alone.
 
     Returns
     -------
@@ -248,10 +257,10 @@ def fov_blocks(
     # the rows themselves are built by fov_rows, on first access to the blocks
     knots = np.array(knots_rel, dtype=float)
     if placed.all():  # every point placed: the arrays as they are
-        rows = FovRowInputs(layout, knots, t, gx, ga, gp, rhs, x0, a0, psi0, fov)
+        rows = FovRowInputs(layout, knots, t, gx, ga, gp, rhs, x0, a0, psi0, fov, float(rotor_drag))
     else:
         rows = FovRowInputs(layout, knots, t[placed], gx[placed], ga[placed], gp[placed], rhs[placed],
-                            x0[placed], a0[placed], psi0[placed], fov)
+                            x0[placed], a0[placed], psi0[placed], fov, float(rotor_drag))
     for arr in (t, h0, reachable, placed, progress):
         arr.setflags(write=False)
     return FovLinearisation(t, h0, reachable, placed, progress, hold, rows)
