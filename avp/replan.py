@@ -34,6 +34,7 @@ inside planning): the :class:`ReplanStep` says what happened.
 
 from __future__ import annotations
 
+import itertools
 import time
 from dataclasses import dataclass, replace
 from enum import Enum
@@ -284,7 +285,7 @@ class Replanner:
         committed = self.trajectory
         assert committed is not None
         rc = self.replan
-        t_ex = t + self.latency
+        t_ex = self._switch_time(committed, t + self.latency)
         remaining = committed.tf - t_ex
         shift, turn = self._change(self.committed_target, self.target)
         budget = 0.5 * rc.reach_acceleration * max(remaining, 0.0) ** 2
@@ -338,7 +339,7 @@ class Replanner:
         for k, frac in enumerate(order):
             f = frac * f_max
             goal = _blend(self.committed_target, self.target, f) if f < 1.0 else self.target
-            durations = np.full(self.config.n_segments, self._retimed(remaining, goal) / self.config.n_segments)
+            durations = self._durations(committed, t_ex, self._retimed(remaining, goal))
             result, elapsed, error = self._plan(start, goal, durations, committed, self._replan_config)
             elapsed_total += elapsed
             n_solves += 1
@@ -366,6 +367,43 @@ class Replanner:
             return commit(*smallest)
         return record(ReplanAction.KEPT_PREVIOUS, last_reason, anticipated=start, result=last_result,
                       solve_time=elapsed_total, anchored=anchored, n_solves=n_solves)
+
+    def _durations(self, committed: Trajectory, t_ex: float, total: float) -> Array:
+        """Segment durations of a replan from ``t_ex``, summing to ``total``.
+
+        With ``replan.keep_knots``: the committed plan's own knots after ``t_ex`` (see
+        :meth:`_switch_time`), the longest piece halved until there are ``n_segments``, scaled to
+        ``total``. The committed plan's remainder is then a spline of the new layout, and since
+        the anchored start fixes position to jerk it is the replan's optimum for the committed
+        target (up to the FoV rows): a small correction changes the plan, and its certificates,
+        a little. Off: ``n_segments`` equal pieces.
+        """
+        n = self.config.n_segments
+        if not self.replan.keep_knots:
+            return np.full(n, total / n)
+        knots = committed.knots
+        inner = knots[(knots > t_ex) & (knots < committed.tf)]
+        pieces = list(np.diff(np.concatenate(([t_ex], inner, [committed.tf]))))
+        while len(pieces) < n:
+            i = int(np.argmax(pieces))
+            pieces[i:i + 1] = [0.5 * pieces[i], 0.5 * pieces[i]]
+        while len(pieces) > n:  # a committed plan with more segments: merge the shortest pair
+            i = int(np.argmin([a + b for a, b in itertools.pairwise(pieces)]))
+            pieces[i:i + 2] = [pieces[i] + pieces[i + 1]]
+        out = np.asarray(pieces, dtype=float)
+        return out * (total / float(out.sum()))
+
+    def _switch_time(self, committed: Trajectory, t_ex: float) -> float:
+        """``t_ex``, or with ``replan.keep_knots`` the committed plan's next knot when it comes
+        within ``keep_knots_min`` of an equal share of the time left: a first segment that short
+        would be ill-conditioned, and merging it into the next loses the knot (the committed
+        remainder is then no longer a spline of the new layout). The switch only comes later."""
+        if not self.replan.keep_knots:
+            return t_ex
+        reach = self.replan.keep_knots_min * (committed.tf - t_ex) / self.config.n_segments
+        knots = committed.knots
+        near = knots[(knots > t_ex) & (knots <= t_ex + reach) & (knots < committed.tf)]
+        return float(near[0]) if near.size else t_ex
 
     def _retimed(self, remaining: float, goal: PerchTarget) -> float:
         """Time left after moving the contact time with the normal part of the correction."""

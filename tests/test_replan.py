@@ -239,6 +239,63 @@ def test_a_deadline_commits_the_certified_smallest_correction(monkeypatch):
     assert s.action is ReplanAction.PARTIAL and s.fraction == pytest.approx(0.125) and s.n_solves == 3
 
 
+def _replan_to_committed_target(keep_knots: bool, t: float):
+    """A replanner without FoV rows after its first plan, tracking it perfectly; at ``t`` one
+    planning call to the committed target from the anchored start at the switch time."""
+    cfg = dataclasses.replace(sim_config(), fov=avp.FovConfig(enabled=False))
+    rp = Replanner(WALL, cfg, ReplanConfig(keep_knots=keep_knots))
+    rp.step(0.0, START)
+    committed = rp.trajectory
+    t_ex = rp._switch_time(committed, t + rp.latency)
+    start = avp.replan._plan_state(committed, t_ex)
+    durations = rp._durations(committed, t_ex, committed.tf - t_ex)
+    result, _, error = rp._plan(start, rp.committed_target, durations, committed, rp._replan_config)
+    assert error is None and result.ok
+    ts = np.linspace(t_ex, committed.tf, 400)
+    gap = np.max(np.abs(result.trajectory.derivatives(ts, (0,))[0] - committed.derivatives(ts, (0,))[0]))
+    return committed, result.trajectory, t_ex, gap
+
+
+def test_a_replan_on_the_committed_knots_stays_on_the_committed_plan():
+    """keep_knots: the committed remainder is a spline of the replan's layout, so a replan to the
+    committed target (no correction) stays within 0.5 mm of the committed plan; on equal pieces
+    it moves by about a centimetre. (Not exactly on it: inside a segment the committed polynomial
+    was also shaped by the part already flown.)"""
+    committed, same, t_ex, gap = _replan_to_committed_target(True, 0.3)
+    assert set(np.round(committed.knots[committed.knots > t_ex], 9)) <= set(np.round(same.knots, 9))
+    assert gap < 5e-4
+    *_, gap_equal = _replan_to_committed_target(False, 0.3)
+    assert gap_equal > 5e-3
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.lists(st.floats(0.01, 2.0), min_size=1, max_size=6), st.floats(0.0, 1.0), st.integers(1, 5),
+       st.floats(0.5, 1.5))
+def test_replan_durations_keep_every_committed_knot(pieces, where, n, stretch):
+    """Any committed layout, switch time and segment count: n positive durations summing to the
+    requested total, every committed knot after the switch time kept (scaled with the total),
+    and no first piece shorter than keep_knots_min of an equal share unless nothing follows."""
+    knots = np.concatenate([[0.0], np.cumsum(pieces)])
+    committed = Trajectory(np.zeros((len(pieces), 4, 8)), knots)
+    rp = Replanner.__new__(Replanner)
+    rp.replan = ReplanConfig()
+    rp.config = dataclasses.replace(avp.PlannerConfig(), n_segments=n)
+    t = float(knots[-1]) * where * 0.999
+    t_ex = rp._switch_time(committed, t)
+    assert t <= t_ex < knots[-1]
+    remaining = knots[-1] - t_ex
+    total = remaining * stretch
+    d = rp._durations(committed, t_ex, total)
+    assert d.shape == (n,) and np.all(d > 0) and math.isclose(float(d.sum()), total, rel_tol=1e-12)
+    after = knots[(knots > t_ex) & (knots < knots[-1])]
+    if after.size < n:  # all of them fit: each is a boundary of the new layout
+        bounds = t_ex + np.cumsum(d) / stretch
+        for k in after:
+            assert np.min(np.abs(bounds - k)) < 1e-9 * (1 + k)
+    if t_ex == t and after.size:  # not moved: the first piece is long enough
+        assert after[0] - t_ex > rp.replan.keep_knots_min * remaining / n
+
+
 def test_reach_budget_limits_how_far_one_step_moves_the_contact_point():
     rc = ReplanConfig(reach_acceleration=1.0)
     rp = Replanner(WALL, sim_config(), rc)
@@ -252,6 +309,9 @@ def test_reach_budget_limits_how_far_one_step_moves_the_contact_point():
 
 
 def test_replan_config_rejects_bad_knobs():
+    for bad in (-0.1, 1.0, float("nan")):
+        with pytest.raises(avp.ConfigError, match="replan.keep_knots_min"):
+            ReplanConfig(keep_knots_min=bad)
     with pytest.raises(avp.ConfigError, match="replan.partial_fractions"):
         ReplanConfig(partial_fractions=(1.0, 1.5))
     with pytest.raises(avp.ConfigError, match="strictly decreasing"):
