@@ -787,13 +787,15 @@ class ReplanConfig:
         replan to the committed target 0.3 s into a wall perch stays within 0.2 mm of the
         committed plan where equal pieces move it by 1 cm (inside a segment the part already
         flown also shaped the committed polynomial, so it is not exact: 8 mm both ways at
-        0.9 s), and a small correction no longer fails the trackability
-        certificate only because the layout changed (on rotorpy's wall a replan to the same
-        target peaked at 46-48 1/s^2 against the committed 44.1, over ``snap_thrust_max``, so no
-        correction could be committed in the last 0.8 s). Measured with the drag-aware FoV rows
-        (``VehicleLimits.rotor_drag``), AVP on the wall: rotorpy 45 / 60 at 4.5 m and 46 / 60 at
-        7.5 m (seeds 0-59) against 43 / 60 each before both changes; avp's model 91 / 100 at both
-        distances against 90 / 92 (docs/simulation.md).
+        0.9 s), and a small correction no longer fails the trackability certificate only
+        because the layout changed (on rotorpy's wall a replan to the same target peaked at
+        46-48 1/s^2 against the committed 44.1, over ``snap_thrust_max``). Off by default: it
+        gained a few perches everywhere, each within noise (rotorpy's wall, seeds 0-19, with the
+        drag-aware FoV rows: 16 / 13 of 20 at 4.5 / 7.5 m against 14 / 12; avp's model, seeds
+        0-99: 91 / 91 against 90 / 92; ``benchmarks/bench_replan.py --seeds 28``: 143 of 168
+        against 140), but every replan then has its own duration ratios, so the elimination
+        cache misses and a solving step costs 2.42 instead of 1.51 ms (median; p99 of all steps
+        4.29 against 3.57 ms, 70 steps over 5 ms against 39).
     keep_knots_min:
         With ``keep_knots``: when the committed plan's next knot comes within this share of an
         equal segment (``(t_f - t_ex) / n_segments``) after ``t_ex``, the switch to the new plan
@@ -821,7 +823,7 @@ class ReplanConfig:
     retime_normal: bool = False
     retime_fraction: float = 0.3
     allow_relaxed: bool = False
-    keep_knots: bool = True
+    keep_knots: bool = False
     keep_knots_min: float = 0.05
 
     def __post_init__(self) -> None:

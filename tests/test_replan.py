@@ -278,7 +278,7 @@ def test_replan_durations_keep_every_committed_knot(pieces, where, n, stretch):
     knots = np.concatenate([[0.0], np.cumsum(pieces)])
     committed = Trajectory(np.zeros((len(pieces), 4, 8)), knots)
     rp = Replanner.__new__(Replanner)
-    rp.replan = ReplanConfig()
+    rp.replan = ReplanConfig(keep_knots=True)
     rp.config = dataclasses.replace(avp.PlannerConfig(), n_segments=n)
     t = float(knots[-1]) * where * 0.999
     t_ex = rp._switch_time(committed, t)
@@ -435,3 +435,14 @@ def test_wilson_interval_matches_the_closed_form():
     lo, hi = wilson_interval(90, 100)
     assert lo == pytest.approx(0.8256, abs=1e-4) and hi == pytest.approx(0.9448, abs=1e-4)
     assert wilson_interval(0, 10)[0] == 0.0 and wilson_interval(10, 10)[1] == pytest.approx(1.0)
+
+
+def test_without_keep_knots_a_replan_splits_the_time_left_equally():
+    """The default layout: n_segments equal pieces of the time left, the switch at t_ex."""
+    knots = np.array([0.0, 0.4, 1.3, 2.0])
+    committed = Trajectory(np.zeros((3, 4, 8)), knots)
+    rp = Replanner.__new__(Replanner)
+    rp.replan = ReplanConfig()
+    rp.config = avp.PlannerConfig()
+    assert rp._switch_time(committed, 0.39) == 0.39
+    np.testing.assert_array_equal(rp._durations(committed, 0.39, 1.61), np.full(3, 1.61 / 3))
