@@ -78,8 +78,8 @@ class VehicleLimits:
     ``a`` (on a wall with a 2 m/s slide and ``d = 0.29 /s`` the drag-free condition leaves the
     thrust 8 deg off the normal). The FoV rows (8)-(9) and the visibility score that accepts an
     SQP step take the camera's attitude from the same thrust (:func:`avp.qp.fov.fov_blocks`; on
-    rotorpy's wall the drag-free attitude put the pad 6-8 deg outside the camera's cone for a
-    second of the approach). The bound certificates and
+    rotorpy's wall the drag turned the camera by 5-7 deg, which put the pad up to 3 deg outside
+    the 35 deg cone for a second of the approach). The bound certificates and
     :class:`~avp.trajectory.Trajectory`'s attitude keep the drag-free flatness map (11): along
     the path the true attitude differs by up to ``atan(d |v| / |a + g e3|)``.
     """
@@ -441,6 +441,8 @@ class FovConfig:
         Half-widths of the trust region (9) around the linearisation point: 0.05 m, 0.2 m/s^2,
         0.1 rad. The paper writes 2-norms; we impose a **box** (per component), the natural linear
         form: it contains the paper's ball and is at most ``sqrt(3)`` wider along a diagonal.
+        With ``VehicleLimits.rotor_drag = d`` the acceleration box is on ``a + d v``, the
+        variable the rows are linearised in (:func:`avp.qp.fov.fov_blocks`).
     gate:
         Window before contact (s) without FoV rows. The final pitch-up turns a front camera away
         from a steep pad, so rows there make the QP infeasible (docs/perception.md measures it).
@@ -783,25 +785,28 @@ class ReplanConfig:
     keep_knots:
         Lay a replan's segments on the committed plan's own knots after ``t_ex`` (the longest
         piece halved until there are ``n_segments``) instead of ``n_segments`` equal pieces of
-        the time left. The committed remainder is then a spline of the replan's layout: a
-        replan to the committed target 0.3 s into a wall perch stays within 0.2 mm of the
-        committed plan where equal pieces move it by 1 cm (inside a segment the part already
-        flown also shaped the committed polynomial, so it is not exact: 8 mm both ways at
-        0.9 s), and a small correction no longer fails the trackability certificate only
-        because the layout changed (on rotorpy's wall a replan to the same target peaked at
-        46-48 1/s^2 against the committed 44.1, over ``snap_thrust_max``). Off by default: it
-        gained a few perches everywhere, each within noise (rotorpy's wall, seeds 0-19, with the
-        drag-aware FoV rows: 16 / 13 of 20 at 4.5 / 7.5 m against 14 / 12; avp's model, seeds
-        0-99: 91 / 91 against 90 / 92; ``benchmarks/bench_replan.py --seeds 28``: 143 of 168
-        against 140), but every replan then has its own duration ratios, so the elimination
-        cache misses and a solving step costs 2.42 instead of 1.51 ms (median; p99 of all steps
-        4.29 against 3.57 ms, 70 steps over 5 ms against 39).
+        the time left (a static pad only: :class:`~avp.moving.MovingReplanner` and
+        :class:`~avp.line_replan.LineReplanner` use the total alone). The committed remainder
+        is then a spline of the replan's layout: a replan to the committed target 0.3 s into a
+        wall perch stays within 0.2 mm of the committed plan where equal pieces move it by 1 cm,
+        and a small correction no longer fails the trackability certificate only because the
+        layout moved (on rotorpy's wall a replan to the same target peaked at 46-48 1/s^2
+        against the committed 44.1, over the limit in force, 45). Not where a piece is halved:
+        continuity stops at snap, so the halves may leave the committed polynomial (8 mm at
+        0.9 s, as with equal pieces; 0.9 mm without the halving). Off by default: its gain was
+        within noise (rotorpy's wall, seeds 0-59, with the drag-aware FoV rows: 45 / 46 of 60
+        at 4.5 / 7.5 m against 42 / 42; avp's model, seeds 0-99: 91 / 91 against 90 / 92, one
+        fewer at 7.5 m; ``benchmarks/bench_replan.py --seeds 28``: 143 of 168 against 140), and
+        every replan then has its own duration ratios, so the elimination cache misses and a
+        solving step costs 2.42 instead of 1.51 ms (median; p99 of all steps 4.29 against
+        3.57 ms, 70 steps over 5 ms against 39).
     keep_knots_min:
         With ``keep_knots``: when the committed plan's next knot comes within this share of an
         equal segment (``(t_f - t_ex) / n_segments``) after ``t_ex``, the switch to the new plan
-        moves to that knot instead. A shorter first segment would be ill-conditioned, and merging
-        it into the next loses the knot (measured: 44.1 -> 45.4 1/s^2 for a replan to the same
-        target). 0.05: at most 5 % of a segment (a few ms near contact) later than ``t_ex``.
+        moves to that knot instead. A shorter first segment would be ill-conditioned (first
+        pieces of 2-20 ms before a 0.4-0.8 s one made the QP infeasible), and merging it into the
+        next loses the knot (measured: 44.1 -> 45.4 1/s^2 for a replan to the same target).
+        0.05: at most 5 % of a segment (a few ms near contact) later than ``t_ex``; at most 0.5.
     """
 
     latency: float = 0.02
@@ -841,8 +846,10 @@ class ReplanConfig:
         v.positive_float("replan.reach_acceleration", self.reach_acceleration, allow_inf=True)
         v.positive_float("replan.reach_tolerance", self.reach_tolerance)
         kmin = v.finite_float("replan.keep_knots_min", self.keep_knots_min)
-        if not 0.0 <= kmin < 1.0:
-            raise ConfigError("replan.keep_knots_min", f"must be in [0, 1) (a share of an equal segment), got {kmin}")
+        if not 0.0 < kmin <= 0.5:
+            raise ConfigError("replan.keep_knots_min",
+                              f"must be in (0, 0.5] (a share of an equal segment; 0 lets a first segment of a few ms "
+                              f"make the QP infeasible), got {kmin}")
         v.positive_float("replan.snap_max", self.snap_max, allow_inf=True)
         v.positive_float("replan.snap_thrust_max", self.snap_thrust_max, allow_inf=True)
         fr = tuple(float(f) for f in self.partial_fractions)

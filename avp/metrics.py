@@ -11,6 +11,7 @@ import numpy as np
 from . import _avp_rust, frames
 from . import _validate as v
 from .camera import Camera
+from .errors import ConfigError
 from .trajectory import Trajectory
 from .types import PerchTarget
 
@@ -45,6 +46,7 @@ def visibility(
     target: PerchTarget,
     camera: Camera | None = None,
     dt: float = 1e-3,
+    *,
     rotor_drag: float = 0.0,
 ) -> Visibility:
     """Fraction of time and of path length with the target point inside ``camera``'s FoV.
@@ -66,10 +68,11 @@ def visibility(
     dt:
         Sampling step (s).
     rotor_drag:
-        Mass-normalised rotor drag ``d`` (1/s, :class:`~avp.config.VehicleLimits`): the attitude
-        is the one of the thrust ``a + g e3 + d v`` (0: the drag-free map (11)).
+        Mass-normalised rotor drag ``d`` (1/s): the attitude is the one of the thrust
+        ``a + g e3 + d v`` (0: the drag-free map (11)). Pass the planner's
+        ``config.limits.rotor_drag`` to get the figures its SQP step scores.
     """
-    return visibility_many((trajectory,), target, camera, dt, rotor_drag)[0]
+    return visibility_many((trajectory,), target, camera, dt, rotor_drag=rotor_drag)[0]
 
 
 def visibility_many(
@@ -77,6 +80,7 @@ def visibility_many(
     target: PerchTarget,
     camera: Camera | None = None,
     dt: float = 1e-3,
+    *,
     rotor_drag: float = 0.0,
 ) -> list[Visibility]:
     """:func:`visibility` of several plans in one pass.
@@ -87,12 +91,14 @@ def visibility_many(
     """
     cam = Camera() if camera is None else camera
     step = v.positive_float("dt", dt)
-    drag = v.nonnegative_float("rotor_drag", rotor_drag)
+    if isinstance(rotor_drag, bool):
+        raise ConfigError("limits.rotor_drag", f"expected a drag in 1/s, got {rotor_drag!r}")
+    drag = v.nonnegative_float("limits.rotor_drag", rotor_drag)
     if not trajectories:
         return []
     first = trajectories[0]
     if any(not np.array_equal(tr.knots, first.knots) or tr.g != first.g for tr in trajectories[1:]):
-        return [visibility_many((tr,), target, cam, step, drag)[0] for tr in trajectories]
+        return [visibility_many((tr,), target, cam, step, rotor_drag=drag)[0] for tr in trajectories]
     k = len(trajectories)
     t = first.sample(step)
     coeffs = first.coefficients if k == 1 else np.concatenate([tr.coefficients for tr in trajectories], axis=1)

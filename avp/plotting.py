@@ -22,6 +22,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from . import frames
+
 if TYPE_CHECKING:  # pragma: no cover
     from .trajectory import Trajectory
     from .types import PerchTarget
@@ -145,11 +147,15 @@ def figure_plan(
     d = traj.derivatives(t, (0, 1, 2, 3))
     p = d[0, :, :3]
     R = traj.attitude(t)
+    if cfg.limits.rotor_drag:  # the camera's attitude is the drag-aware thrust's (VehicleLimits.rotor_drag)
+        R_cam = frames.attitude(d[2, :, :3] + cfg.limits.rotor_drag * d[1, :, :3], d[0, :, 3], traj.g)
+    else:
+        R_cam = R
     thrust = traj.thrust(t)
     w = traj.body_rates(t)
     tilt_rate = np.hypot(w[:, 0], w[:, 1])
     body_rate = np.linalg.norm(w, axis=1)
-    visible = cfg.fov.camera.sees(p, R, target.point)
+    visible = cfg.fov.camera.sees(p, R_cam, target.point)
     lim = cfg.limits
 
     fig = plt.figure(figsize=(15, 9), layout="constrained")

@@ -373,13 +373,16 @@ class Replanner:
 
         With ``replan.keep_knots``: the committed plan's own knots after ``t_ex`` (see
         :meth:`_switch_time`), the longest piece halved until there are ``n_segments``, scaled to
-        ``total``. The committed plan's remainder is then a spline of the new layout, and since
-        the anchored start fixes position to jerk it is the replan's optimum for the committed
-        target (up to the FoV rows): a small correction changes the plan, and its certificates,
-        a little. Off: ``n_segments`` equal pieces.
+        ``total``. The committed plan's remainder is then a spline of the new layout, so a replan
+        to the committed target can return it and a small correction changes the plan, and its
+        certificates, a little. Not exactly where a piece was halved: continuity stops at snap,
+        so the halves may leave the committed polynomial (measured 8 mm at 0.9 s into a wall
+        perch, against 0.9 mm without the halving); nor after a retiming (``retime_normal``
+        rescales every piece). Off, or for a replanner with its own target model (only the
+        total matters there): ``n_segments`` equal pieces.
         """
         n = self.config.n_segments
-        if not self.replan.keep_knots:
+        if not (self.replan.keep_knots and self._static_pad):
             return np.full(n, total / n)
         knots = committed.knots
         inner = knots[(knots > t_ex) & (knots < committed.tf)]
@@ -397,13 +400,18 @@ class Replanner:
         """``t_ex``, or with ``replan.keep_knots`` the committed plan's next knot when it comes
         within ``keep_knots_min`` of an equal share of the time left: a first segment that short
         would be ill-conditioned, and merging it into the next loses the knot (the committed
-        remainder is then no longer a spline of the new layout). The switch only comes later."""
-        if not self.replan.keep_knots:
+        remainder is then no longer a spline of the new layout). The switch only comes later.
+        Not when the layout merges pieces anyway (more pieces left than ``n_segments``) or does
+        not use the knots (:meth:`_durations`)."""
+        if not (self.replan.keep_knots and self._static_pad):
             return t_ex
-        reach = self.replan.keep_knots_min * (committed.tf - t_ex) / self.config.n_segments
+        n = self.config.n_segments
         knots = committed.knots
-        near = knots[(knots > t_ex) & (knots <= t_ex + reach) & (knots < committed.tf)]
-        return float(near[0]) if near.size else t_ex
+        inner = knots[(knots > t_ex) & (knots < committed.tf)]
+        if inner.size + 1 > n:
+            return t_ex
+        reach = self.replan.keep_knots_min * (committed.tf - t_ex) / n
+        return float(inner[0]) if inner.size and inner[0] <= t_ex + reach else t_ex
 
     def _retimed(self, remaining: float, goal: PerchTarget) -> float:
         """Time left after moving the contact time with the normal part of the correction."""

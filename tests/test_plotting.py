@@ -147,3 +147,26 @@ def test_closed_loop_run_animates(tmp_path: Path) -> None:
     with Image.open(out) as im:
         duration = run.path_t[-1] - run.path_t[0]
         assert im.format == "GIF" and im.n_frames == int(duration / 0.5 * 4) + 1
+
+
+def test_plot_in_view_uses_the_drag_aware_camera():
+    """With VehicleLimits.rotor_drag the figure's "in view" share is the visibility of the
+    drag-aware attitude (the planner's own score), not the drag-free one."""
+    import re
+
+    from avp.metrics import visibility
+
+    cfg = avp.PlannerConfig()
+    cfg = dataclasses.replace(cfg, limits=dataclasses.replace(cfg.limits, rotor_drag=0.35))
+    target = avp.PerchTarget.from_incline([6.0, 0.0, 1.5], math.pi / 2)
+    result = avp.plan_detailed(avp.State.hover([0.0, 0.0, 1.5]), target, cfg)
+
+    def share(config):
+        text = figure_plan(result, target, config=config)._suptitle.get_text()
+        return int(re.search(r"in view (\d+)% of the time", text).group(1))
+
+    with_drag = visibility(result.trajectory, target, cfg.fov.camera, rotor_drag=0.35).time_fraction
+    without = visibility(result.trajectory, target, cfg.fov.camera).time_fraction
+    assert abs(with_drag - without) > 0.05  # the case tells them apart
+    assert abs(share(cfg) - 100 * with_drag) <= 1.0
+    assert abs(share(avp.PlannerConfig()) - 100 * without) <= 1.0

@@ -259,10 +259,11 @@ def _replan_to_committed_target(keep_knots: bool, t: float):
 def test_a_replan_on_the_committed_knots_stays_on_the_committed_plan():
     """keep_knots: the committed remainder is a spline of the replan's layout, so a replan to the
     committed target (no correction) stays within 0.5 mm of the committed plan; on equal pieces
-    it moves by about a centimetre. (Not exactly on it: inside a segment the committed polynomial
-    was also shaped by the part already flown.)"""
+    it moves by about a centimetre. (Not where a piece is halved to make up the segments:
+    continuity stops at snap, so the halves may leave the committed polynomial.)"""
     committed, same, t_ex, gap = _replan_to_committed_target(True, 0.3)
-    assert set(np.round(committed.knots[committed.knots > t_ex], 9)) <= set(np.round(same.knots, 9))
+    for k in committed.knots[committed.knots > t_ex]:
+        assert np.min(np.abs(same.knots - k)) < 1e-9
     assert gap < 5e-4
     *_, gap_equal = _replan_to_committed_target(False, 0.3)
     assert gap_equal > 5e-3
@@ -274,7 +275,7 @@ def test_a_replan_on_the_committed_knots_stays_on_the_committed_plan():
 def test_replan_durations_keep_every_committed_knot(pieces, where, n, stretch):
     """Any committed layout, switch time and segment count: n positive durations summing to the
     requested total, every committed knot after the switch time kept (scaled with the total),
-    and no first piece shorter than keep_knots_min of an equal share unless nothing follows."""
+    and, unless pieces are merged, no first piece shorter than keep_knots_min of an equal share."""
     knots = np.concatenate([[0.0], np.cumsum(pieces)])
     committed = Trajectory(np.zeros((len(pieces), 4, 8)), knots)
     rp = Replanner.__new__(Replanner)
@@ -292,7 +293,7 @@ def test_replan_durations_keep_every_committed_knot(pieces, where, n, stretch):
         bounds = t_ex + np.cumsum(d) / stretch
         for k in after:
             assert np.min(np.abs(bounds - k)) < 1e-9 * (1 + k)
-    if t_ex == t and after.size:  # not moved: the first piece is long enough
+    if t_ex == t and 0 < after.size < n:  # not moved (and not merged): the first piece is long enough
         assert after[0] - t_ex > rp.replan.keep_knots_min * remaining / n
 
 
@@ -309,7 +310,7 @@ def test_reach_budget_limits_how_far_one_step_moves_the_contact_point():
 
 
 def test_replan_config_rejects_bad_knobs():
-    for bad in (-0.1, 1.0, float("nan")):
+    for bad in (-0.1, 0.0, 0.6, float("nan")):
         with pytest.raises(avp.ConfigError, match="replan.keep_knots_min"):
             ReplanConfig(keep_knots_min=bad)
     with pytest.raises(avp.ConfigError, match="replan.partial_fractions"):

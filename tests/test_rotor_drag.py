@@ -139,6 +139,11 @@ def test_fov_rows_take_the_camera_attitude_of_the_drag_aware_thrust(drag):
     c0 = ref.qp.c_hat
     h0 = h_true(ref.trajectory)
     np.testing.assert_allclose(rows.matrix @ c0 - rows.upper, h0, atol=1e-9)
+    # the trust region (9) in a bounds a + d v: centred on it at the reference
+    d1 = ref.trajectory.derivatives(t_abs, (1, 2))
+    box = next(b for b in lin.blocks if b.name == "fov trust region (9) a")
+    np.testing.assert_allclose(box.matrix @ c0, (d1[1, :, :3] + drag * d1[0, :, :3]).reshape(-1), atol=1e-9)
+    np.testing.assert_allclose(0.5 * (box.lower + box.upper), box.matrix @ c0, atol=1e-9)
     d = ref.trajectory.derivatives(t_abs, (0, 2))
     drag_free = np.array([_off_axis_cosine(d[0, i, :3], d[0, i, 3], d[1, i, :3], target.point, cam)
                           for i in range(t_abs.size)])
@@ -169,7 +174,7 @@ def test_visibility_with_drag_uses_the_drag_aware_attitude():
     """visibility(..., rotor_drag=d) counts the samples whose thrust a + g e3 + d v's attitude
     sees the pad (dense sampling against Camera.sees), and differs from the drag-free score on a
     plan that runs the pad near the edge of the cone."""
-    from avp.metrics import visibility
+    from avp.metrics import visibility, visibility_many
 
     state = avp.State.hover([0.0, 0.0, 1.0])
     target = avp.PerchTarget.from_incline([6.0, 0.0, 1.0], math.pi / 2)
@@ -181,8 +186,19 @@ def test_visibility_with_drag_uses_the_drag_aware_attitude():
         d = tr.derivatives(t, (0, 1, 2))
         R = avp.frames.attitude(d[2, :, :3] + drag * d[1, :, :3], d[0, :, 3])
         seen = cam.sees(d[0, :, :3], R, target.point).astype(float)
-        want = float(np.sum(0.5 * (seen[1:] + seen[:-1]) * np.diff(t)) / (t[-1] - t[0]))
+        w = 0.5 * (seen[1:] + seen[:-1])
+        want = float(np.sum(w * np.diff(t)) / (t[-1] - t[0]))
+        chords = np.linalg.norm(np.diff(d[0, :, :3], axis=0), axis=1)
         assert v.time_fraction == pytest.approx(want, abs=1e-9)
+        assert v.path_fraction == pytest.approx(float(w @ chords / chords.sum()), abs=1e-9)
+        lost = np.flatnonzero(seen[:-1] < 0.5)
+        assert v.first_loss == (None if lost.size == 0 else pytest.approx(float(t[lost[0]])))
     assert visibility(tr, target, cam, rotor_drag=0.6).time_fraction != visibility(tr, target, cam).time_fraction
+    # several plans in one pass (the SQP's score) equal one at a time
+    other = avp.plan(state, avp.PerchTarget.from_incline([6.0, 0.5, 1.2], math.pi / 2),
+                     avp.PlannerConfig(fov=avp.FovConfig(enabled=False)))
+    other = avp.Trajectory(other.coefficients, tr.knots) if other.n_segments == tr.n_segments else tr
+    many = visibility_many((tr, other), target, cam, dt=1e-2, rotor_drag=0.4)
+    assert many == [visibility(x, target, cam, dt=1e-2, rotor_drag=0.4) for x in (tr, other)]
     with pytest.raises(ConfigError, match="rotor_drag"):
         visibility(tr, target, cam, rotor_drag=-0.1)

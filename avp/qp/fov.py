@@ -24,6 +24,7 @@ import numpy as np
 import numpy.typing as npt
 
 from .. import _avp_rust
+from .. import _validate as v
 from .._typing import Array
 from ..camera import Camera
 from ..config import FovConfig
@@ -237,6 +238,7 @@ def fov_blocks(
         Blocks ``"fov rows (8)"`` and ``"fov trust region (9) x|a|yaw"``.
     """
     t = np.array(times, dtype=float)  # a copy: it is returned read-only
+    drag = v.nonnegative_float("limits.rotor_drag", rotor_drag)
     m = t.size
     empty = np.zeros(0)
     if m == 0:
@@ -257,10 +259,10 @@ def fov_blocks(
     # the rows themselves are built by fov_rows, on first access to the blocks
     knots = np.array(knots_rel, dtype=float)
     if placed.all():  # every point placed: the arrays as they are
-        rows = FovRowInputs(layout, knots, t, gx, ga, gp, rhs, x0, a0, psi0, fov, float(rotor_drag))
+        rows = FovRowInputs(layout, knots, t, gx, ga, gp, rhs, x0, a0, psi0, fov, drag)
     else:
         rows = FovRowInputs(layout, knots, t[placed], gx[placed], ga[placed], gp[placed], rhs[placed],
-                            x0[placed], a0[placed], psi0[placed], fov, float(rotor_drag))
+                            x0[placed], a0[placed], psi0[placed], fov, drag)
     for arr in (t, h0, reachable, placed, progress):
         arr.setflags(write=False)
     return FovLinearisation(t, h0, reachable, placed, progress, hold, rows)
