@@ -59,7 +59,9 @@ def finite_float(field: str, value: Any) -> float:
 
 
 def nonnegative_float(field: str, value: Any) -> float:
-    """``value`` as a finite float >= 0."""
+    """``value`` as a finite float >= 0 (a bool is refused: it is not a quantity)."""
+    if isinstance(value, bool):
+        raise ConfigError(field, f"expected a number, got {value!r}")
     out = finite_float(field, value)
     if out < 0.0:
         raise ConfigError(field, f"must be >= 0, got {out}")

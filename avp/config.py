@@ -78,7 +78,7 @@ class VehicleLimits:
     ``a`` (on a wall with a 2 m/s slide and ``d = 0.29 /s`` the drag-free condition leaves the
     thrust 8 deg off the normal). The FoV rows (8)-(9) and the visibility score that accepts an
     SQP step take the camera's attitude from the same thrust (:func:`avp.qp.fov.fov_blocks`; on
-    rotorpy's wall the drag turned the camera by 5-7 deg, which put the pad up to 3 deg outside
+    rotorpy's wall the drag turned the camera by 4-8 deg, which put the pad up to 3 deg outside
     the 35 deg cone for a second of the approach). The bound certificates and
     :class:`~avp.trajectory.Trajectory`'s attitude keep the drag-free flatness map (11): along
     the path the true attitude differs by up to ``atan(d |v| / |a + g e3|)``.
@@ -94,7 +94,7 @@ class VehicleLimits:
 
     def __post_init__(self) -> None:
         v.positive_float("limits.mass", self.mass)
-        if not (math.isfinite(self.rotor_drag) and self.rotor_drag >= 0.0):
+        if isinstance(self.rotor_drag, bool) or not (math.isfinite(self.rotor_drag) and self.rotor_drag >= 0.0):
             raise ConfigError("limits.rotor_drag", f"must be finite and >= 0 1/s, got {self.rotor_drag}")
         if not (math.isfinite(self.thrust_min) and self.thrust_min >= 0.0):
             raise ConfigError("limits.thrust_min", f"must be finite and >= 0 N, got {self.thrust_min}")

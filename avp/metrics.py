@@ -11,7 +11,6 @@ import numpy as np
 from . import _avp_rust, frames
 from . import _validate as v
 from .camera import Camera
-from .errors import ConfigError
 from .trajectory import Trajectory
 from .types import PerchTarget
 
@@ -91,8 +90,6 @@ def visibility_many(
     """
     cam = Camera() if camera is None else camera
     step = v.positive_float("dt", dt)
-    if isinstance(rotor_drag, bool):
-        raise ConfigError("limits.rotor_drag", f"expected a drag in 1/s, got {rotor_drag!r}")
     drag = v.nonnegative_float("limits.rotor_drag", rotor_drag)
     if not trajectories:
         return []

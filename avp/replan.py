@@ -401,15 +401,12 @@ class Replanner:
         within ``keep_knots_min`` of an equal share of the time left: a first segment that short
         would be ill-conditioned, and merging it into the next loses the knot (the committed
         remainder is then no longer a spline of the new layout). The switch only comes later.
-        Not when the layout merges pieces anyway (more pieces left than ``n_segments``) or does
-        not use the knots (:meth:`_durations`)."""
+        Not when the layout does not use the knots (:meth:`_durations`)."""
         if not (self.replan.keep_knots and self._static_pad):
             return t_ex
         n = self.config.n_segments
         knots = committed.knots
         inner = knots[(knots > t_ex) & (knots < committed.tf)]
-        if inner.size + 1 > n:
-            return t_ex
         reach = self.replan.keep_knots_min * (committed.tf - t_ex) / n
         return float(inner[0]) if inner.size and inner[0] <= t_ex + reach else t_ex
 

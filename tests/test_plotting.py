@@ -162,7 +162,9 @@ def test_plot_in_view_uses_the_drag_aware_camera():
     result = avp.plan_detailed(avp.State.hover([0.0, 0.0, 1.5]), target, cfg)
 
     def share(config):
-        text = figure_plan(result, target, config=config)._suptitle.get_text()
+        fig = figure_plan(result, target, config=config)
+        text = fig._suptitle.get_text()
+        pyplot().close(fig)
         return int(re.search(r"in view (\d+)% of the time", text).group(1))
 
     with_drag = visibility(result.trajectory, target, cfg.fov.camera, rotor_drag=0.35).time_fraction

@@ -275,7 +275,7 @@ def test_a_replan_on_the_committed_knots_stays_on_the_committed_plan():
 def test_replan_durations_keep_every_committed_knot(pieces, where, n, stretch):
     """Any committed layout, switch time and segment count: n positive durations summing to the
     requested total, every committed knot after the switch time kept (scaled with the total),
-    and, unless pieces are merged, no first piece shorter than keep_knots_min of an equal share."""
+    and no first piece shorter than keep_knots_min of an equal share before the next knot."""
     knots = np.concatenate([[0.0], np.cumsum(pieces)])
     committed = Trajectory(np.zeros((len(pieces), 4, 8)), knots)
     rp = Replanner.__new__(Replanner)
@@ -293,7 +293,7 @@ def test_replan_durations_keep_every_committed_knot(pieces, where, n, stretch):
         bounds = t_ex + np.cumsum(d) / stretch
         for k in after:
             assert np.min(np.abs(bounds - k)) < 1e-9 * (1 + k)
-    if t_ex == t and 0 < after.size < n:  # not moved (and not merged): the first piece is long enough
+    if t_ex == t and after.size:  # not moved: the first piece is long enough
         assert after[0] - t_ex > rp.replan.keep_knots_min * remaining / n
 
 
@@ -447,3 +447,16 @@ def test_without_keep_knots_a_replan_splits_the_time_left_equally():
     rp.config = avp.PlannerConfig()
     assert rp._switch_time(committed, 0.39) == 0.39
     np.testing.assert_array_equal(rp._durations(committed, 0.39, 1.61), np.full(3, 1.61 / 3))
+
+
+def test_keep_knots_waits_for_a_near_knot_even_when_pieces_are_merged():
+    """A committed plan with more pieces left than n_segments (a plan handed in by the user):
+    the switch still waits for a knot 1 ms away, so no 1 ms first segment is laid out."""
+    knots = np.array([0.0, 1.0, 1.3, 1.4, 1.5])
+    committed = Trajectory(np.zeros((4, 4, 8)), knots)
+    rp = Replanner.__new__(Replanner)
+    rp.replan = ReplanConfig(keep_knots=True)
+    rp.config = avp.PlannerConfig()
+    t_ex = rp._switch_time(committed, 0.999)
+    assert t_ex == 1.0
+    np.testing.assert_allclose(rp._durations(committed, t_ex, 0.5), [0.3, 0.1, 0.1])

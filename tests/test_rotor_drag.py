@@ -202,3 +202,14 @@ def test_visibility_with_drag_uses_the_drag_aware_attitude():
     assert many == [visibility(x, target, cam, dt=1e-2, rotor_drag=0.4) for x in (tr, other)]
     with pytest.raises(ConfigError, match="rotor_drag"):
         visibility(tr, target, cam, rotor_drag=-0.1)
+
+
+def test_a_bool_is_not_a_drag():
+    with pytest.raises(ConfigError, match="limits.rotor_drag"):
+        avp.VehicleLimits(rotor_drag=True)
+    from avp.metrics import visibility
+
+    target = avp.PerchTarget.from_incline([4.0, 0.0, 1.5], math.pi / 2)
+    tr = avp.plan(avp.State.hover([0.0, 0.0, 1.5]), target, avp.PlannerConfig(fov=avp.FovConfig(enabled=False)))
+    with pytest.raises(ConfigError, match="limits.rotor_drag"):
+        visibility(tr, target, rotor_drag=True)
