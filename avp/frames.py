@@ -23,6 +23,7 @@ __all__ = [
     "body_rates",
     "contact_yaw",
     "cross",
+    "drag_acceleration",
     "expm_so3",
     "hat",
     "project_so3",
@@ -44,6 +45,14 @@ def thrust_vector(acc: npt.ArrayLike, g: float = GRAVITY) -> Array:
     """Mass-normalised thrust vector ``f = a + g e3`` (m/s^2), from (1)."""
     a = np.asarray(acc, dtype=float)
     return a + g * E3
+
+
+def drag_acceleration(acc: Array, vel: Array, rotor_drag: float) -> Array:
+    """``a + d v``: the acceleration whose flatness map (11), (13) gives the attitude of a vehicle
+    with mass-normalised rotor drag ``d`` (:class:`avp.VehicleLimits` ``rotor_drag``; after
+    Faessler, Franchi and Scaramuzza, the thrust axis is ``b3 || a + g e3 + d v``). Shapes
+    ``(..., 3)``."""
+    return acc + rotor_drag * vel
 
 
 def thrust_magnitude(acc: npt.ArrayLike, g: float = GRAVITY) -> Array:

@@ -101,7 +101,7 @@ def visibility_many(
     coeffs = first.coefficients if k == 1 else np.concatenate([tr.coefficients for tr in trajectories], axis=1)
     if drag:  # position and the thrust's a + d v (VehicleLimits.rotor_drag)
         pva = _avp_rust.eval_spline(coeffs, first.knots, t, [0, 1, 2]).reshape(3, t.size, k, 4)
-        pva[2, :, :, :3] += drag * pva[1, :, :, :3]
+        pva[2, :, :, :3] = frames.drag_acceleration(pva[2, :, :, :3], pva[1, :, :, :3], drag)
         ev = np.ascontiguousarray(pva[[0, 2]])
     else:
         ev = _avp_rust.eval_spline(coeffs, first.knots, t, [0, 2]).reshape(2, t.size, k, 4)

@@ -21,6 +21,7 @@ import numpy as np
 
 from ._typing import Array
 from .config import PlannerConfig
+from .frames import drag_acceleration
 from .metrics import visibility_many
 from .qp.assemble import ConstraintBlock, PerchingQp
 from .qp.fov import FovLinearisation, fov_blocks, fov_times
@@ -65,7 +66,7 @@ def linearise_on(
     drag = cfg.limits.rotor_drag
     if drag:  # the attitude of the thrust a + g e3 + d v (VehicleLimits.rotor_drag)
         d = reference.derivatives(t_ref, (0, 1, 2))
-        a0 = d[2, :, :3] + drag * d[1, :, :3]
+        a0 = drag_acceleration(d[2, :, :3], d[1, :, :3], drag)
     else:
         d = reference.derivatives(t_ref, (0, 2))
         a0 = d[1, :, :3]

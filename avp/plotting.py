@@ -148,7 +148,8 @@ def figure_plan(
     p = d[0, :, :3]
     R = traj.attitude(t)
     if cfg.limits.rotor_drag:  # the camera's attitude is the drag-aware thrust's (VehicleLimits.rotor_drag)
-        R_cam = frames.attitude(d[2, :, :3] + cfg.limits.rotor_drag * d[1, :, :3], d[0, :, 3], traj.g)
+        R_cam = frames.attitude(frames.drag_acceleration(d[2, :, :3], d[1, :, :3], cfg.limits.rotor_drag),
+                                d[0, :, 3], traj.g)
     else:
         R_cam = R
     thrust = traj.thrust(t)

@@ -143,6 +143,12 @@ def _plan_state(plan: Trajectory, t: float) -> State:
                  yaw=float(d[0, 3]), yaw_rate=float(d[1, 3]), time=float(t))
 
 
+def _knots_after(plan: Trajectory, t: float) -> Array:
+    """The plan's interior knots after ``t`` (its contact time excluded)."""
+    knots = plan.knots
+    return knots[(knots > t) & (knots < plan.tf)]
+
+
 def _blend(a: PerchTarget, b: PerchTarget, f: float) -> PerchTarget:
     """The target a fraction ``f`` of the way from ``a`` to ``b`` (point and frame)."""
     if f >= 1.0:
@@ -384,9 +390,7 @@ class Replanner:
         n = self.config.n_segments
         if not (self.replan.keep_knots and self._static_pad):
             return np.full(n, total / n)
-        knots = committed.knots
-        inner = knots[(knots > t_ex) & (knots < committed.tf)]
-        pieces = list(np.diff(np.concatenate(([t_ex], inner, [committed.tf]))))
+        pieces = list(np.diff(np.concatenate(([t_ex], _knots_after(committed, t_ex), [committed.tf]))))
         while len(pieces) < n:
             i = int(np.argmax(pieces))
             pieces[i:i + 1] = [0.5 * pieces[i], 0.5 * pieces[i]]
@@ -405,8 +409,7 @@ class Replanner:
         if not (self.replan.keep_knots and self._static_pad):
             return t_ex
         n = self.config.n_segments
-        knots = committed.knots
-        inner = knots[(knots > t_ex) & (knots < committed.tf)]
+        inner = _knots_after(committed, t_ex)
         reach = self.replan.keep_knots_min * (committed.tf - t_ex) / n
         return float(inner[0]) if inner.size and inner[0] <= t_ex + reach else t_ex
 
