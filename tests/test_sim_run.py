@@ -31,13 +31,18 @@ def test_noise_free_single_plan_is_tracked_to_contact():
     assert r.visible[0] and not r.visible[-1]  # sees the pad at hover, loses it in the pitch-up
 
 
-def test_motor_lag_costs_centimetres_along_the_slide():
+def test_motor_lag_costs_centimetres_along_the_slide_unless_the_thrust_leads():
     ideal = simulate(WALL_45.ideal(), Mode.ONE_SHOT, seed=0)
-    lagged = simulate(WALL_45.without_noise(), Mode.ONE_SHOT, seed=0)  # 20 ms motor lag, mixer
-    assert lagged.scenario.vehicle.motor_time_constant == 0.02
-    # the lag delays the slide (2 m/s along s1) by about one time constant: ~4 cm, not mm
+    sc = WALL_45.without_noise()  # 20 ms motor lag, mixer
+    assert sc.vehicle.motor_time_constant == 0.02 and sc.gains.lag_feedforward
+    led = simulate(sc, Mode.ONE_SHOT, seed=0)
+    lagged = simulate(dataclasses.replace(sc, gains=dataclasses.replace(sc.gains, lag_feedforward=False)),
+                      Mode.ONE_SHOT, seed=0)
+    # unled, the lag delays the slide (2 m/s along s1) by about one time constant: ~4 cm, not mm
     assert 0.01 < abs(lagged.contact.p_S[0]) < 0.08 and abs(ideal.contact.p_S[0]) < 0.02
-    assert lagged.success  # still inside the 10 cm / 3 cm / 10 deg criterion at t_f
+    # the thrust lead (ControllerGains.lag_feedforward) gives the contact of instant rotors back
+    assert abs(led.contact.p_S[0]) < 0.005
+    assert lagged.success and led.success  # inside the 10 cm / 3 cm / 10 deg criterion at t_f
 
 
 def test_seeded_runs_are_deterministic():

@@ -377,6 +377,10 @@ class SimConfig:
         Feed the back-end's rotor drag forward in the controller (rotorpy's:
         :func:`~avp.sim.backend.rotorpy_gains`; avp's model has none). False:
         ``ControllerGains(rotor_drag=(0, 0, 0))``.
+    lag_feedforward:
+        Lead the controller's collective thrust by the rotors' lag
+        (``ControllerGains.lag_feedforward``, :func:`~avp.sim.controller.thrust_lead`). False:
+        the controller without it (before 2026-12; docs/simulation.md compares).
     """
 
     n_trials: int = 100
@@ -408,6 +412,7 @@ class SimConfig:
     alpha_nominal: float | None = 6.0
     backend: str = "avp"
     drag_feedforward: bool = True
+    lag_feedforward: bool = True
 
     def __post_init__(self) -> None:
         Backend.parse(self.backend, "sim.backend")
@@ -441,7 +446,8 @@ class SimConfig:
             drift_p=float(self.odometry_drift), rate_hz=float(self.odometry_rate_hz))
         vehicle = VehicleParams(motor_time_constant=float(self.motor_time_constant), mixer=bool(self.mixer))
         backend = Backend.parse(self.backend, "sim.backend")
-        gains = ControllerGains(rotor_drag=None if self.drag_feedforward else (0.0, 0.0, 0.0))
+        gains = ControllerGains(rotor_drag=None if self.drag_feedforward else (0.0, 0.0, 0.0),
+                                lag_feedforward=bool(self.lag_feedforward))
         return SimScenario(incline=math.radians(incline_deg), distance=float(distance), camera=cam, backend=backend,
                            gains=gains,
                            odometry=odo, vehicle=vehicle, initial_frames=int(self.initial_frames),
