@@ -380,7 +380,7 @@ class SimConfig:
     lag_feedforward:
         Lead the controller's collective thrust by the rotors' lag
         (``ControllerGains.lag_feedforward``, :func:`~avp.sim.controller.thrust_lead`). False:
-        the controller without it (before 2026-12; docs/simulation.md compares).
+        the controller without it (docs/simulation.md, "The rotors' lag fed forward", compares).
     """
 
     n_trials: int = 100
