@@ -5,7 +5,8 @@ realistic SimConfig and its perfect-estimate variant: success with Wilson 95 % i
 
 Without rotorpy (``pip install "avp[rotorpy]"``) only avp's back-end runs. The rotorpy back-end
 feeds rotorpy's rotor drag forward in avp's controller (``SimConfig.drag_feedforward``);
-``--no-drag-feedforward`` flies it without. Long (rotorpy: ~2-4 s per trial on one core); not
+``--no-drag-feedforward`` flies it without; ``--no-lag-feedforward`` flies the controller without
+its thrust lead on either back-end (``SimConfig.lag_feedforward``). Long (rotorpy: ~2-4 s per trial on one core); not
 part of the test suite.
 """
 
@@ -30,13 +31,15 @@ def main() -> None:
     ap.add_argument("--distances", type=float, nargs="+", default=[4.5])
     ap.add_argument("--backends", nargs="+", default=["avp", "rotorpy"], choices=["avp", "rotorpy"])
     ap.add_argument("--no-drag-feedforward", action="store_true", help="rotorpy without the drag feed-forward")
+    ap.add_argument("--no-lag-feedforward", action="store_true", help="the controller without its thrust lead")
     args = ap.parse_args()
     backends = [b for b in args.backends if b == "avp" or importlib.util.find_spec("rotorpy") is not None]
     if len(backends) < len(args.backends):
         print('rotorpy is not installed (pip install "avp[rotorpy]"): avp back-end only')
     warnings.filterwarnings("ignore")
     base = SimConfig(n_trials=args.trials, seed=args.seed, inclines_deg=tuple(args.inclines),
-                     distances=tuple(args.distances), drag_feedforward=not args.no_drag_feedforward)
+                     distances=tuple(args.distances), drag_feedforward=not args.no_drag_feedforward,
+                     lag_feedforward=not args.no_lag_feedforward)
     rows = []
     for backend in backends:
         for label, cfg in (("realistic", base), ("perfect", base.perfect_estimate())):

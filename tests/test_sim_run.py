@@ -6,6 +6,7 @@ import dataclasses
 import math
 
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from numpy.polynomial import polynomial as P
@@ -38,11 +39,28 @@ def test_motor_lag_costs_centimetres_along_the_slide_unless_the_thrust_leads():
     led = simulate(sc, Mode.ONE_SHOT, seed=0)
     lagged = simulate(dataclasses.replace(sc, gains=dataclasses.replace(sc.gains, lag_feedforward=False)),
                       Mode.ONE_SHOT, seed=0)
-    # unled, the lag delays the slide (2 m/s along s1) by about one time constant: ~4 cm, not mm
+    # unled, the lag delays the slide (2 m/s along s1) by about one time constant: cm (2.7), not mm
     assert 0.01 < abs(lagged.contact.p_S[0]) < 0.08 and abs(ideal.contact.p_S[0]) < 0.02
     # the thrust lead (ControllerGains.lag_feedforward) gives the contact of instant rotors back
     assert abs(led.contact.p_S[0]) < 0.005
     assert lagged.success and led.success  # inside the 10 cm / 3 cm / 10 deg criterion at t_f
+
+
+def test_no_thrust_lead_without_a_rotor_lag():
+    """avp's model lags its rotors only through the mixer: without it (or with instant rotors)
+    ``thrust_lead`` is 0 and the controller's thrust is the unled one, to the bit."""
+    from avp.sim.controller import ControllerGains, FlatReference, control, thrust_lead
+    from avp.sim.vehicle import RigidBodyState, VehicleParams
+
+    ref = FlatReference([0.0, 0.0, 1.0], [1.0, 0.0, 0.5], [2.0, 0.0, 1.0], [5.0, 1.0, 20.0], [0.0, 0.0, 0.0],
+                        0.0, 0.0, 0.0)
+    state = RigidBodyState([0.0, 0.0, 1.0], [1.0, 0.0, 0.5])
+    for veh in (VehicleParams(mixer=False), VehicleParams(motor_time_constant=0.0)):
+        assert thrust_lead(np.eye(3), ref, veh) == 0.0
+        led = control(state, ref, veh, ControllerGains(lag_feedforward=True))
+        assert led.thrust == control(state, ref, veh, ControllerGains(lag_feedforward=False)).thrust
+    veh = VehicleParams()
+    assert thrust_lead(np.eye(3), ref, veh) == pytest.approx(veh.motor_time_constant * veh.mass * 20.0)
 
 
 def test_seeded_runs_are_deterministic():

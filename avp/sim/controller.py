@@ -27,11 +27,13 @@ attitude lags the reference by roughly ``(k_W / k_R) |Omega|`` (the design notes
 to the commanded acceleration (:func:`drag_acceleration`).
 
 Rotor lag. With ``ControllerGains.lag_feedforward`` and a vehicle whose rotors lag
-(``VehicleParams.motor_time_constant = tau_m > 0``: rotor speeds through a first-order lag) the
-collective thrust is led by the reference's thrust rate, ``tau + tau_m m (j_d . R_WB e3)``
-(:func:`thrust_lead`; ``m j_d . b3`` is the rate of ``m |a_d + g e3|`` along the reference).
-A first-order lag ``T' = (T_cmd - T) / tau_m`` then delivers the reference's thrust, up to the
-rotors' limits. The moments are not led. Without the lead, a 20 ms lag left the vehicle 1.2 cm
+(``VehicleParams.motor_time_constant = tau_m > 0`` with the mixer: rotor speeds through a
+first-order lag) the collective thrust is led by the reference's thrust rate,
+``tau + tau_m m (j_d . R_WB e3)`` (:func:`thrust_lead`; ``m j_d . b3`` is the rate of
+``m |a_d + g e3|`` along the reference). For small changes a first-order lag of the rotor speeds
+is one of the thrust, ``T' = (T_cmd - T) / tau_m`` (``T = k_f w^2``; the neglected term
+``tau_m T'^2 / (4 T)`` is about 1 % of the lead on a wall perch), which then delivers the
+reference's thrust, up to the rotors' limits. The moments are not led. Without the lead, a 20 ms lag left the vehicle 1.2 cm
 above the reference in the final pitch-up on the wall at 4.5 m (avp's model, perfect estimate;
 0.06 cm with it) and lost perches on rotorpy (docs/simulation.md).
 """
@@ -187,9 +189,12 @@ def planar_drag(params: VehicleParams, rotor_drag: Any, accel: float) -> float:
 
 def thrust_lead(R: Array, ref: FlatReferenceLike, params: VehicleParams) -> float:
     """Thrust (N) that leads the collective by the rotors' first-order lag (module docstring):
-    ``tau_m m (j_d . R e3)`` with ``tau_m = params.motor_time_constant``; 0 without a lag."""
+    ``tau_m m (j_d . R e3)`` with ``tau_m = params.motor_time_constant``. 0 where
+    :class:`VehicleParams` has no lag: ``tau_m = 0``, or ``mixer=False`` (avp's model then
+    clips the collective without a rotor lag; rotorpy's ``cmd_ctbm`` lags its rotors all the
+    same, so with ``mixer=False`` rotorpy flies unled)."""
     tau_m = params.motor_time_constant
-    if tau_m <= 0.0:
+    if tau_m <= 0.0 or not params.mixer:
         return 0.0
     return float(tau_m * params.mass * (np.asarray(ref.jerk, dtype=float) @ R[:, 2]))
 
