@@ -551,10 +551,10 @@ class PlannerConfig:
         :data:`ALPHA_NOMINAL` (4, the paper's experiments) by default. A vehicle whose rotors lag
         or sit near their floor in the final pitch-up wants more: the moment a quadrotor can
         produce shrinks with its thrust, and the trackability limit of a replan scales with it
-        (``ReplanConfig.snap_thrust_max``). In the realistic simulator (20 ms motor lag; before the
-        controller's thrust lead) 6 raised AVP's perches on a wall at 7.5 m from 83 to 92 of 100 (and from 82 to 94 on 100 seeds
-        not used before); ``avp.sim`` flies 6 (``SimScenario.alpha_nominal``,
-        ``docs/simulation.md``).
+        (``ReplanConfig.snap_thrust_max``). In the realistic simulator (20 ms motor lag; before
+        the controller's thrust lead) 6 raised AVP's perches on a wall at 7.5 m from 83 to 92 of
+        100 (and from 82 to 94 on 100 seeds not used before); ``avp.sim`` flies 6
+        (``SimScenario.alpha_nominal``, ``docs/simulation.md``).
     alpha_range:
         If given, ``(lo, hi)``: the contact thrust is a decision variable in that range (the
         terminal acceleration is only required to be along ``s3``), as Gao et al., "Adaptive

@@ -6,8 +6,8 @@ realistic SimConfig and its perfect-estimate variant: success with Wilson 95 % i
 Without rotorpy (``pip install "avp[rotorpy]"``) only avp's back-end runs. The rotorpy back-end
 feeds rotorpy's rotor drag forward in avp's controller (``SimConfig.drag_feedforward``);
 ``--no-drag-feedforward`` flies it without; ``--no-lag-feedforward`` flies the controller without
-its thrust lead on either back-end (``SimConfig.lag_feedforward``). Long (rotorpy: ~2-4 s per trial on one core); not
-part of the test suite.
+its thrust lead on either back-end (``SimConfig.lag_feedforward``). Long (rotorpy: ~2-4 s per
+trial on one core); not part of the test suite.
 """
 
 from __future__ import annotations

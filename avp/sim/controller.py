@@ -33,9 +33,10 @@ first-order lag) the collective thrust is led by the reference's thrust rate,
 ``m |a_d + g e3|`` along the reference). For small changes a first-order lag of the rotor speeds
 is one of the thrust, ``T' = (T_cmd - T) / tau_m`` (``T = k_f w^2``; the neglected term
 ``tau_m T'^2 / (4 T)`` is about 1 % of the lead on a wall perch), which then delivers the
-reference's thrust, up to the rotors' limits. The moments are not led. Without the lead, a 20 ms lag left the vehicle 1.2 cm
-above the reference in the final pitch-up on the wall at 4.5 m (avp's model, perfect estimate;
-0.06 cm with it) and lost perches on rotorpy (docs/simulation.md).
+reference's thrust, up to the rotors' limits. The moments are not led. Without the lead, a
+20 ms lag left the vehicle 1.2 cm above the reference in the final pitch-up on the wall at
+4.5 m (avp's model, perfect estimate; 0.06 cm with it) and lost perches on rotorpy
+(docs/simulation.md).
 """
 
 from __future__ import annotations
