@@ -4,7 +4,7 @@ For a flat-output reference (position ``x_d`` and derivatives up to snap, yaw an
 derivatives) the controller computes::
 
     f_W   = m (-k_x e_x - k_v e_v + g e3 + a_d)                      force command in W
-    tau   = f_W . R_WB e3                                            (2), clipped to the limits
+    tau   = f_W . R_WB e3 (+ thrust_lead)                            (2), then clipped to the limits
     R_C   = attitude(f_W / m - g e3, yaw)                            (11), (13)
     e_R   = 1/2 vee(R_C^T R - R^T R_C),   e_W = omega_B - R^T R_C Omega_C
     M     = J(-k_R e_R - k_W e_W) + omega x J omega
@@ -30,10 +30,10 @@ Rotor lag. With ``ControllerGains.lag_feedforward`` and a vehicle whose rotors l
 (``VehicleParams.motor_time_constant = tau_m > 0`` with the mixer: rotor speeds through a
 first-order lag) the collective thrust is led by the reference's thrust rate,
 ``tau + tau_m m (j_d . R_WB e3)`` (:func:`thrust_lead`; ``m j_d . b3`` is the rate of
-``m |a_d + g e3|`` along the reference). For small changes a first-order lag of the rotor speeds
-is one of the thrust, ``T' = (T_cmd - T) / tau_m`` (``T = k_f w^2``; the neglected term
-``tau_m T'^2 / (4 T)`` is about 1 % of the lead on a wall perch), which then delivers the
-reference's thrust, up to the rotors' limits. The moments are not led. Without the lead, a
+``m |a_d + g e3|`` along the reference). For small changes a first-order lag on the rotor speeds
+(``T = k_f w^2``) acts as one on the thrust, ``T' = (T_cmd - T) / tau_m``, so commanding
+``T + tau_m T'`` delivers the reference's thrust up to the rotors' limits (the neglected command
+term ``tau_m^2 T'^2 / (4 T)`` is about 1 % of the lead on a wall perch). The moments are not led. Without the lead, a
 20 ms lag left the vehicle 1.2 cm above the reference in the final pitch-up on the wall at
 4.5 m (avp's model, perfect estimate; 0.06 cm with it) and lost perches on rotorpy
 (docs/simulation.md).

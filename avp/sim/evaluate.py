@@ -361,7 +361,8 @@ class SimConfig:
         Where the user-side code aims off the estimated pad centre (m): into the pad, and down the
         slope times ``sin(incline)`` (:class:`~avp.sim.run.SimScenario`). 1.5 cm and 7 cm: an
         early contact (a pad found too deep) slides up the slope, 6.7 cm per cm on a wall, and
-        the vehicle tracks about 1 cm short. Chosen on seeds 0-59 (wall, 4.5 / 7.5 m: 43 / 43 of
+        the vehicle tracked about 1 cm short before the controller's thrust lead (with the lead
+        the aim was checked again on seeds 200-259 and kept). Chosen on seeds 0-59 (wall, 4.5 / 7.5 m: 43 / 43 of
         60 with this aim, 32 / 32 at the estimate); on seeds 100-179, 47 / 55 of 80 against 33 / 37
         (docs/simulation.md). A user-side calibration, not a planner change; set both to 0 for a
         moving platform.
@@ -370,7 +371,7 @@ class SimConfig:
         (``PlannerConfig.alpha_nominal``, m/s^2; ``None``: the planner's 4). 6: with 20 ms of
         motor lag the rotors need room above their floor in the final pitch-up; on the wall at
         7.5 m AVP perched 92 / 100 with 6 against 83 / 100 with 4 (seeds 0-99), and 94 against 82
-        on seeds 100-199, not used to choose it (docs/simulation.md).
+        on seeds 100-199, not used to choose it (before the thrust lead; docs/simulation.md).
     backend:
         Simulator back-end (:class:`~avp.sim.backend.Backend` name): ``"avp"`` or ``"rotorpy"``.
     drag_feedforward:
