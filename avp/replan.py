@@ -388,7 +388,7 @@ class Replanner:
         total matters there): ``n_segments`` equal pieces.
         """
         n = self.config.n_segments
-        if not (self.replan.keep_knots and self._static_pad):
+        if not self._keeps_knots:
             return np.full(n, total / n)
         pieces = list(np.diff(np.concatenate(([t_ex], _knots_after(committed, t_ex), [committed.tf]))))
         while len(pieces) < n:
@@ -406,7 +406,7 @@ class Replanner:
         would be ill-conditioned, and merging it into the next loses the knot (the committed
         remainder is then no longer a spline of the new layout). The switch only comes later.
         Not when the layout does not use the knots (:meth:`_durations`)."""
-        if not (self.replan.keep_knots and self._static_pad):
+        if not self._keeps_knots:
             return t_ex
         n = self.config.n_segments
         inner = _knots_after(committed, t_ex)
@@ -464,6 +464,12 @@ class Replanner:
     def _can_hold(self) -> bool:
         """Whether an unchanged estimate with good tracking keeps the plan without a solve."""
         return self._static_pad
+
+    @property
+    def _keeps_knots(self) -> bool:
+        """Whether replans lay their segments on the committed knots (``replan.keep_knots``, a
+        static pad only: :meth:`_durations`, :meth:`_switch_time`)."""
+        return self.replan.keep_knots and self._static_pad
 
     @property
     def _static_pad(self) -> bool:
