@@ -19,7 +19,7 @@ the planner's rows (8) use the cone only, which is the paper's model).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import cached_property
 from typing import Any
 
@@ -98,6 +98,24 @@ class Camera:
         axis = np.ascontiguousarray(self.R_BC[:, 2])
         axis.setflags(write=False)
         return axis
+
+    def narrowed(self, margin: float) -> Camera | None:
+        """This camera with the cone the FoV rows (8) ask for with ``FovConfig.margin``.
+
+        The row ``h/|n_d| <= -margin``, ``h = cos(half_fov)|n_d| - n_d.e_c`` (7), reads
+        ``cos(angle) >= cos(half_fov) + margin`` for the angle between ``n_d`` and the optical
+        axis: a cone of half-angle ``acos(cos(half_fov) + margin)``. Mounting, image rectangle and
+        range are kept. ``self`` for ``margin = 0``; ``None`` when no direction meets the rows
+        (``cos(half_fov) + margin >= 1``)."""
+        m = v.finite_float("fov.margin", margin)
+        if m < 0.0:
+            raise ConfigError("fov.margin", f"must be >= 0, got {m}")
+        if m == 0.0:
+            return self
+        c = math.cos(self.half_fov) + m
+        if c >= 1.0:
+            return None
+        return replace(self, half_fov=math.acos(c))
 
     def axis(self, R_WB: npt.ArrayLike) -> Array:
         """Optical axis ``e_c = R_WB R_BC e3`` in W; ``R_WB`` of shape ``(..., 3, 3)``."""

@@ -11,6 +11,7 @@ import itertools
 import math
 from dataclasses import dataclass, field
 from enum import Enum
+from functools import cached_property
 from typing import Any
 
 import numpy as np
@@ -457,7 +458,13 @@ class FovConfig:
         back-ends report infeasibility).
     margin:
         Right-hand side of the linearised row in units of ``|n_d|``: ``h/|n_d| <= -margin``
-        (0: the cone itself). A small positive value absorbs linearisation error.
+        (0: the cone itself), i.e. the narrower cone ``cos(angle) >= cos(half_fov) + margin``
+        (:meth:`Camera.narrowed`; 0.04 is about 4 deg inside a 35 deg cone). A small positive
+        value absorbs linearisation error, or a vehicle whose attitude departs from the model by
+        a few degrees. A first plan's SQP scores its steps' visibility in the same narrowed cone
+        (:attr:`score_camera`), so a step that meets the margin is kept; scored in the cone
+        itself, such steps lowered the score and were rejected, and the margin changed no first
+        plan (``docs/perception.md``).
     sqp_iterations:
         Cap on SQP steps for a first plan (no previous plan): solve without FoV, then linearise
         around the last solution and re-solve while the visibility improves, at most this often.
@@ -524,6 +531,13 @@ class FovConfig:
             raise ConfigError("fov.fallback_max_iter", f"must be None or an integer >= 1, got {self.fallback_max_iter!r}")
         if not isinstance(self.camera, Camera):
             raise ConfigError("fov.camera", f"must be an avp.Camera, got {type(self.camera).__name__}")
+
+    @cached_property
+    def score_camera(self) -> Camera | None:
+        """The camera a first plan's SQP scores visibility with: :attr:`camera` with the cone the
+        rows ask for (:meth:`Camera.narrowed` by :attr:`margin`; the camera itself for 0),
+        ``None`` when no direction meets the rows (every plan then scores 0)."""
+        return self.camera.narrowed(self.margin)
 
 
 @dataclass(frozen=True)

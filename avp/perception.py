@@ -82,8 +82,13 @@ def _fov_config(cfg: PlannerConfig) -> PlannerConfig:
 
 
 def _scores(trajs: tuple[Trajectory, ...], target: PerchTarget, cfg: PlannerConfig) -> list[float]:
-    """Visibility time + path fraction of plans on the same knots, in one vectorised pass."""
-    vis = visibility_many(trajs, target, cfg.fov.camera, dt=trajs[0].duration / _SCORE_GRID,
+    """Visibility time + path fraction of plans on the same knots, in one vectorised pass, in
+    the cone the FoV rows ask for (:attr:`~avp.config.FovConfig.score_camera`: the camera's
+    cone narrowed by ``fov.margin``)."""
+    camera = cfg.fov.score_camera
+    if camera is None:  # no direction meets the rows: nothing to gain
+        return [0.0] * len(trajs)
+    vis = visibility_many(trajs, target, camera, dt=trajs[0].duration / _SCORE_GRID,
                           rotor_drag=cfg.limits.rotor_drag)
     return [v.time_fraction + v.path_fraction for v in vis]
 

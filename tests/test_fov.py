@@ -10,7 +10,7 @@ import numpy as np
 import numpy.typing as npt
 import pytest
 import qpsolvers
-from hypothesis import given, settings
+from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
 import avp
@@ -107,6 +107,58 @@ def test_h_matches_cone_geometry(x, d, dist, psi, a) -> None:
     ang = math.acos(np.clip(d @ e_c, -1, 1))
     assert fov_h(x, psi, a, s, CAM)[0] / dist == pytest.approx(math.cos(CAM.half_fov) - math.cos(ang), abs=1e-12)
     assert bool(fov_h(x, psi, a, s, CAM)[0] <= 0) == bool(CAM.sees(x, attitude(a, psi), s)) or abs(ang - CAM.half_fov) < 1e-9
+
+
+@settings(max_examples=120, deadline=None)
+@given(x=_vec(-3, 3), d=_direction(), dist=st.floats(0.5, 10), psi=st.floats(-math.pi, math.pi), a=ACC,
+       half=st.floats(10.0, 80.0), margin=st.floats(0.0, 0.4), R_BC=MOUNTS)
+def test_narrowed_camera_sees_where_the_rows_with_margin_hold(x, d, dist, psi, a, half, margin, R_BC) -> None:
+    """``Camera.narrowed(margin)`` (numpy geometry of ``sees``) contains a point exactly where the
+    FoV kernel's ``h/|n_d| <= -margin``, the row (8) with ``fov.margin`` at its linearisation point."""
+    cam = Camera(R_BC=R_BC, half_fov=math.radians(half))
+    s = x + dist * d
+    h = float(fov_h(x, psi, a, s, cam)[0]) / dist
+    narrow = cam.narrowed(margin)
+    if narrow is None:  # the rows ask for cos(angle) >= cos(half_fov) + margin >= 1
+        assert math.cos(cam.half_fov) + margin >= 1.0
+        assert h > -margin or abs(h + margin) < 1e-12
+        return
+    assert narrow.half_fov <= cam.half_fov and (margin > 0 or narrow is cam)
+    assume(abs(h + margin) > 1e-9)
+    assert bool(narrow.sees(x, attitude(a, psi), s)) == bool(h <= -margin)
+
+
+def test_narrowed_camera_validation() -> None:
+    with pytest.raises(ConfigError, match="fov.margin"):
+        CAM.narrowed(-0.01)
+    with pytest.raises(ConfigError, match="fov.margin"):
+        CAM.narrowed(float("nan"))
+    fov = FovConfig()
+    assert fov.score_camera is fov.camera
+    assert FovConfig(margin=0.5).score_camera is None  # cos 35 deg + 0.5 > 1: no direction
+
+
+def test_fov_margin_is_scored_in_its_narrowed_cone() -> None:
+    """A first plan's SQP keeps steps that bring the pad inside the cone the margin asks for. On a
+    drag-aware wall perch the plan without margin has the pad 33-35 deg off the axis in the fast
+    part; with ``margin = 0.04`` (about 31 deg) and a trust box that lets the attitude move, the
+    SQP's steps raise the time in the narrowed cone. Scored in the plain cone, as before, step 1
+    was rejected and the plan was the margin-free one."""
+    target = PerchTarget.from_incline([4.5, 0.0, 1.5], math.radians(90))
+    start = State.hover([0.0, 0.0, 1.5])
+    base = PlannerConfig(alpha_nominal=6.0, workspace=avp.Workspace(ground_z=0.3))
+    base = dataclasses.replace(base, limits=dataclasses.replace(base.limits, rotor_drag=0.35))
+    narrow = FovConfig(margin=0.04).score_camera
+    assert narrow is not None and math.degrees(narrow.half_fov) == pytest.approx(30.78, abs=0.01)
+    in_narrow = []
+    for margin in (0.0, 0.04):
+        cfg = dataclasses.replace(base, fov=dataclasses.replace(base.fov, margin=margin, trust_acceleration=0.6))
+        result = plan_detailed(start, target, cfg)
+        assert result.status is avp.PlanStatus.SOLVED
+        in_narrow.append(visibility(result.trajectory, target, narrow, rotor_drag=0.35).time_fraction)
+        if margin:
+            assert any("SQP step 2: visibility" in line for line in result.log)
+    assert in_narrow[1] > in_narrow[0] + 0.1
 
 
 LINEARISATION_BOUND = 0.03
