@@ -20,7 +20,8 @@ durations:
 * **First plan** (no previous plan): solve without FoV rows, linearise around that solution and
   solve again (an SQP step); repeat, at most ``fov.sqp_iterations`` times, while the visibility
   (:func:`avp.metrics.visibility` on a 200-sample grid, time + path fraction) improves; a step
-  that does not improve it is discarded (so FoV on never lowers the visibility of a first plan),
+  that does not improve it is discarded (so FoV on never lowers the visibility of a first plan,
+  counted in the cone narrowed by ``fov.margin``, :attr:`~avp.config.FovConfig.score_camera`),
   and after a kept step that gained less than ``fov.sqp_min_gain`` (default 0) no further step is
   taken. If the first FoV step is incompatible, the FoV-free solution is returned and the result says
   the rows were dropped.

@@ -107,15 +107,13 @@ class Camera:
         axis: a cone of half-angle ``acos(cos(half_fov) + margin)``. Mounting, image rectangle and
         range are kept. ``self`` for ``margin = 0``; ``None`` when no direction meets the rows
         (``cos(half_fov) + margin >= 1``)."""
-        m = v.finite_float("fov.margin", margin)
-        if m < 0.0:
-            raise ConfigError("fov.margin", f"must be >= 0, got {m}")
-        if m == 0.0:
-            return self
+        m = v.nonnegative_float("fov.margin", margin)
         c = math.cos(self.half_fov) + m
         if c >= 1.0:
             return None
-        return replace(self, half_fov=math.acos(c))
+        if m == 0.0 or c <= math.cos(self.half_fov):  # a margin below the float spacing of cos
+            return self
+        return replace(self, half_fov=min(math.acos(c), self.half_fov))
 
     def axis(self, R_WB: npt.ArrayLike) -> Array:
         """Optical axis ``e_c = R_WB R_BC e3`` in W; ``R_WB`` of shape ``(..., 3, 3)``."""

@@ -463,8 +463,8 @@ class FovConfig:
         value absorbs linearisation error, or a vehicle whose attitude departs from the model by
         a few degrees. A first plan's SQP scores its steps' visibility in the same narrowed cone
         (:attr:`score_camera`), so a step that meets the margin is kept; scored in the cone
-        itself, such steps lowered the score and were rejected, and the margin changed no first
-        plan (``docs/perception.md``).
+        itself, such steps could lower the score and be rejected (on a drag-aware wall perch the
+        margin then changed nothing: ``docs/perception.md``).
     sqp_iterations:
         Cap on SQP steps for a first plan (no previous plan): solve without FoV, then linearise
         around the last solution and re-solve while the visibility improves, at most this often.

@@ -136,11 +136,15 @@ def test_narrowed_camera_validation() -> None:
     fov = FovConfig()
     assert fov.score_camera is fov.camera
     assert FovConfig(margin=0.5).score_camera is None  # cos 35 deg + 0.5 > 1: no direction
+    narrow10 = Camera(half_fov=math.radians(10.0))
+    assert narrow10.narrowed(1e-300) is narrow10  # below the float spacing of cos: never a wider cone
+    with pytest.raises(ConfigError, match="fov.margin"):
+        CAM.narrowed(True)  # type: ignore[arg-type]
 
 
 def test_fov_margin_is_scored_in_its_narrowed_cone() -> None:
     """A first plan's SQP keeps steps that bring the pad inside the cone the margin asks for. On a
-    drag-aware wall perch the plan without margin has the pad 33-35 deg off the axis in the fast
+    drag-aware wall perch the plan without margin has the pad about 33 deg off the axis in the fast
     part; with ``margin = 0.04`` (about 31 deg) and a trust box that lets the attitude move, the
     SQP's steps raise the time in the narrowed cone. Scored in the plain cone, as before, step 1
     was rejected and the plan was the margin-free one."""
