@@ -107,11 +107,11 @@ class Camera:
         axis: a cone of half-angle ``acos(cos(half_fov) + margin)``. Mounting, image rectangle and
         range are kept. ``self`` for ``margin = 0``; ``None`` when no direction meets the rows
         (``cos(half_fov) + margin >= 1``)."""
-        m = v.nonnegative_float("fov.margin", margin)
-        c = math.cos(self.half_fov) + m
+        cos_half = math.cos(self.half_fov)
+        c = cos_half + v.nonnegative_float("fov.margin", margin)
         if c >= 1.0:
             return None
-        if m == 0.0 or c <= math.cos(self.half_fov):  # a margin below the float spacing of cos
+        if c <= cos_half:  # margin 0, or below the float spacing of cos
             return self
         return replace(self, half_fov=min(math.acos(c), self.half_fov))
 
