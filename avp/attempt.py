@@ -79,6 +79,9 @@ class Attempt:
         Set by the planner: what was relaxed for this attempt.
     refined:
         Solved with workspace refinement rows, not the initial rows only.
+    rows, rounds:
+        The workspace rows the plan was solved with (initial and refinement) and the refinement
+        rounds that added them (0: the initial rows only).
     qp:
         The QP solved when it had no FoV rows (a later FoV stage at the same durations starts
         from it).
@@ -96,6 +99,8 @@ class Attempt:
     safety: SafetyReport | None = None
     relaxations: tuple[Relaxation, ...] = ()
     refined: bool = False
+    rows: tuple[ConstraintBlock, ...] = ()
+    rounds: int = 0
     qp: PerchingQp | None = None
     sqp_steps: int = 0
     linearisation: FovLinearisation | None = None
@@ -166,16 +171,17 @@ def solve_at(
 
     ``previous``: the committed plan when replanning (the FoV stage then takes one SQP step).
     ``initvals``: normalised coefficients that warm-start back-ends taking a guess. ``seed``: an
-    attempt at the same durations without FoV rows, solved with the initial rows only; the FoV
-    stage starts from its QP and solution (its workspace certificate is reused when the stage
-    returns that same plan). ``worth_fov``: a test of a first plan's
+    attempt at the same durations without FoV rows; the FoV stage starts from its QP, its
+    workspace rows (refinement rows included) and its solution, and its workspace certificate is
+    reused when the stage returns that same plan; further refinement rounds, if the FoV plan
+    needs them, continue the seed's (``refinement_margin`` grows with the round). A refined seed
+    is not re-derived from the initial rows: when the FoV rows hold at its solution, that
+    certified solution is the plan. ``worth_fov``: a test of a first plan's
     FoV-free solution; ``False`` skips the SQP step (the planner: a sampled limit is already
     broken, a time search follows). ``ws_rows``: initial workspace rows by durations, shared by
     the attempts of one plan.
     """
     ws = cfg.workspace
-    if seed is not None and seed.refined:
-        seed = None
     if not ws.active:
         return solve_rows(state, target, cfg, T, (), previous=previous, initvals=initvals, seed=seed,
                           worth_fov=worth_fov)
@@ -183,7 +189,10 @@ def solve_at(
     layout = layout_for(cfg.n_segments, cfg.degree)
     knots_rel = np.concatenate([[0.0], np.cumsum(T)])
     key = T.tobytes()
-    if ws_rows is not None and key in ws_rows:  # the same durations in another stage of the plan
+    first_round = 0
+    if seed is not None and seed.refined:  # start where the seed's refinement ended
+        extra, first_round = seed.rows, seed.rounds
+    elif ws_rows is not None and key in ws_rows:  # the same durations in another stage of the plan
         extra = ws_rows[key]
     else:
         extra = workspace_blocks(layout, knots_rel, state, target, cfg)
@@ -191,10 +200,11 @@ def solve_at(
             ws_rows[key] = extra
     build, solve, certify = time.perf_counter() - t0, 0.0, 0.0
     log: list[str] = []
-    for round_index in range(ws.refinement_rounds + 1):
+    last_round = first_round + ws.refinement_rounds
+    for round_index in range(first_round, last_round + 1):
         attempt = solve_rows(state, target, cfg, T, extra, previous=previous, initvals=initvals,
-                             seed=seed if round_index == 0 else None, worth_fov=worth_fov)
-        attempt.refined = round_index > 0
+                             seed=seed if round_index == first_round else None, worth_fov=worth_fov)
+        attempt.refined, attempt.rows, attempt.rounds = round_index > 0, extra, round_index
         log.extend(attempt.log)
         build += attempt.build
         solve += attempt.solve
@@ -203,7 +213,8 @@ def solve_at(
             attempt.certify, attempt.log = certify, tuple(log)
             return attempt
         t_cert = time.perf_counter()
-        if seed is not None and round_index == 0 and attempt.trajectory is seed.trajectory and seed.safety is not None:
+        if seed is not None and round_index == first_round and attempt.trajectory is seed.trajectory \
+                and seed.safety is not None:
             report = seed.safety  # the FoV stage returned the search step's own plan, certified
         else:
             report = certify_workspace(attempt.trajectory, target, ws)
@@ -214,7 +225,7 @@ def solve_at(
             attempt.log = tuple(log)
             return attempt
         log.append("workspace: " + "; ".join(str(c) for c in report.checks if not c.certified))
-        if round_index == ws.refinement_rounds:
+        if round_index == last_round:
             attempt.log = tuple(log)
             return attempt
         tb = time.perf_counter()

@@ -21,6 +21,7 @@ from avp.errors import ConfigError
 from avp.qp.assemble import ConstraintBlock, build_perching_qp
 from avp.qp.fov import fov_blocks
 from avp.qp.layout import layout_for
+from avp.safety import certify_workspace
 from avp.solve import solve_perching_qp
 from avp.timing import initial_durations
 
@@ -219,3 +220,31 @@ def test_sqp_min_gain_stops_a_first_plan_after_a_small_step() -> None:
     for bad in (-0.01, 1.5):
         with pytest.raises(ConfigError, match="fov.sqp_min_gain"):
             avp.FovConfig(sqp_min_gain=bad)
+
+
+@pytest.mark.parametrize(("incline", "standoff", "ground_z"), [(90, 7.5, 0.5), (60, 7.5, 0.5)])
+def test_the_fov_stage_of_a_refined_seed_starts_from_its_rows_and_keeps_its_certificate(
+        incline: float, standoff: float, ground_z: float) -> None:
+    """A certified search step that needed workspace refinement seeds the FoV stage with its own
+    rows: when the FoV rows hold at its solution that certified plan is returned without a solve;
+    otherwise the FoV plan keeps every refinement row of the seed and is certified afresh (the
+    workspace certificate recomputed here agrees). Both cases occur."""
+    sc = standard(incline, standoff)
+    base = avp.PlannerConfig()
+    cfg = replace(base, workspace=replace(base.workspace, ground_z=ground_z))
+    T = initial_durations(sc.state, sc.target, cfg)
+    seed = solve_at(sc.state, sc.target, replace(cfg, fov=replace(cfg.fov, enabled=False)), T)
+    assert seed.refined and seed.rounds >= 1 and seed.safe and seed.trajectory is not None
+    assert any(b.name.startswith("workspace refinement") for b in seed.rows)
+    attempt = solve_at(sc.state, sc.target, cfg, T, seed=seed)
+    assert attempt.trajectory is not None and attempt.safe and attempt.rounds >= seed.rounds
+    assert not any("before FoV) " in line for line in attempt.log)  # the seed's QP is not solved again
+    fresh = certify_workspace(attempt.trajectory, sc.target, cfg.workspace)
+    assert fresh.certified
+    if attempt.trajectory is seed.trajectory:
+        assert attempt.safety is seed.safety and attempt.solve == 0.0
+        assert attempt.linearisation is not None and attempt.linearisation.hold_at_linearisation
+    else:
+        assert attempt.solve > 0.0 and attempt.sqp_steps >= 1
+        assert set(map(id, seed.rows)) <= set(map(id, attempt.rows))
+        assert _rows_hold(seed.rows, attempt.outcome.c_hat, tol=1e-7)
