@@ -174,7 +174,7 @@ def solve_at(
     attempt at the same durations without FoV rows; the FoV stage starts from its QP, its
     workspace rows (refinement rows included) and its solution, and its workspace certificate is
     reused when the stage returns that same plan; further refinement rounds, if the FoV plan
-    needs them, continue the seed's (``refinement_margin`` grows with the round). A refined seed
+    needs them, continue the search step's (``refinement_margin`` grows with the round). A refined seed
     is not re-derived from the initial rows: when the FoV rows hold at its solution, that
     certified solution is the plan. ``worth_fov``: a test of a first plan's
     FoV-free solution; ``False`` skips the SQP step (the planner: a sampled limit is already
@@ -190,7 +190,7 @@ def solve_at(
     knots_rel = np.concatenate([[0.0], np.cumsum(T)])
     key = T.tobytes()
     first_round = 0
-    if seed is not None and seed.refined:  # start where the seed's refinement ended
+    if seed is not None and seed.refined:  # start where the search step's refinement ended
         extra, first_round = seed.rows, seed.rounds
     elif ws_rows is not None and key in ws_rows:  # the same durations in another stage of the plan
         extra = ws_rows[key]

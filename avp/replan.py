@@ -18,7 +18,11 @@ certified. The policy
   does not certify, the fractions ``partial_fractions`` of it are tried: a partial, certified
   correction is preferred over none (``PARTIAL``). The full correction first, then the
   smallest fraction; only if that certifies, the ones between, largest first: a step that
-  cannot correct at all costs two solves, not one per fraction.
+  cannot correct at all costs two solves, not one per fraction, plus the retimed retries below.
+- **Retimed retries.** A full correction whose plan fails only a certificate (trackability or
+  actuator bounds) is solved again with the time left scaled by each of ``retime_retries``
+  (a few per cent either side) before the partial fractions: those certificates are not
+  monotone in the time left, and a late correction often certifies at a nearby contact time.
 - **Certified commits.** A plan is committed only if ``result.ok`` (no relaxed plan unless
   ``allow_relaxed``), its actuator bounds are certified and its snap is certified below
   ``snap_max`` (:mod:`avp.trackability`), which bounds the angular acceleration.
@@ -87,7 +91,9 @@ class ReplanStep:
     estimate after the step; ``reach_budget`` (m) how far the contact point could move in the
     time left; ``fraction`` the share of the requested correction committed (0 when nothing
     was); ``anchored`` whether the plan started from the committed reference (True) or from
-    odometry; ``snap`` the trackability certificate of the committed plan, when one was checked.
+    odometry; ``snap`` the trackability certificate of the committed plan, when one was checked;
+    ``time_factor`` the committed plan's time left over the nominal one (``retime_retries``:
+    other than 1 when the nominal time failed a certificate).
     """
 
     t: float
@@ -104,6 +110,7 @@ class ReplanStep:
     anchored: bool = False
     n_solves: int = 0
     snap: SnapReport | None = None
+    time_factor: float = 1.0
 
     @property
     def solved(self) -> bool:
@@ -160,6 +167,18 @@ def _blend(a: PerchTarget, b: PerchTarget, f: float) -> PerchTarget:
         return PerchTarget.from_normal(point, normal, up_slope=up)
     except ConfigError:
         return PerchTarget(point=point, R_WS=a.R_WS)
+
+
+def _certificate_failed(result: PlanResult | None, snap: SnapReport | None) -> bool:
+    """The plan was solved and failed only a certificate: its actuator bounds or its
+    trackability (what ``ReplanConfig.retime_retries`` retries with another time left)."""
+    if result is None:
+        return False
+    if result.status is PlanStatus.BOUNDS_NOT_CERTIFIED:
+        return True
+    if not result.ok:
+        return False
+    return (result.bounds is not None and not result.bounds.certified) or (snap is not None and not snap.certified)
 
 
 def _target_change(a: PerchTarget, b: PerchTarget) -> tuple[float, float]:
@@ -334,8 +353,12 @@ class Replanner:
             self.committed_target = goal
             action = ReplanAction.REPLANNED if f >= 1.0 else ReplanAction.PARTIAL
             reason = "ok" if f >= 1.0 else f"{f:.0%} of the correction ({shift:.3f} m requested, budget {budget:.3f} m)"
+            assert self.trajectory is not None
+            time_factor = (self.trajectory.tf - t_ex) / max(self._retimed(remaining, goal), 1e-12)
+            if abs(time_factor - 1.0) > 1e-9:
+                reason += f" (time left x{time_factor:.3g}: the nominal time failed a certificate)"
             return record(action, reason, anticipated=start, result=result, solve_time=elapsed_total,
-                          fraction=f, anchored=anchored, n_solves=n_solves, snap=snap)
+                          fraction=f, anchored=anchored, n_solves=n_solves, snap=snap, time_factor=time_factor)
 
         # Order: the full (first) fraction, then the smallest; only if the smallest certifies,
         # the ones between, largest first (a step that cannot correct at all costs two solves).
@@ -345,20 +368,26 @@ class Replanner:
         for k, frac in enumerate(order):
             f = frac * f_max
             goal = _blend(self.committed_target, self.target, f) if f < 1.0 else self.target
-            durations = self._durations(committed, t_ex, self._retimed(remaining, goal))
-            result, elapsed, error = self._plan(start, goal, durations, committed, self._replan_config)
-            elapsed_total += elapsed
-            n_solves += 1
-            last_result = result
-            if rc.deadline is not None and elapsed_total > rc.deadline:
-                if smallest is not None:  # a certified correction is at hand: commit it, solve no more
-                    return commit(*smallest)
-                return record(ReplanAction.KEPT_PREVIOUS, f"too late: solves took {elapsed_total * 1e3:.1f} ms > "
-                              f"deadline {rc.deadline * 1e3:.1f} ms", anticipated=start, result=result,
-                              solve_time=elapsed_total, anchored=anchored, n_solves=n_solves)
-            ok, why, snap = self._certified(result)
-            if error is not None:
-                why = error
+            total = self._retimed(remaining, goal)
+            # the full correction is solved again with the time left scaled (retime_retries)
+            # when its plan fails only a certificate
+            for factor in (1.0, *rc.retime_retries) if k == 0 else (1.0,):
+                durations = self._durations(committed, t_ex, factor * total)
+                result, elapsed, error = self._plan(start, goal, durations, committed, self._replan_config)
+                elapsed_total += elapsed
+                n_solves += 1
+                last_result = result
+                if rc.deadline is not None and elapsed_total > rc.deadline:
+                    if smallest is not None:  # a certified correction is at hand: commit it, solve no more
+                        return commit(*smallest)
+                    return record(ReplanAction.KEPT_PREVIOUS, f"too late: solves took {elapsed_total * 1e3:.1f} ms > "
+                                  f"deadline {rc.deadline * 1e3:.1f} ms", anticipated=start, result=result,
+                                  solve_time=elapsed_total, anchored=anchored, n_solves=n_solves)
+                ok, why, snap = self._certified(result)
+                if error is not None:
+                    why = error
+                if ok or error is not None or not _certificate_failed(result, snap):
+                    break
             is_smallest = probe_smallest and k == 1
             if ok:
                 assert result is not None

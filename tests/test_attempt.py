@@ -238,7 +238,7 @@ def test_the_fov_stage_of_a_refined_seed_starts_from_its_rows_and_keeps_its_cert
     assert any(b.name.startswith("workspace refinement") for b in seed.rows)
     attempt = solve_at(sc.state, sc.target, cfg, T, seed=seed)
     assert attempt.trajectory is not None and attempt.safe and attempt.rounds >= seed.rounds
-    assert not any("before FoV) " in line for line in attempt.log)  # the seed's QP is not solved again
+    assert not any("before FoV) " in line for line in attempt.log)  # the search step's QP is not solved again
     fresh = certify_workspace(attempt.trajectory, sc.target, cfg.workspace)
     assert fresh.certified
     if attempt.trajectory is seed.trajectory:

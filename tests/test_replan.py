@@ -323,6 +323,10 @@ def test_replan_config_rejects_bad_knobs():
         ReplanConfig(snap_thrust_max=-1.0)
     with pytest.raises(avp.ConfigError, match="replan.anchor_position"):
         ReplanConfig(anchor_position=float("nan"))
+    for bad in ((1.0,), (0.97, 3.0), (0.4,), (float("nan"),), "0.97", 0.97, (True,)):
+        with pytest.raises(avp.ConfigError, match=r"replan.retime_retries"):
+            ReplanConfig(retime_retries=bad)
+    assert ReplanConfig(retime_retries=[0.9, 1.1]).retime_retries == (0.9, 1.1)
 
 
 # -- trackability certificate ----------------------------------------------------------------------
@@ -460,3 +464,52 @@ def test_keep_knots_waits_for_a_near_knot_even_when_pieces_are_merged():
     t_ex = rp._switch_time(committed, 0.999)
     assert t_ex == 1.0
     np.testing.assert_allclose(rp._durations(committed, t_ex, 0.5), [0.3, 0.1, 0.1])
+
+
+def test_a_retimed_commit_is_certified_and_its_nominal_time_was_not(monkeypatch):
+    """``retime_retries``: in a realistic closed loop (avp's model, a wall at 4.5 m) a full
+    correction that failed a certificate at the nominal time left is committed at a scaled one.
+    The step's planning calls show it: the first, at the nominal time, fails the bounds or the
+    trackability certificate (re-checked here), the committed one has the durations of the
+    reported factor, and its snap limits hold on a dense grid. Without the retries no commit is
+    retimed, and the flight, the same until then, does not commit that correction in full."""
+    calls: list[tuple[int, tuple]] = []
+
+    class Recording(Replanner):
+        def _plan(self, state, target, durations, previous, config):
+            calls.append((len(self.history), (state, target, durations, previous, config)))
+            return super()._plan(state, target, durations, previous, config)
+
+    monkeypatch.setattr(avp.sim.run, "Replanner", Recording)
+    sc = SimConfig().scenario(90.0, 4.5)
+    r = simulate(sc, Mode.AVP, seed=3)
+    retimed = [(i, s) for i, s in enumerate(r.steps) if s.time_factor != 1.0]
+    assert retimed
+    rc = ReplanConfig()
+    for i, s in retimed:
+        assert s.action is ReplanAction.REPLANNED and s.fraction == 1.0
+        assert any(math.isclose(s.time_factor, f, rel_tol=1e-9) for f in rc.retime_retries)
+        assert "time left x" in s.reason
+        mine = [a for k, a in calls if k == i]
+        assert 2 <= len(mine) == s.n_solves <= 1 + len(rc.retime_retries)
+        nominal, last = mine[0], mine[-1]
+        assert math.isclose(float(np.sum(last[2])), s.time_factor * float(np.sum(nominal[2])), rel_tol=1e-9)
+        assert last[1] is nominal[1]  # the same goal, the full correction
+        state, target, durations, previous, config = nominal
+        again = avp.plan_detailed(state, target, config, durations=durations, previous=previous, warm_start=previous)
+        failed_bounds = again.status is PlanStatus.BOUNDS_NOT_CERTIFIED or not again.bounds.certified
+        limits = (s.snap.snap_max, s.snap.snap_thrust_max)
+        failed_snap = again.ok and not certify_snap(again.trajectory, limits[0], snap_thrust_max=limits[1]).certified
+        assert failed_bounds or failed_snap
+        tr = s.trajectory
+        assert s.snap.certified and s.result.bounds.certified
+        t = np.linspace(tr.t0, tr.tf, 4000)
+        d = tr.derivatives(t, (2, 4))
+        snap = np.linalg.norm(d[1][:, :3], axis=1)
+        f = np.linalg.norm(d[0][:, :3] + [0.0, 0.0, tr.g], axis=1)
+        assert snap.max() < limits[0] and np.max(snap / f) < limits[1]
+    plain = simulate(sc, Mode.AVP, seed=3, replan=ReplanConfig(retime_retries=()))
+    assert all(s.time_factor == 1.0 for s in plain.steps)
+    first = retimed[0][0]  # the same flight up to the first retimed step, which plain cannot commit in full
+    assert [s.action for s in plain.steps[:first]] == [s.action for s in r.steps[:first]]
+    assert plain.steps[first].fraction < 1.0 and plain.steps[first].n_solves >= 2
