@@ -347,16 +347,15 @@ class Replanner:
         last_result: PlanResult | None = None
         smallest: tuple[PlanResult, SnapReport | None, PerchTarget, float] | None = None
 
-        def commit(result: PlanResult, snap: SnapReport | None, goal: PerchTarget, f: float) -> ReplanStep:
+        def commit(result: PlanResult, snap: SnapReport | None, goal: PerchTarget, f: float,
+                   time_factor: float = 1.0) -> ReplanStep:
             self._previous = committed
             self.trajectory = result.trajectory
             self.committed_target = goal
             action = ReplanAction.REPLANNED if f >= 1.0 else ReplanAction.PARTIAL
             reason = "ok" if f >= 1.0 else f"{f:.0%} of the correction ({shift:.3f} m requested, budget {budget:.3f} m)"
-            assert self.trajectory is not None
-            time_factor = (self.trajectory.tf - t_ex) / max(self._retimed(remaining, goal), 1e-12)
-            if abs(time_factor - 1.0) > 1e-9:
-                reason += f" (time left x{time_factor:.3g}: the nominal time failed a certificate)"
+            if time_factor != 1.0:
+                reason += f" (time left x{time_factor:g}: the nominal time failed a certificate)"
             return record(action, reason, anticipated=start, result=result, solve_time=elapsed_total,
                           fraction=f, anchored=anchored, n_solves=n_solves, snap=snap, time_factor=time_factor)
 
@@ -392,7 +391,7 @@ class Replanner:
             if ok:
                 assert result is not None
                 if not is_smallest:
-                    return commit(result, snap, goal, f)
+                    return commit(result, snap, goal, f, factor)
                 smallest = (result, snap, goal, f)  # kept; a larger fraction between may certify
                 continue
             last_reason = why

@@ -30,6 +30,8 @@ def main() -> None:
     ap.add_argument("--inclines", type=float, nargs="+", default=[90.0, 45.0])
     ap.add_argument("--distances", type=float, nargs="+", default=[4.5])
     ap.add_argument("--backends", nargs="+", default=["avp", "rotorpy"], choices=["avp", "rotorpy"])
+    ap.add_argument("--estimates", nargs="+", default=["realistic", "perfect"], choices=["realistic", "perfect"],
+                    help="which estimate variants to run (one each on two processes halves the wall time)")
     ap.add_argument("--no-drag-feedforward", action="store_true", help="rotorpy without the drag feed-forward")
     ap.add_argument("--no-lag-feedforward", action="store_true", help="the controller without its thrust lead")
     args = ap.parse_args()
@@ -43,6 +45,8 @@ def main() -> None:
     rows = []
     for backend in backends:
         for label, cfg in (("realistic", base), ("perfect", base.perfect_estimate())):
+            if label not in args.estimates:
+                continue
             t0 = time.perf_counter()
             res = sweep(dataclasses.replace(cfg, backend=backend))
             wall = time.perf_counter() - t0
