@@ -360,7 +360,8 @@ class Replanner:
                           fraction=f, anchored=anchored, n_solves=n_solves, snap=snap, time_factor=time_factor)
 
         # Order: the full (first) fraction, then the smallest; only if the smallest certifies,
-        # the ones between, largest first (a step that cannot correct at all costs two solves).
+        # the ones between, largest first (a step that cannot correct at all costs two solves
+        # and the failed retimed retries).
         # With a deadline, a certified smallest correction is committed when the time runs out.
         probe_smallest = len(fractions) >= 3
         order = [fractions[0], fractions[-1], *fractions[1:-1]] if probe_smallest else list(fractions)
