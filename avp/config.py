@@ -727,8 +727,10 @@ class ReplanConfig:
         0.25 s: 0.15 s gave identical outcomes (6 seeds, wall at 4.5 / 7.5 m): replans that late
         do not pass the trackability certificate anyway, so the freeze only saves solves.
     deadline:
-        A solve slower than this (s, wall clock) is discarded as too late; ``None``: no deadline
-        (use ``None`` in simulation for deterministic runs).
+        A step whose solves take longer than this (s, wall clock) discards the last as too late
+        (committing a certified smallest fraction if it has one); ``None``: no deadline (use
+        ``None`` in simulation for deterministic runs). A ``retime_retries`` retry is started
+        only while it and the smallest fraction, each as slow as the nominal solve, fit.
     measured_orders:
         When re-anchoring: derivative orders taken from odometry (2: position and velocity, yaw
         and yaw rate); higher orders come from the committed plan, so commands stay continuous (6).
@@ -804,11 +806,20 @@ class ReplanConfig:
         ``(0.97, 1.03)``: AVP on rotorpy's wall at 4.5 / 7.5 m 51 / 49 of 60 against 49 / 46
         (seeds 0-59) and 81 / 81 of 100 against 77 / 77 (seeds 100-199, not used to choose); on
         avp's model (seeds 0-99) 97 / 92 of 100 against 94 / 89. 0.5-0.7 commits per run are
-        retimed, for 23-28 % more planning calls per run (most retries fail). Of the retimed
+        retimed, for 24 % more planning calls per run (most retries fail). Of the retimed
         commits with ``(0.97, 1.03, 0.94, 1.06)`` (avp's model, 80 wall runs) 39 took 0.97, 15
         took 1.03, one 0.94 and none 1.06; that list perched 51 / 50 and 82 / 81 for 50-60 % more
-        calls. Retrying the partial fractions too gained one or two seeds more for twice the
-        calls.
+        calls. Retrying the partial fractions too gained one or two seeds more for 1.9 times the
+        default's calls. Only for a static pad: a subclass with its own target model (a moving
+        pad, a line) keeps the committed contact time.
+    retime_min_time:
+        Time left (s) below which a replan makes no ``retime_retries``. On the wall (90 deg,
+        4.5 and 7.5 m, AVP) no retry with less than 0.5 s left certified: 177 retried
+        corrections on avp's model (seeds 0-29) and 148 on rotorpy (seeds 0-19), none
+        committed, while 3 of 47 and 6 of 44 between 0.5 and 1 s were; the late corrections
+        need a snap that a few per cent of time does not bring under the limit. 0.45 s keeps
+        a margin below the earliest certified retries (0.5-0.6 s left) and saves those solves (the steps with
+        four to six solves of ``docs/performance.md``).
     allow_relaxed:
         Commit plans the planner obtained by relaxing something (``result.relaxations``, status
         ``SOLVED_RELAXED``). Off: a relaxed plan moves the contact velocity or band.
@@ -858,6 +869,7 @@ class ReplanConfig:
     retime_normal: bool = False
     retime_fraction: float = 0.3
     retime_retries: tuple[float, ...] = (0.97, 1.03)
+    retime_min_time: float = 0.45
     allow_relaxed: bool = False
     keep_knots: bool = False
     keep_knots_min: float = 0.05
@@ -893,9 +905,18 @@ class ReplanConfig:
         if isinstance(self.retime_retries, (str, bytes)) or not hasattr(self.retime_retries, "__iter__"):
             raise ConfigError("replan.retime_retries",
                               f"must be a sequence of factors on the time left, got {self.retime_retries!r}")
-        rr = tuple(v.finite_float(f"replan.retime_retries[{i}]", f) for i, f in enumerate(self.retime_retries))
-        if any(not 0.5 <= f <= 2.0 or f == 1.0 for f in rr):
+        if isinstance(self.retime_retries, dict):
             raise ConfigError("replan.retime_retries",
-                              f"need factors in [0.5, 2] other than 1 (the nominal time is always tried first), "
-                              f"got {self.retime_retries!r}")
+                              f"must be a sequence of factors on the time left, got a mapping {self.retime_retries!r}")
+        rr = tuple(v.nonnegative_float(f"replan.retime_retries[{i}]", f) for i, f in enumerate(self.retime_retries))
+        for i, f in enumerate(rr):
+            if not 0.5 <= f <= 2.0 or f == 1.0:
+                raise ConfigError(f"replan.retime_retries[{i}]",
+                                  f"need a factor in [0.5, 2] other than 1 (the nominal time is always tried "
+                                  f"first), got {f!r}; () turns the retries off")
+        if len(set(rr)) != len(rr):
+            raise ConfigError("replan.retime_retries",
+                              f"each factor once (a repeated one solves the same problem again), got {rr!r}")
         object.__setattr__(self, "retime_retries", rr)
+        object.__setattr__(self, "retime_min_time", v.nonnegative_float("replan.retime_min_time",
+                                                                        self.retime_min_time))

@@ -23,6 +23,9 @@ certified. The policy
   actuator bounds) is solved again with the time left scaled by each of ``retime_retries``
   (a few per cent either side) before the partial fractions: those certificates are not
   monotone in the time left, and a late correction often certifies at a nearby contact time.
+  Not with less than ``retime_min_time`` left (none certified there), not for a subclass with
+  its own target model (it keeps the committed contact time), and with a ``deadline`` only
+  while a retry and the smallest fraction, each as slow as the nominal solve, still fit in it.
 - **Certified commits.** A plan is committed only if ``result.ok`` (no relaxed plan unless
   ``allow_relaxed``), its actuator bounds are certified and its snap is certified below
   ``snap_max`` (:mod:`avp.trackability`), which bounds the angular acceleration.
@@ -169,18 +172,6 @@ def _blend(a: PerchTarget, b: PerchTarget, f: float) -> PerchTarget:
         return PerchTarget(point=point, R_WS=a.R_WS)
 
 
-def _certificate_failed(result: PlanResult | None, snap: SnapReport | None) -> bool:
-    """The plan was solved and failed only a certificate: its actuator bounds or its
-    trackability (what ``ReplanConfig.retime_retries`` retries with another time left)."""
-    if result is None:
-        return False
-    if result.status is PlanStatus.BOUNDS_NOT_CERTIFIED:
-        return True
-    if not result.ok:
-        return False
-    return (result.bounds is not None and not result.bounds.certified) or (snap is not None and not snap.certified)
-
-
 def _target_change(a: PerchTarget, b: PerchTarget) -> tuple[float, float]:
     """Distance (m) between the pad centres and angle (rad) between the normals."""
     d = float(np.linalg.norm(b.point - a.point))
@@ -272,31 +263,40 @@ class Replanner:
         return step
 
     # -- certification ---------------------------------------------------------------------
-    def _certified(self, result: PlanResult | None, trackability: bool = True) -> tuple[bool, str, SnapReport | None]:
-        """Whether ``result`` may be committed, why not, and its snap certificate."""
-        if result is None or not result.ok or result.trajectory is None:
-            return False, result.status.value if result is not None else "planning failed", None
+    def _certified(self, result: PlanResult | None,
+                   trackability: bool = True) -> tuple[bool, str, SnapReport | None, bool]:
+        """Whether ``result`` may be committed, why not, its snap certificate, and whether it
+        failed only a certificate: a solved, unrelaxed plan whose actuator bounds or
+        trackability did not certify (what ``ReplanConfig.retime_retries`` retries with
+        another time left). Infeasible, failed, relaxed or workspace-uncertified plans and a
+        certificate that raised are not retried."""
+        if result is None or result.trajectory is None:
+            return False, result.status.value if result is not None else "planning failed", None, False
         relaxations = tuple(getattr(result, "relaxations", ()))  # a MovingPlanResult has none
-        if not self.replan.allow_relaxed and (relaxations or result.status is PlanStatus.SOLVED_RELAXED):
-            return False, "relaxed plan (allow_relaxed is off)", None
+        relaxed = bool(relaxations) or result.status is PlanStatus.SOLVED_RELAXED
+        if not result.ok:
+            only_bounds = result.status is PlanStatus.BOUNDS_NOT_CERTIFIED and not relaxed
+            return False, result.status.value, None, only_bounds
+        if not self.replan.allow_relaxed and relaxed:
+            return False, "relaxed plan (allow_relaxed is off)", None, False
         if self.config.bounds.certify and (result.bounds is None or not result.bounds.certified):
-            return False, "actuator bounds not certified", None
+            return False, "actuator bounds not certified", None, True
         if not trackability:
-            return True, "ok", None
+            return True, "ok", None, False
         try:
             snap = certify_snap(result.trajectory, self.snap_limits[0], snap_thrust_max=self.snap_limits[1])
         except _PLANNING_ERRORS as exc:
-            return False, f"snap certificate failed: {type(exc).__name__}: {exc}", None
+            return False, f"snap certificate failed: {type(exc).__name__}: {exc}", None, False
         if not snap.certified:
-            return False, snap.summary(), snap
-        return True, "ok", snap
+            return False, snap.summary(), snap, True
+        return True, "ok", snap, False
 
     def _initial(self, t: float, odometry: State) -> ReplanStep:
         state = State(position=odometry.position, velocity=odometry.velocity,
                       acceleration=odometry.acceleration, jerk=odometry.jerk,
                       yaw=odometry.yaw, yaw_rate=odometry.yaw_rate, time=t)
         result, elapsed, error = self._plan(state, self.target, None, None, self.config)
-        ok, why, snap = self._certified(result, trackability=False)
+        ok, why, snap, _ = self._certified(result, trackability=False)
         if not ok:
             return ReplanStep(t=t, action=ReplanAction.NO_PLAN, trajectory=None, reason=error or why, t_ex=t, anticipated=state, result=result, solve_time=elapsed, n_solves=1, snap=snap)
         assert result is not None and result.trajectory is not None
@@ -369,9 +369,17 @@ class Replanner:
             f = frac * f_max
             goal = _blend(self.committed_target, self.target, f) if f < 1.0 else self.target
             total = self._retimed(remaining, goal)
-            # the full correction is solved again with the time left scaled (retime_retries)
-            # when its plan fails only a certificate
-            for factor in (1.0, *rc.retime_retries) if k == 0 else (1.0,):
+            # The full correction is solved again with the time left scaled (retime_retries) when
+            # its plan at the nominal time fails only a certificate; a static pad only (the
+            # subclasses keep the committed contact time), and not in the last retime_min_time.
+            retry = k == 0 and self._static_pad and remaining >= rc.retime_min_time
+            factors = (1.0, *rc.retime_retries) if retry else (1.0,)
+            nominal: tuple[PlanResult | None, str, float] | None = None  # reported if no retry certifies
+            tried: list[float] = []
+            for factor in factors:
+                if nominal is not None and rc.deadline is not None and elapsed_total + 2.0 * nominal[2] > rc.deadline:
+                    break  # a retry and then the smallest fraction would not fit the deadline: go to the fractions
+                tried.append(factor)
                 durations = self._durations(committed, t_ex, factor * total)
                 result, elapsed, error = self._plan(start, goal, durations, committed, self._replan_config)
                 elapsed_total += elapsed
@@ -383,16 +391,24 @@ class Replanner:
                     return record(ReplanAction.KEPT_PREVIOUS, f"too late: solves took {elapsed_total * 1e3:.1f} ms > "
                                   f"deadline {rc.deadline * 1e3:.1f} ms", anticipated=start, result=result,
                                   solve_time=elapsed_total, anchored=anchored, n_solves=n_solves)
-                ok, why, snap = self._certified(result)
+                ok, why, snap, only_certificate = self._certified(result)
                 if error is not None:
-                    why = error
-                if ok or error is not None or not _certificate_failed(result, snap):
+                    why, only_certificate = error, False
+                if ok:
                     break
+                if nominal is None:
+                    nominal = (result, why, elapsed)
+                    if not only_certificate:
+                        break  # only a plan that failed a certificate is retried
+            if not ok and nominal is not None:  # report the nominal time's plan and reason
+                last_result, why = nominal[0], nominal[1]
+                if len(tried) > 1:
+                    why += " (also at time left " + ", ".join(f"x{x:g}" for x in tried[1:]) + ")"
             is_smallest = probe_smallest and k == 1
             if ok:
                 assert result is not None
                 if not is_smallest:
-                    return commit(result, snap, goal, f, factor)
+                    return commit(result, snap, goal, f, tried[-1])
                 smallest = (result, snap, goal, f)  # kept; a larger fraction between may certify
                 continue
             last_reason = why

@@ -222,13 +222,14 @@ def test_sqp_min_gain_stops_a_first_plan_after_a_small_step() -> None:
             avp.FovConfig(sqp_min_gain=bad)
 
 
-@pytest.mark.parametrize(("incline", "standoff", "ground_z"), [(90, 7.5, 0.5), (60, 7.5, 0.5)])
+@pytest.mark.parametrize(("incline", "standoff", "ground_z", "returns_seed"),
+                         [(90, 7.5, 0.5, True), (60, 7.5, 0.5, False)])
 def test_the_fov_stage_of_a_refined_seed_starts_from_its_rows_and_keeps_its_certificate(
-        incline: float, standoff: float, ground_z: float) -> None:
+        incline: float, standoff: float, ground_z: float, returns_seed: bool) -> None:
     """A certified search step that needed workspace refinement seeds the FoV stage with its own
     rows: when the FoV rows hold at its solution that certified plan is returned without a solve;
     otherwise the FoV plan keeps every refinement row of the seed and is certified afresh (the
-    workspace certificate recomputed here agrees). Both cases occur."""
+    workspace certificate recomputed here agrees). Both cases occur, one per parameter set."""
     sc = standard(incline, standoff)
     base = avp.PlannerConfig()
     cfg = replace(base, workspace=replace(base.workspace, ground_z=ground_z))
@@ -241,7 +242,8 @@ def test_the_fov_stage_of_a_refined_seed_starts_from_its_rows_and_keeps_its_cert
     assert not any("before FoV) " in line for line in attempt.log)  # the search step's QP is not solved again
     fresh = certify_workspace(attempt.trajectory, sc.target, cfg.workspace)
     assert fresh.certified
-    if attempt.trajectory is seed.trajectory:
+    assert (attempt.trajectory is seed.trajectory) is returns_seed
+    if returns_seed:
         assert attempt.safety is seed.safety and attempt.solve == 0.0
         assert attempt.linearisation is not None and attempt.linearisation.hold_at_linearisation
     else:

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import types
 from fractions import Fraction
 
 import numpy as np
@@ -191,7 +192,7 @@ def _fraction_probe(monkeypatch, certifies, replan=None, elapsed=None):
 
     def certified(result, trackability=True):
         ok = certifies(tried[-1])
-        return ok, "ok" if ok else "injected: not certified", None
+        return ok, "ok" if ok else "injected: not certified", None, False  # not a certificate: no retries
 
     monkeypatch.setattr(rp, "_plan", plan)
     monkeypatch.setattr(rp, "_certified", certified)
@@ -323,10 +324,16 @@ def test_replan_config_rejects_bad_knobs():
         ReplanConfig(snap_thrust_max=-1.0)
     with pytest.raises(avp.ConfigError, match="replan.anchor_position"):
         ReplanConfig(anchor_position=float("nan"))
-    for bad in ((1.0,), (0.97, 3.0), (0.4,), (float("nan"),), "0.97", 0.97, (True,)):
+    for bad in ((1.0,), (0.97, 3.0), (0.4,), (float("nan"),), "0.97", 0.97, (True,), (0.97, 0.97), {0.97: 1},
+                (0.97, -1.03)):
         with pytest.raises(avp.ConfigError, match=r"replan.retime_retries"):
             ReplanConfig(retime_retries=bad)
+    with pytest.raises(avp.ConfigError, match=r"replan.retime_retries\[1\].*\(\) turns the retries off"):
+        ReplanConfig(retime_retries=(0.97, 2.5))
     assert ReplanConfig(retime_retries=[0.9, 1.1]).retime_retries == (0.9, 1.1)
+    for bad_time in (-0.1, float("nan"), True, None):
+        with pytest.raises(avp.ConfigError, match="replan.retime_min_time"):
+            ReplanConfig(retime_min_time=bad_time)
 
 
 # -- trackability certificate ----------------------------------------------------------------------
@@ -497,7 +504,8 @@ def test_a_retimed_commit_is_certified_and_its_nominal_time_was_not(monkeypatch)
         assert last[1] is nominal[1]  # the same goal, the full correction
         state, target, durations, previous, config = nominal
         again = avp.plan_detailed(state, target, config, durations=durations, previous=previous, warm_start=previous)
-        failed_bounds = again.status is PlanStatus.BOUNDS_NOT_CERTIFIED or not again.bounds.certified
+        failed_bounds = (again.status is PlanStatus.BOUNDS_NOT_CERTIFIED or again.bounds is None
+                         or not again.bounds.certified)
         limits = (s.snap.snap_max, s.snap.snap_thrust_max)
         failed_snap = again.ok and not certify_snap(again.trajectory, limits[0], snap_thrust_max=limits[1]).certified
         assert failed_bounds or failed_snap
@@ -513,3 +521,123 @@ def test_a_retimed_commit_is_certified_and_its_nominal_time_was_not(monkeypatch)
     first = retimed[0][0]  # the same flight up to the first retimed step, which plain cannot commit in full
     assert [s.action for s in plain.steps[:first]] == [s.action for s in r.steps[:first]]
     assert plain.steps[first].fraction < 1.0 and plain.steps[first].n_solves >= 2
+
+
+def _failing_full_corrections(rc, monkeypatch, elapsed=None, static=True):
+    """A replanner after its first plan whose full corrections all fail only the trackability
+    certificate (the other fractions are certified as usual), recording the time left of every
+    planning call; ``elapsed`` replaces the measured solve time."""
+    rp = Replanner(WALL, sim_config(), rc)
+    rp.step(0.0, START)
+    calls: list[tuple[object, float]] = []
+    plan, certified = rp._plan, rp._certified
+
+    def fake_plan(state, target, durations, previous, config):
+        result, took, error = plan(state, target, durations, previous, config)
+        calls.append((target, float(np.sum(durations))))
+        return result, took if elapsed is None else elapsed, error
+
+    def fake_certified(result, trackability=True):
+        ok, why, snap, only = certified(result, trackability)
+        if calls and calls[-1][0] is rp.target and ok:
+            return False, "snap 1e9 > limit (forced)", snap, True
+        return ok, why, snap, only
+
+    monkeypatch.setattr(rp, "_plan", fake_plan)
+    monkeypatch.setattr(rp, "_certified", fake_certified)
+    if not static:
+        monkeypatch.setattr(Replanner, "_static_pad", property(lambda self: False))
+    return rp, calls
+
+
+def _moved_wall_step(rp, t=0.5, dz=0.02):
+    moved = avp.PerchTarget(point=WALL.point + [0.0, 0.0, dz], R_WS=WALL.R_WS)
+    return rp.step(t, _fly_reference(rp, t), moved)
+
+
+def test_failed_retries_report_the_nominal_plan_and_fall_back_to_the_fractions(monkeypatch):
+    """A full correction that fails only a certificate is retried at every factor in turn, then
+    the fractions follow; a step that commits no full correction reports the nominal time's plan,
+    ``time_factor`` 1 and which retries were made."""
+    rc = ReplanConfig()
+    rp, calls = _failing_full_corrections(rc, monkeypatch)
+    s = _moved_wall_step(rp)
+    nominal = calls[0][1]
+    full = [T for target, T in calls if target is rp.target]
+    np.testing.assert_allclose(full, [nominal * f for f in (1.0, *rc.retime_retries)], rtol=1e-12)
+    assert len(calls) > len(full)  # the fractions were tried after the retries
+    assert s.time_factor == 1.0 and s.fraction < 1.0
+    if s.action is ReplanAction.KEPT_PREVIOUS:  # no fraction certified either
+        assert math.isclose(float(np.sum(s.result.trajectory.durations)), nominal, rel_tol=1e-12)
+    assert s.action in (ReplanAction.PARTIAL, ReplanAction.KEPT_PREVIOUS, ReplanAction.CANNOT_REACH)
+
+
+def test_no_retries_for_a_plan_that_failed_other_than_a_certificate(monkeypatch):
+    rp = Replanner(WALL, sim_config(), ReplanConfig())
+    rp.step(0.0, START)
+    plan = rp._plan
+    full_calls: list[float] = []
+
+    def infeasible_full(state, target, durations, previous, config):
+        result, took, error = plan(state, target, durations, previous, config)
+        if target is rp.target:
+            full_calls.append(float(np.sum(durations)))
+            return dataclasses.replace(result, status=PlanStatus.INFEASIBLE), took, error
+        return result, took, error
+
+    monkeypatch.setattr(rp, "_plan", infeasible_full)
+    s = _moved_wall_step(rp)
+    assert len(full_calls) == 1 and s.time_factor == 1.0 and s.fraction < 1.0
+
+
+def test_certified_says_which_failures_a_retry_may_fix():
+    """Only a solved, unrelaxed plan that failed its bounds or trackability certificate is
+    retried; relaxed, infeasible and workspace-uncertified plans are not."""
+    rp = Replanner(WALL, sim_config(), ReplanConfig())
+    first = rp.step(0.0, START).result
+    assert first is not None and first.ok and not first.relaxations
+    ok, _, _, only = rp._certified(first)
+    assert ok and not only
+    uncertified = types.SimpleNamespace(certified=False)  # a bound report that did not certify
+    assert rp._certified(dataclasses.replace(first, bounds=uncertified))[1:4:2] == ("actuator bounds not certified", True)
+    bnc = dataclasses.replace(first, status=PlanStatus.BOUNDS_NOT_CERTIFIED, bounds=uncertified)
+    assert rp._certified(bnc)[3] is True
+    relaxed = dataclasses.replace(first, relaxations=("terminal velocity",))
+    assert rp._certified(relaxed)[0] is False and rp._certified(relaxed)[3] is False
+    assert rp._certified(dataclasses.replace(relaxed, status=PlanStatus.BOUNDS_NOT_CERTIFIED))[3] is False
+    assert rp._certified(dataclasses.replace(relaxed, bounds=uncertified))[3] is False
+    for status in (PlanStatus.INFEASIBLE, PlanStatus.WORKSPACE_NOT_CERTIFIED, PlanStatus.SOLVER_FAILED):
+        assert rp._certified(dataclasses.replace(first, status=status))[3] is False
+    rp.snap_limits = (1e-6, 1e-6)  # no plan meets these
+    ok, why, snap, only = rp._certified(first)
+    assert "snap" in why or "trackab" in why
+    assert not ok and only and snap is not None and not snap.certified
+
+
+def test_retries_only_for_a_static_pad_and_not_late(monkeypatch):
+    """A subclass with its own target model keeps the committed contact time (no retries), and
+    with less than ``retime_min_time`` left no retry is made."""
+    rp, calls = _failing_full_corrections(ReplanConfig(), monkeypatch, static=False)
+    _moved_wall_step(rp)
+    assert len({round(T, 12) for _, T in calls}) == 1
+    monkeypatch.undo()
+    remaining = None
+    rc = ReplanConfig(retime_min_time=50.0)  # more than any time left
+    rp, calls = _failing_full_corrections(rc, monkeypatch)
+    s = _moved_wall_step(rp)
+    remaining = s.trajectory.tf - s.t_ex if s.trajectory is not None else None
+    assert remaining is not None and remaining < rc.retime_min_time
+    assert len([T for target, T in calls if target is rp.target]) == 1
+
+
+def test_retries_leave_room_for_the_smallest_fraction_within_the_deadline(monkeypatch):
+    """With a deadline, a retry starts only while it and the smallest fraction fit: with every
+    solve taking 1 ms and a 3.5 ms deadline, the nominal time and one retry are solved, then the
+    smallest fraction, which is committed when the next solve overruns."""
+    rc = ReplanConfig(deadline=3.5e-3)
+    rp, calls = _failing_full_corrections(rc, monkeypatch, elapsed=1e-3)
+    s = _moved_wall_step(rp)
+    full = [T for target, T in calls if target is rp.target]
+    assert len(full) == 2 and math.isclose(full[1], full[0] * rc.retime_retries[0], rel_tol=1e-12)
+    assert s.action is ReplanAction.PARTIAL
+    assert math.isclose(s.fraction, rc.partial_fractions[-1], rel_tol=1e-12)
