@@ -813,13 +813,15 @@ class ReplanConfig:
         default's calls. Only for a static pad: a subclass with its own target model (a moving
         pad, a line) keeps the committed contact time.
     retime_min_time:
-        Time left (s) below which a replan makes no ``retime_retries``. On the wall (90 deg,
-        4.5 and 7.5 m, AVP) no retry with less than 0.5 s left certified: 177 retried
-        corrections on avp's model (seeds 0-29) and 148 on rotorpy (seeds 0-19), none
-        committed, while 3 of 47 and 6 of 44 between 0.5 and 1 s were; the late corrections
-        need a snap that a few per cent of time does not bring under the limit. 0.45 s keeps
-        a margin below the earliest certified retries (0.5-0.6 s left) and saves those solves (the steps with
-        four to six solves of ``docs/performance.md``).
+        Time left (s) below which a replan makes no ``retime_retries``. Logged on the realistic
+        wall (``SimConfig``, 90 deg, 4.5 and 7.5 m, AVP, the retries everywhere): on avp's
+        model (seeds 0-99) 224 retried corrections with 0.25-0.3 s left, none committed; 1 of
+        227 at 0.3-0.35 s (the earliest at 0.31 s), 7 of 420 at 0.35-0.45 s, 57 of 289 at
+        0.45-0.6 s; on rotorpy (seeds 0-29) 0 of 151 below 0.35 s, the earliest at 0.385 s. Late
+        corrections need a snap of order ``delta / T^4`` that a few per cent of time rarely
+        brings under the limit. 0.3 s: no certified retry is lost in those 260 runs and the
+        same 200 avp runs make the same decisions with 432 fewer solves (8539 against 8971);
+        0.45 s lost 8 committed retries and one perch of 200 (wall, 7.5 m).
     allow_relaxed:
         Commit plans the planner obtained by relaxing something (``result.relaxations``, status
         ``SOLVED_RELAXED``). Off: a relaxed plan moves the contact velocity or band.
@@ -869,7 +871,7 @@ class ReplanConfig:
     retime_normal: bool = False
     retime_fraction: float = 0.3
     retime_retries: tuple[float, ...] = (0.97, 1.03)
-    retime_min_time: float = 0.45
+    retime_min_time: float = 0.3
     allow_relaxed: bool = False
     keep_knots: bool = False
     keep_knots_min: float = 0.05
