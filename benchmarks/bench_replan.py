@@ -1,8 +1,8 @@
 """Cost of every ``Replanner.step`` inside the simulated 30 Hz closed loop, in CPU time.
 
     python benchmarks/bench_replan.py [--seeds 40] [--distances 1.5 4.5 7.5] [--inclines 90 45]
-                                      [--previous] [--gc-freeze] [--stages] [--save FILE]
-                                      [--compare FILE]
+                                      [--previous] [--gc-freeze] [--stages] [--evict-mb MB]
+                                      [--save FILE] [--compare FILE]
 
 Runs ``avp.sim.run.simulate`` in ``Mode.AVP`` for every seed, distance and incline, with the
 ``Replanner`` the loop builds replaced by a subclass that times each :meth:`step` call with
@@ -17,7 +17,9 @@ Baseline in the same run: after each simulation, every planning call the steps m
 in the same order and from the same state of the elimination cache (``avp.qp.assemble``) as in
 the loop, and timed the same way; a solving step's cost over the sum of its bare planning calls
 is the step's overhead (policy, snap certificate, bookkeeping, and the colder CPU caches of a
-step that follows 33 ms of simulation).
+step that follows 33 ms of simulation). ``--evict-mb MB`` streams through an array of that many
+MB before each bare call, so the replay meets data caches as cold as the loop leaves them: how
+much of the step's overhead that explains.
 
 ``--save FILE`` writes what the replanner decided (every step's action, fraction and solves, and
 a digest of every committed plan's coefficients); ``--compare FILE`` checks the run against such
@@ -149,9 +151,14 @@ def _set_factor_cache(state: OrderedDict[Any, list[Any]]) -> None:
     assemble._FACTORS.update((k, list(v)) for k, v in state.items())
 
 
+_EVICT: list[np.ndarray] = []  # the --evict-mb buffer, when asked for
+
+
 def bare(args: tuple[Any, ...], warm: bool) -> float:
     """CPU seconds of one bare ``plan_detailed`` at a step's planning arguments."""
     state, target, durations, previous, config = args
+    for buf in _EVICT:  # untimed: push the planner's data out of the CPU caches
+        buf += 1.0
     c0 = time.thread_time()
     try:
         with serial_blas():  # as Replanner.step plans (avp._blas)
@@ -181,12 +188,16 @@ def main() -> None:
                     help="gc.freeze() after the imports and a first run, as a real-time loop would after its setup")
     ap.add_argument("--previous", action="store_true",
                     help="the previous code paths: Fraction snap coefficients, threaded BLAS in the step")
+    ap.add_argument("--evict-mb", type=float, default=0.0,
+                    help="stream through this many MB before each bare call (cold data caches, as in the loop)")
     ap.add_argument("--stages", action="store_true",
                     help="also print where the steps' CPU goes, per planning call (wrappers add a little)")
     ap.add_argument("--save", help="write the decisions and committed-plan digests to this JSON file")
     ap.add_argument("--compare", help="compare the decisions and plans with this JSON file")
     args = ap.parse_args()
     warnings.simplefilter("ignore")
+    if args.evict_mb > 0:
+        _EVICT.append(np.zeros(int(args.evict_mb * 2**20 / 8)))
     gc.callbacks.append(_count_gc)
     sim_run.Replanner = TimedReplanner  # type: ignore[misc]  # the loop builds this class
     if args.previous:
