@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import itertools
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from enum import Enum
 from functools import cached_property
@@ -904,12 +905,9 @@ class ReplanConfig:
             raise ConfigError("replan.partial_fractions",
                               f"must be strictly decreasing (largest first), got {self.partial_fractions!r}")
         object.__setattr__(self, "partial_fractions", fr)
-        if isinstance(self.retime_retries, (str, bytes)) or not hasattr(self.retime_retries, "__iter__"):
+        if isinstance(self.retime_retries, (str, bytes, Mapping)) or not hasattr(self.retime_retries, "__iter__"):
             raise ConfigError("replan.retime_retries",
                               f"must be a sequence of factors on the time left, got {self.retime_retries!r}")
-        if isinstance(self.retime_retries, dict):
-            raise ConfigError("replan.retime_retries",
-                              f"must be a sequence of factors on the time left, got a mapping {self.retime_retries!r}")
         rr = tuple(v.nonnegative_float(f"replan.retime_retries[{i}]", f) for i, f in enumerate(self.retime_retries))
         for i, f in enumerate(rr):
             if not 0.5 <= f <= 2.0 or f == 1.0:
