@@ -165,6 +165,7 @@ def solve_at(
     seed: Attempt | None = None,
     worth_fov: Callable[[Trajectory], bool] | None = None,
     ws_rows: dict[bytes, tuple[ConstraintBlock, ...]] | None = None,
+    deadline_at: float | None = None,
 ) -> Attempt:
     """Solve at durations ``T`` with the workspace rows, certify the workspace limits, and
     re-solve with refined rows around proven violations (``workspace.refinement_rounds``).
@@ -179,7 +180,9 @@ def solve_at(
     certified solution is the plan. ``worth_fov``: a test of a first plan's
     FoV-free solution; ``False`` skips the SQP step (the planner: a sampled limit is already
     broken, a time search follows). ``ws_rows``: initial workspace rows by durations, shared by
-    the attempts of one plan.
+    the attempts of one plan. ``deadline_at``: a ``time.perf_counter`` instant; a refinement
+    round starts only while it, predicted as slow as the slowest round so far, ends before it
+    (the attempt is returned uncertified otherwise, and says so).
     """
     ws = cfg.workspace
     if not ws.active:
@@ -201,7 +204,9 @@ def solve_at(
     build, solve, certify = time.perf_counter() - t0, 0.0, 0.0
     log: list[str] = []
     last_round = first_round + ws.refinement_rounds
+    slowest = 0.0
     for round_index in range(first_round, last_round + 1):
+        t_round = time.perf_counter()
         attempt = solve_rows(state, target, cfg, T, extra, previous=previous, initvals=initvals,
                              seed=seed if round_index == first_round else None, worth_fov=worth_fov)
         attempt.refined, attempt.rows, attempt.rounds = round_index > 0, extra, round_index
@@ -226,6 +231,11 @@ def solve_at(
             return attempt
         log.append("workspace: " + "; ".join(str(c) for c in report.checks if not c.certified))
         if round_index == last_round:
+            attempt.log = tuple(log)
+            return attempt
+        slowest = max(slowest, time.perf_counter() - t_round)
+        if deadline_at is not None and time.perf_counter() + slowest > deadline_at:
+            log.append(f"deadline: no time for refinement round {round_index + 1} (predicted {slowest * 1e3:.2f} ms)")
             attempt.log = tuple(log)
             return attempt
         tb = time.perf_counter()

@@ -728,10 +728,18 @@ class ReplanConfig:
         0.25 s: 0.15 s gave identical outcomes (6 seeds, wall at 4.5 / 7.5 m): replans that late
         do not pass the trackability certificate anyway, so the freeze only saves solves.
     deadline:
-        A step whose solves take longer than this (s, wall clock) discards the last as too late
-        (committing a certified smallest fraction if it has one); ``None``: no deadline (use
-        ``None`` in simulation for deterministic runs). A ``retime_retries`` retry is started
-        only while it and the smallest fraction, each as slow as the nominal solve, fit.
+        A budget (s, wall clock since the step began) for a replanning step; ``None``: no
+        deadline. A solve after the step's first starts only while it, predicted as slow as the
+        first (solve and certificates), fits (a ``retime_retries`` retry only while it and the
+        smallest fraction fit), and each planning call gets the time left
+        (:func:`avp.plan_detailed` ``deadline``: no time-search step or refinement round that
+        would overrun). When nothing more fits, a certified smallest fraction is committed if
+        the step has one, else the committed plan is kept; a solve that still ends past the
+        deadline is discarded as too late (the same fallback). ``None`` by default, so that a
+        run makes the same decisions on any machine (the simulator's figures). Measured
+        (``docs/performance.md``): 4 ms gave no step over 5 ms in 11,438 (p99 3.6 ms, against
+        143 over 5 ms and p99 5.6 ms without) and cost 3-5 perches in 100 on the realistic wall,
+        where the retimed retries no longer fit.
     measured_orders:
         When re-anchoring: derivative orders taken from odometry (2: position and velocity, yaw
         and yaw rate); higher orders come from the committed plan, so commands stay continuous (6).

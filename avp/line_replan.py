@@ -89,7 +89,8 @@ class LineReplanner(Replanner):
         return True
 
     def _solve(  # type: ignore[override]  # returns the duck-compatible LinePlanResult
-        self, state: State, durations: Array | None, previous: Trajectory | None, config: PlannerConfig
+        self, state: State, durations: Array | None, previous: Trajectory | None, config: PlannerConfig,
+        deadline: float | None = None,  # not used: this planner has no time budget
     ) -> LinePlanResult:
         assert isinstance(self.target, LineTarget)
         if durations is None:  # the first plan: the duration search of ``config``

@@ -512,7 +512,8 @@ class MovingReplanner(Replanner):
         return super().step(t, odometry, target_estimate)
 
     def _solve(  # type: ignore[override]  # returns the duck-compatible MovingPlanResult
-        self, state: State, durations: Array | None, previous: Trajectory | None, config: PlannerConfig
+        self, state: State, durations: Array | None, previous: Trajectory | None, config: PlannerConfig,
+        deadline: float | None = None,  # not used: this planner has no time budget
     ) -> MovingPlanResult:
         assert isinstance(self.target, MovingTarget)
         duration = float(np.sum(durations)) if durations is not None else None

@@ -11,6 +11,7 @@ from typing import Any
 
 import numpy as np
 
+from . import _validate as v
 from ._typing import Array
 from .attempt import Attempt, solve_at
 from .bounds import BoundReport, certify_spline
@@ -56,6 +57,7 @@ class PlanStatus(Enum):
     SOLVER_FAILED = "solver failed: no usable solution from the QP back-end"
     BOUNDS_NOT_CERTIFIED = "actuator bounds not certified within the allowed time changes"
     WORKSPACE_NOT_CERTIFIED = "no trajectory keeps the workspace limits certified (see safety)"
+    OUT_OF_TIME = "stopped at the deadline before a certified plan (see log)"
 
     @property
     def has_trajectory(self) -> bool:
@@ -204,6 +206,7 @@ def plan_detailed(
     durations: Any = None,
     previous: Trajectory | None = None,
     warm_start: Trajectory | None = None,
+    deadline: float | None = None,
 ) -> PlanResult:
     """Plan a perch and report what happened; raises only for bad input or a missing solver.
 
@@ -228,8 +231,19 @@ def plan_detailed(
         score (:mod:`avp.attempt`); the plan's coefficients are not used.
     warm_start:
         A plan whose shape seeds the back-end's initial guess (ProxQP, OSQP; DAQP ignores it).
+    deadline:
+        A time budget (s, wall clock, from the call): an attempt after the first (a time-search
+        step, a stage, the FoV re-solve of a certified step), or a workspace refinement round
+        within one, starts only while it, predicted as slow as the slowest so far, fits (an
+        attempt cut short is not certified and says so). When none fits the plan ends with
+        ``PlanStatus.OUT_OF_TIME`` (no trajectory stands behind it), or, when only the FoV
+        re-solve is left, as ``SOLVED_WITHOUT_FOV`` with its certified FoV-free plan.
+        ``None``: no budget (the decisions then do not depend on the machine's speed).
     """
     t_start = time.perf_counter()
+    if deadline is not None:
+        v.positive_float("deadline", deadline)
+    deadline_at = None if deadline is None else t_start + deadline
     cfg = _check_inputs(state, target, config)
     T0 = check_durations(durations, cfg) if durations is not None else initial_durations(state, target, cfg)
     check_request(state, target, cfg, float(T0.sum()))  # physical sense of the request
@@ -241,6 +255,15 @@ def plan_detailed(
                    f"differs from R_WS by {math.degrees(frame_error):.2f} deg")
     build = solve = certify = 0.0
     attempts = 0
+    slowest = 0.0  # the longest attempt so far (s): the predicted cost of the next (deadline)
+
+    def out_of_time() -> bool:
+        """With a deadline: no further attempt, as slow as the slowest so far, fits."""
+        if deadline is None or attempts == 0 or time.perf_counter() - t_start + slowest <= deadline:
+            return False
+        log.append(f"deadline {deadline * 1e3:.2f} ms: stopped after {attempts} attempt(s) in "
+                   f"{(time.perf_counter() - t_start) * 1e3:.2f} ms (the next predicted {slowest * 1e3:.2f} ms)")
+        return True
     relaxed: list[Relaxation] = []
     last: Attempt | None = None
     unsafe: Attempt | None = None  # latest attempt whose bounds held but whose workspace did not
@@ -302,6 +325,9 @@ def plan_detailed(
         search_cfg: PlannerConfig | None = None  # stage_cfg without FoV rows, built when first needed
         factor: float | None = 1.0
         while factor is not None:
+            if out_of_time():
+                return finish(PlanStatus.OUT_OF_TIME, last, T0 if last is None or last.trajectory is None
+                              else last.trajectory.durations)
             T = T0 * factor
             if factor != 1.0 or stage is not None:
                 log.append(f"durations x{factor:.4g}: total {T.sum():.3f} s")
@@ -316,9 +342,11 @@ def plan_detailed(
                 search_cfg = stage_cfg if not stage_cfg.fov.enabled else replace(
                     stage_cfg, fov=replace(stage_cfg.fov, enabled=False))
             attempt_cfg = stage_cfg if first or search_cfg is None else search_cfg
+            t_attempt = time.perf_counter()
             attempt = solve_at(state, target, attempt_cfg, T, previous=previous, initvals=initvals,
                                worth_fov=within_sampled if first and cfg.bounds.certify else None,
-                               ws_rows=ws_rows)
+                               ws_rows=ws_rows, deadline_at=deadline_at)
+            slowest = max(slowest, time.perf_counter() - t_attempt)
             log.extend(attempt.log)
             attempt.relaxations = tuple(relaxed)
             attempts += 1
@@ -341,11 +369,15 @@ def plan_detailed(
             t_cert = time.perf_counter()
             report = _certify(attempt.trajectory, cfg)
             certify += time.perf_counter() - t_cert
+            slowest = max(slowest, time.perf_counter() - t_attempt)
             if report.certified and attempt.safe:
                 log.append("bounds certified (Algorithm 1, exact)")
-                if attempt_cfg is not stage_cfg:
+                if attempt_cfg is not stage_cfg and out_of_time():
+                    log.append("FoV rows not added back: no time for the re-solve")
+                    attempt.fov_dropped = True
+                elif attempt_cfg is not stage_cfg:
                     with_fov, fov_report = _with_fov(state, target, stage_cfg, T, log, previous, initvals, attempt,
-                                                     report, ws_rows)
+                                                     report, ws_rows, deadline_at)
                     with_fov.relaxations = attempt.relaxations
                     attempts += 1
                     build, solve, certify = (build + with_fov.build, solve + with_fov.solve,
@@ -401,12 +433,13 @@ def _measured(traj: Trajectory, target: PerchTarget, cfg: PlannerConfig) -> str:
 def _with_fov(
     state: State, target: PerchTarget, cfg: PlannerConfig, T: Array, log: list[str],
     previous: Trajectory | None, initvals: Array | None, seed: Attempt, seed_report: BoundReport,
-    ws_rows: dict[bytes, tuple[ConstraintBlock, ...]] | None = None,
+    ws_rows: dict[bytes, tuple[ConstraintBlock, ...]] | None = None, deadline_at: float | None = None,
 ) -> tuple[Attempt, tuple[BoundReport | None, float]]:
     """Re-solve a certified search step ``seed`` (bounds: ``seed_report``) with the FoV rows (the
     SQP starts from that step's plan); ``(attempt, (report, seconds))`` with ``report`` set only
     when that plan certifies too (bounds and workspace)."""
-    attempt = solve_at(state, target, cfg, T, previous=previous, initvals=initvals, seed=seed, ws_rows=ws_rows)
+    attempt = solve_at(state, target, cfg, T, previous=previous, initvals=initvals, seed=seed, ws_rows=ws_rows,
+                       deadline_at=deadline_at)
     log.extend(attempt.log)
     if attempt.trajectory is None or not attempt.safe or attempt.fov_dropped:
         log.append("FoV rows dropped (16): the plan with them did not solve or certify")

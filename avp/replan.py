@@ -69,6 +69,33 @@ __all__ = ["ReplanAction", "ReplanConfig", "ReplanStep", "Replanner", "anticipat
 _PLANNING_ERRORS = (AvpError, ValueError, ArithmeticError, np.linalg.LinAlgError, RuntimeError)
 """Exceptions a planning call may raise that :meth:`Replanner.step` turns into a result."""
 
+_clock = time.perf_counter
+"""The wall clock (s) of the solve times and of ``ReplanConfig.deadline`` (tests replace it)."""
+
+
+class _StepBudget:
+    """``ReplanConfig.deadline`` of one step: the wall time used since the step began, and the
+    predicted cost of one more planning attempt (the step's first: its solve and certificates)."""
+
+    def __init__(self, deadline: float | None) -> None:
+        self.deadline = deadline
+        self.t0 = _clock()
+        self.per_attempt: float | None = None
+
+    def used(self) -> float:
+        return _clock() - self.t0
+
+    def fits(self, n: int) -> bool:
+        """No deadline, or ``n`` more attempts, each as slow as the first, still fit."""
+        return self.deadline is None or self.per_attempt is None or self.used() + n * self.per_attempt <= self.deadline
+
+    def left(self) -> float | None:
+        """The time left (s) for a planning call (``None``: no deadline)."""
+        return None if self.deadline is None else max(self.deadline - self.used(), 1e-6)
+
+    def overrun(self) -> bool:
+        return self.deadline is not None and self.used() > self.deadline
+
 
 class ReplanAction(Enum):
     """What one :meth:`Replanner.step` did."""
@@ -310,6 +337,7 @@ class Replanner:
         committed = self.trajectory
         assert committed is not None
         rc = self.replan
+        timer = _StepBudget(rc.deadline)
         t_ex = self._switch_time(committed, t + self.latency)
         remaining = committed.tf - t_ex
         shift, turn = self._change(self.committed_target, self.target)
@@ -362,11 +390,20 @@ class Replanner:
         # Order: the full (first) fraction, then the smallest; only if the smallest certifies,
         # the ones between, largest first (a step that cannot correct at all costs two solves
         # and the failed retimed retries).
-        # With a deadline, a certified smallest correction is committed when the time runs out.
+        # With a deadline, a solve starts only while it is predicted to fit, and a certified
+        # smallest correction is committed when the time runs out.
         probe_smallest = len(fractions) >= 3
         order = [fractions[0], fractions[-1], *fractions[1:-1]] if probe_smallest else list(fractions)
         for k, frac in enumerate(order):
             f = frac * f_max
+            if not timer.fits(1):
+                if smallest is not None:
+                    return commit(*smallest)
+                late = f"deadline {(rc.deadline or 0.0) * 1e3:.1f} ms: no time for the {f:.0%} correction"
+                return record(ReplanAction.KEPT_PREVIOUS,
+                              f"{late} after {n_solves} solves ({timer.used() * 1e3:.1f} ms); {last_reason}",
+                              anticipated=start, result=last_result, solve_time=elapsed_total, anchored=anchored,
+                              n_solves=n_solves)
             goal = _blend(self.committed_target, self.target, f) if f < 1.0 else self.target
             total = self._retimed(remaining, goal)
             # The full correction is solved again with the time left scaled (retime_retries) when
@@ -374,30 +411,34 @@ class Replanner:
             # subclasses keep the committed contact time), and not in the last retime_min_time.
             retry = k == 0 and self._static_pad and remaining >= rc.retime_min_time
             factors = (1.0, *rc.retime_retries) if retry else (1.0,)
-            nominal: tuple[PlanResult | None, str, float] | None = None  # reported if no retry certifies
+            nominal: tuple[PlanResult | None, str] | None = None  # reported if no retry certifies
             tried: list[float] = []
             for factor in factors:
-                if nominal is not None and rc.deadline is not None and elapsed_total + 2.0 * nominal[2] > rc.deadline:
+                if nominal is not None and not timer.fits(2):
                     break  # a retry and then the smallest fraction would not fit the deadline: go to the fractions
                 tried.append(factor)
                 durations = self._durations(committed, t_ex, factor * total)
-                result, elapsed, error = self._plan(start, goal, durations, committed, self._replan_config)
+                t_attempt = timer.used()
+                result, elapsed, error = self._plan(start, goal, durations, committed, self._replan_config,
+                                                    deadline=timer.left())
                 elapsed_total += elapsed
                 n_solves += 1
                 last_result = result
-                if rc.deadline is not None and elapsed_total > rc.deadline:
+                if timer.overrun():
                     if smallest is not None:  # a certified correction is at hand: commit it, solve no more
                         return commit(*smallest)
-                    return record(ReplanAction.KEPT_PREVIOUS, f"too late: solves took {elapsed_total * 1e3:.1f} ms > "
-                                  f"deadline {rc.deadline * 1e3:.1f} ms", anticipated=start, result=result,
+                    return record(ReplanAction.KEPT_PREVIOUS, f"too late: the step took {timer.used() * 1e3:.1f} ms > "
+                                  f"deadline {(rc.deadline or 0.0) * 1e3:.1f} ms", anticipated=start, result=result,
                                   solve_time=elapsed_total, anchored=anchored, n_solves=n_solves)
                 ok, why, snap, only_certificate = self._certified(result)
+                if timer.per_attempt is None:
+                    timer.per_attempt = timer.used() - t_attempt
                 if error is not None:
                     why, only_certificate = error, False
                 if ok:
                     break
                 if nominal is None:
-                    nominal = (result, why, elapsed)
+                    nominal = (result, why)
                     if not only_certificate:
                         break  # only a plan that failed a certificate is retried
             if not ok and nominal is not None:  # report the nominal time's plan and reason
@@ -469,33 +510,35 @@ class Replanner:
 
     def _plan(
         self, state: State, target: PerchTarget, durations: Array | None, previous: Trajectory | None,
-        config: PlannerConfig,
+        config: PlannerConfig, deadline: float | None = None,
     ) -> tuple[PlanResult | None, float, str | None]:
-        t0 = time.perf_counter()
+        t0 = _clock()
         try:
             with serial_blas():  # no wait for a second core (avp._blas)
                 if target is self.target:
-                    result = self._solve(state, durations, previous, config)
+                    result = self._solve(state, durations, previous, config, deadline=deadline)
                 else:  # a blended (partial) target: only the static-pad hook plans to another target
-                    result = Replanner._solve(self, state, durations, previous, config, target=target)
+                    result = Replanner._solve(self, state, durations, previous, config, target=target,
+                                              deadline=deadline)
         except _PLANNING_ERRORS as exc:  # never raise for a planning or solver failure
-            elapsed = time.perf_counter() - t0
+            elapsed = _clock() - t0
             self._solve_times.append(elapsed)
             return None, elapsed, f"{type(exc).__name__}: {exc}"
-        elapsed = time.perf_counter() - t0
+        elapsed = _clock() - t0
         self._solve_times.append(elapsed)
         return result, elapsed, None
 
     def _solve(
         self, state: State, durations: Array | None, previous: Trajectory | None, config: PlannerConfig,
-        target: PerchTarget | None = None,
+        target: PerchTarget | None = None, deadline: float | None = None,
     ) -> PlanResult:
-        """One planning call to ``target`` (default: the latest estimate); the hook a subclass for
-        another target model overrides (it then plans to its own ``self.target``, and the policy
-        uses full corrections only: no blending, reach budget or ``CANNOT_REACH``)."""
+        """One planning call to ``target`` (default: the latest estimate) within ``deadline`` (s,
+        :func:`avp.plan_detailed`); the hook a subclass for another target model overrides (it
+        then plans to its own ``self.target``, and the policy uses full corrections only: no
+        blending, reach budget or ``CANNOT_REACH``; its planner may ignore the deadline)."""
         return plan_detailed(
             state, target if target is not None else self.target, config, durations=durations,
-            previous=previous, warm_start=previous if self.replan.warm_start else None,
+            previous=previous, warm_start=previous if self.replan.warm_start else None, deadline=deadline,
         )
 
     _target_type: type = PerchTarget

@@ -205,3 +205,71 @@ def test_alpha_nominal_sets_the_contact_thrust_on_steep_pads_only() -> None:
     for bad in (0.0, -1.0, math.nan):
         with pytest.raises(avp.ConfigError, match="config.alpha_nominal"):
             avp.PlannerConfig(alpha_nominal=bad)
+
+
+# Gao et al.'s tight limits (benchmarks/bench_gao_perch.py): a near rest-to-rest 60 deg perch
+# needs a time search (two failing durations, then a certified one, then the FoV re-solve).
+GAO_LIMITS = avp.VehicleLimits(mass=1.0, thrust_min=5.0, thrust_max=17.0, tilt_rate_max=3.0)
+
+
+def _searching_request():
+    cfg = avp.PlannerConfig(limits=GAO_LIMITS, alpha=5.5,
+                            contact_velocity=avp.ContactVelocity(normal=-0.05, slope=0.0, lateral=0.0))
+    return avp.State.hover([0.0, 0.0, 1.5]), avp.PerchTarget.from_incline([3.0, 0.0, 1.5], math.radians(60.0)), cfg
+
+
+def test_a_deadline_that_leaves_no_time_ends_the_plan_out_of_time_without_a_trajectory():
+    """A deadline shorter than any attempt: the first attempt runs, then nothing else fits, and
+    the result says so (no status that stands behind a trajectory), where the plan without a
+    deadline searches on to a certified one."""
+    state, target, cfg = _searching_request()
+    full = avp.plan_detailed(state, target, cfg)
+    assert full.status is avp.PlanStatus.SOLVED and full.duration_scale_steps >= 2
+    cut = avp.plan_detailed(state, target, cfg, deadline=1e-9)
+    assert cut.status is avp.PlanStatus.OUT_OF_TIME and not cut.ok and not cut.status.has_trajectory
+    assert cut.duration_scale_steps == 0 and cut.log[-1].startswith("deadline")
+
+
+def test_a_generous_deadline_changes_nothing():
+    state, target, cfg = _searching_request()
+    full = avp.plan_detailed(state, target, cfg)
+    timed = avp.plan_detailed(state, target, cfg, deadline=60.0)
+    assert timed.status is full.status and timed.duration_scale_steps == full.duration_scale_steps
+    assert np.array_equal(timed.trajectory.coefficients, full.trajectory.coefficients)
+    assert np.array_equal(timed.trajectory.knots, full.trajectory.knots)
+
+
+@pytest.mark.parametrize(("deadline", "want"), [(2.5, avp.PlanStatus.OUT_OF_TIME),
+                                                (3.5, avp.PlanStatus.SOLVED_WITHOUT_FOV),
+                                                (4.0, avp.PlanStatus.SOLVED)])
+def test_an_attempt_starts_only_while_it_is_predicted_to_fit_the_deadline(monkeypatch, deadline, want):
+    """Each attempt (one duration of the search, or the FoV re-solve) made to take 1 s on a clock
+    that otherwise stands still: the search needs three attempts and then the FoV re-solve, so a
+    2.5 s deadline stops it after two, 3.5 s keeps the certified FoV-free plan (and says why),
+    and 4 s runs it all. The same durations and plan where one is returned."""
+    import types
+
+    import avp.planner as planner
+
+    state, target, cfg = _searching_request()
+    full = avp.plan_detailed(state, target, cfg)
+    clock = [0.0]
+    real_solve_at = planner.solve_at
+
+    def slow_solve_at(*args, **kw):
+        clock[0] += 1.0
+        return real_solve_at(*args, **kw)
+
+    monkeypatch.setattr(planner, "time", types.SimpleNamespace(perf_counter=lambda: clock[0]))
+    monkeypatch.setattr(planner, "solve_at", slow_solve_at)
+    r = avp.plan_detailed(state, target, cfg, deadline=deadline)
+    assert r.status is want
+    assert clock[0] <= deadline  # no attempt was started that the prediction said would overrun
+    if want is avp.PlanStatus.OUT_OF_TIME:
+        assert r.trajectory is None or not r.ok
+        assert clock[0] == 2.0
+        return
+    assert np.array_equal(r.trajectory.coefficients, full.trajectory.coefficients)
+    assert r.fov_dropped is (want is avp.PlanStatus.SOLVED_WITHOUT_FOV)
+    if r.fov_dropped:
+        assert "FoV rows not added back: no time for the re-solve" in r.log

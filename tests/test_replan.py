@@ -176,6 +176,23 @@ def test_a_late_jump_of_the_estimate_is_reported_as_cannot_reach():
     assert last.reach_budget < 0.5  # the numbers say why: the budget has collapsed
 
 
+class _FakeClock:
+    """A wall clock that stands still except where a test advances it."""
+
+    def __init__(self) -> None:
+        self.now = 0.0
+
+    def __call__(self) -> float:
+        return self.now
+
+
+def _slow_solves(monkeypatch) -> _FakeClock:
+    """Replace the replanner's clock (solve times, deadline) by one the test advances."""
+    clock = _FakeClock()
+    monkeypatch.setattr(avp.replan, "_clock", clock)
+    return clock
+
+
 def _fraction_probe(monkeypatch, certifies, replan=None, elapsed=None):
     """A replanner after its first plan whose certificate is replaced by ``certifies(fraction)``
     (and, with ``elapsed``, each planning call reported to take that long, s); returns it and the
@@ -184,11 +201,15 @@ def _fraction_probe(monkeypatch, certifies, replan=None, elapsed=None):
     rp.step(0.0, START)
     tried: list[float] = []
     real_plan = rp._plan
+    clock = _slow_solves(monkeypatch) if elapsed is not None else None
 
-    def plan(state, target, *args):
+    def plan(state, target, *args, **kw):
         tried.append(float(np.linalg.norm(target.point - WALL.point) / 0.04))
-        result, took, error = real_plan(state, target, *args)
-        return result, took if elapsed is None else elapsed, error
+        result, took, error = real_plan(state, target, *args, **kw)
+        if clock is None:
+            return result, took, error
+        clock.now += elapsed
+        return result, elapsed, error
 
     def certified(result, trackability=True):
         ok = certifies(tried[-1])
@@ -236,8 +257,31 @@ def test_a_deadline_commits_the_certified_smallest_correction(monkeypatch):
 
     rp, tried = _fraction_probe(monkeypatch, lambda f: f < 0.2, ReplanConfig(deadline=2.5), elapsed=1.0)
     s = rp.step(t, _fly_reference(rp, t), MOVED)
-    assert tried == pytest.approx([1.0, 0.125, 0.5])  # the third solve ends past 2.5 s
-    assert s.action is ReplanAction.PARTIAL and s.fraction == pytest.approx(0.125) and s.n_solves == 3
+    assert tried == pytest.approx([1.0, 0.125])  # a third solve would end past 2.5 s: not started
+    assert s.action is ReplanAction.PARTIAL and s.fraction == pytest.approx(0.125) and s.n_solves == 2
+
+
+@pytest.mark.parametrize(("deadline", "want_tried", "want_action"),
+                         [(1.5, [1.0], ReplanAction.KEPT_PREVIOUS),  # no time even for 1/8
+                          (2.0, [1.0, 0.125], ReplanAction.PARTIAL),  # exactly two solves fit
+                          (3.99, [1.0, 0.125, 0.5], ReplanAction.PARTIAL),
+                          (4.0, [1.0, 0.125, 0.5, 0.25], ReplanAction.PARTIAL)])
+def test_a_deadline_starts_only_the_solves_predicted_to_fit(monkeypatch, deadline, want_tried, want_action):
+    """Every solve takes 1 s and only 1/8 certifies: a solve starts only while the step's
+    solves so far plus one more (as slow as the first) fit the deadline, so the step never
+    overruns it, and it commits the certified 1/8 when nothing more fits."""
+    t = 0.4
+    rp, tried = _fraction_probe(monkeypatch, lambda f: f < 0.2, ReplanConfig(deadline=deadline), elapsed=1.0)
+    first = rp.trajectory
+    s = rp.step(t, _fly_reference(rp, t), MOVED)
+    assert tried == pytest.approx(want_tried)
+    assert s.n_solves == len(want_tried) and s.solve_time == pytest.approx(len(want_tried))
+    assert s.solve_time <= deadline
+    assert s.action is want_action
+    if want_action is ReplanAction.KEPT_PREVIOUS:
+        assert rp.trajectory is first and "no time for the 12% correction after 1 solves" in s.reason
+    else:
+        assert s.fraction == pytest.approx(0.125) and rp.trajectory is s.trajectory is not first
 
 
 def _replan_to_committed_target(keep_knots: bool, t: float):
@@ -483,9 +527,9 @@ def test_a_retimed_commit_is_certified_and_its_nominal_time_was_not(monkeypatch)
     calls: list[tuple[int, tuple]] = []
 
     class Recording(Replanner):
-        def _plan(self, state, target, durations, previous, config):
+        def _plan(self, state, target, durations, previous, config, deadline=None):
             calls.append((len(self.history), (state, target, durations, previous, config)))
-            return super()._plan(state, target, durations, previous, config)
+            return super()._plan(state, target, durations, previous, config, deadline)
 
     monkeypatch.setattr(avp.sim.run, "Replanner", Recording)
     sc = SimConfig().scenario(90.0, 4.5)
@@ -531,11 +575,15 @@ def _failing_full_corrections(rc, monkeypatch, elapsed=None, static=True):
     rp.step(0.0, START)
     calls: list[tuple[object, float]] = []
     plan, certified = rp._plan, rp._certified
+    clock = _slow_solves(monkeypatch) if elapsed is not None else None
 
-    def fake_plan(state, target, durations, previous, config):
-        result, took, error = plan(state, target, durations, previous, config)
+    def fake_plan(state, target, durations, previous, config, deadline=None):
+        result, took, error = plan(state, target, durations, previous, config, deadline)
         calls.append((target, float(np.sum(durations))))
-        return result, took if elapsed is None else elapsed, error
+        if clock is None:
+            return result, took, error
+        clock.now += elapsed
+        return result, elapsed, error
 
     def fake_certified(result, trackability=True):
         ok, why, snap, only = certified(result, trackability)
@@ -578,8 +626,8 @@ def test_no_retries_for_a_plan_that_failed_other_than_a_certificate(monkeypatch)
     plan = rp._plan
     full_calls: list[float] = []
 
-    def infeasible_full(state, target, durations, previous, config):
-        result, took, error = plan(state, target, durations, previous, config)
+    def infeasible_full(state, target, durations, previous, config, deadline=None):
+        result, took, error = plan(state, target, durations, previous, config, deadline)
         if target is rp.target:
             full_calls.append(float(np.sum(durations)))
             return dataclasses.replace(result, status=PlanStatus.INFEASIBLE), took, error
@@ -633,7 +681,7 @@ def test_retries_only_for_a_static_pad_and_not_late(monkeypatch):
 def test_retries_leave_room_for_the_smallest_fraction_within_the_deadline(monkeypatch):
     """With a deadline, a retry starts only while it and the smallest fraction fit: with every
     solve taking 1 ms and a 3.5 ms deadline, the nominal time and one retry are solved, then the
-    smallest fraction, which is committed when the next solve overruns."""
+    smallest fraction, which is committed since no further solve fits."""
     rc = ReplanConfig(deadline=3.5e-3)
     rp, calls = _failing_full_corrections(rc, monkeypatch, elapsed=1e-3)
     s = _moved_wall_step(rp)
