@@ -51,6 +51,7 @@ from avp._blas import serial_blas
 from avp.planner import plan_detailed
 from avp.qp import assemble
 from avp.replan import ReplanConfig, Replanner
+from avp.sim.evaluate import SimConfig
 from avp.sim.run import Mode, SimScenario, simulate
 
 _GC = [0, 0]  # collections started, of which of the oldest generation
@@ -84,9 +85,11 @@ class TimedReplanner(Replanner):
         ))
         return s
 
-    def _plan(self, state: Any, target: Any, durations: Any, previous: Any, config: Any) -> Any:
-        TimedReplanner.calls.append((len(TimedReplanner.records), (state, target, durations, previous, config)))
-        return super()._plan(state, target, durations, previous, config)
+    def _plan(self, state: Any, target: Any, durations: Any, previous: Any, config: Any,
+              deadline: Any = None) -> Any:
+        TimedReplanner.calls.append((len(TimedReplanner.records),
+                                     (state, target, durations, previous, config, deadline)))
+        return super()._plan(state, target, durations, previous, config, deadline)
 
 
 STAGES = (  # (module, function, label): CPU inside Replanner.step, per planning call
@@ -156,14 +159,14 @@ _EVICT: list[np.ndarray] = []  # the --evict-mb buffer, when asked for
 
 def bare(args: tuple[Any, ...], warm: bool) -> float:
     """CPU seconds of one bare ``plan_detailed`` at a step's planning arguments."""
-    state, target, durations, previous, config = args
+    state, target, durations, previous, config, deadline = args
     for buf in _EVICT:  # untimed: push the planner's data out of the CPU caches
         buf += 1.0
     c0 = time.thread_time()
     try:
         with serial_blas():  # as Replanner.step plans (avp._blas)
             plan_detailed(state, target, config, durations=durations, previous=previous,
-                          warm_start=previous if warm else None)
+                          warm_start=previous if warm else None, deadline=deadline)
     except Exception:  # the step turned the same failure into a result
         pass
     return time.thread_time() - c0
@@ -192,6 +195,12 @@ def main() -> None:
                     help="stream through this many MB before each bare call (cold data caches, as in the loop)")
     ap.add_argument("--stages", action="store_true",
                     help="also print where the steps' CPU goes, per planning call (wrappers add a little)")
+    ap.add_argument("--deadline-ms", type=float, default=None,
+                    help="ReplanConfig.deadline (ms): a solve starts only while it is predicted to fit "
+                         "(decisions then depend on this machine's speed)")
+    ap.add_argument("--realistic", action="store_true",
+                    help="the realistic simulator of the success sweeps (SimConfig().scenario: motor lag, "
+                         "odometry drift, biased detections) instead of SimScenario's defaults")
     ap.add_argument("--save", help="write the decisions and committed-plan digests to this JSON file")
     ap.add_argument("--compare", help="compare the decisions and plans with this JSON file")
     args = ap.parse_args()
@@ -200,12 +209,13 @@ def main() -> None:
         _EVICT.append(np.zeros(int(args.evict_mb * 2**20 / 8)))
     gc.callbacks.append(_count_gc)
     sim_run.Replanner = TimedReplanner  # type: ignore[misc]  # the loop builds this class
+    replan_cfg = ReplanConfig(deadline=None if args.deadline_ms is None else args.deadline_ms * 1e-3)
     if args.previous:
         use_previous_paths()
     if args.stages:
         instrument_stages()
     if args.gc_freeze:
-        simulate(SimScenario(distance=args.distances[0]), Mode.AVP, seed=10**6)  # not counted
+        simulate(SimScenario(distance=args.distances[0]), Mode.AVP, seed=10**6, replan=replan_cfg)  # not counted
         gc.collect()
         gc.freeze()
     rows: list[dict[str, Any]] = []
@@ -216,7 +226,8 @@ def main() -> None:
             for seed in range(args.seeds):
                 TimedReplanner.records, TimedReplanner.calls = [], []
                 before = _factor_cache()
-                r = simulate(SimScenario(distance=d, incline=math.radians(inc)), Mode.AVP, seed=seed)
+                sc = SimConfig().scenario(inc, d) if args.realistic else SimScenario(distance=d, incline=math.radians(inc))
+                r = simulate(sc, Mode.AVP, seed=seed, replan=replan_cfg)
                 recs, calls = TimedReplanner.records, TimedReplanner.calls
                 after = _factor_cache()
                 _set_factor_cache(before)  # the replay meets the elimination cache the loop met

@@ -20,6 +20,7 @@ import warnings
 
 import numpy as np
 
+from avp.replan import ReplanConfig
 from avp.sim.evaluate import SimConfig, sweep
 
 
@@ -34,7 +35,10 @@ def main() -> None:
                     help="which estimate variants to run (one each on two processes halves the wall time)")
     ap.add_argument("--no-drag-feedforward", action="store_true", help="rotorpy without the drag feed-forward")
     ap.add_argument("--no-lag-feedforward", action="store_true", help="the controller without its thrust lead")
+    ap.add_argument("--deadline-ms", type=float, default=None,
+                    help="ReplanConfig.deadline (ms) of AVP's steps (decisions then depend on this machine's speed)")
     args = ap.parse_args()
+    replan = None if args.deadline_ms is None else ReplanConfig(deadline=args.deadline_ms * 1e-3)
     backends = [b for b in args.backends if b == "avp" or importlib.util.find_spec("rotorpy") is not None]
     if len(backends) < len(args.backends):
         print('rotorpy is not installed (pip install "avp[rotorpy]"): avp back-end only')
@@ -48,7 +52,7 @@ def main() -> None:
             if label not in args.estimates:
                 continue
             t0 = time.perf_counter()
-            res = sweep(dataclasses.replace(cfg, backend=backend))
+            res = sweep(dataclasses.replace(cfg, backend=backend), replan=replan)
             wall = time.perf_counter() - t0
             for p in res.points:
                 lo, hi = p.interval

@@ -16,6 +16,7 @@ import warnings
 
 from _grid import grid_parser
 
+from avp.replan import ReplanConfig
 from avp.sim.evaluate import SimConfig, sweep
 
 AXES = {
@@ -35,17 +36,20 @@ def main() -> None:
                     help="conditions for the one-at-a-time axes (fewer to save time)")
     ap.add_argument("--perfect", action="store_true", help="perfect target estimate and odometry")
     ap.add_argument("--out", default=None, help="directory for the plots")
+    ap.add_argument("--deadline-ms", type=float, default=None,
+                    help="ReplanConfig.deadline (ms) of AVP's steps (decisions then depend on this machine's speed)")
     args = ap.parse_args()
     warnings.simplefilter("ignore")
     cfg = SimConfig(n_trials=args.trials, seed=args.seed, inclines_deg=tuple(args.inclines),
                     distances=tuple(args.distances))
     if args.perfect:
         cfg = cfg.perfect_estimate()
-    res = sweep(cfg, progress=True)
+    replan = None if args.deadline_ms is None else ReplanConfig(deadline=args.deadline_ms * 1e-3)
+    res = sweep(cfg, progress=True, replan=replan)
     print(res.report(), flush=True)
     if args.axes:
         axis_cfg = dataclasses.replace(cfg, inclines_deg=tuple(args.axis_inclines))
-        ax = sweep(axis_cfg, AXES, include_base=False, progress=True)
+        ax = sweep(axis_cfg, AXES, include_base=False, progress=True, replan=replan)
         print(ax.report(), flush=True)
         if args.out:
             for p in ax.plot(args.out):
