@@ -87,6 +87,9 @@ class Attempt:
         from it).
     sqp_steps, linearisation:
         FoV steps kept and the linearisation of the returned plan's rows.
+    out_of_time:
+        A refinement round was not started for lack of time (a deadline): the workspace is not
+        certified because the attempt was cut short, not because no plan keeps it.
     """
 
     outcome: QpOutcome | None
@@ -104,6 +107,7 @@ class Attempt:
     qp: PerchingQp | None = None
     sqp_steps: int = 0
     linearisation: FovLinearisation | None = None
+    out_of_time: bool = False
 
     @property
     def safe(self) -> bool:
@@ -204,9 +208,9 @@ def solve_at(
     build, solve, certify = time.perf_counter() - t0, 0.0, 0.0
     log: list[str] = []
     last_round = first_round + ws.refinement_rounds
-    slowest = 0.0
+    slowest = rows_build = 0.0  # the slowest round (s) and the last refinement rows' build
     for round_index in range(first_round, last_round + 1):
-        t_round = time.perf_counter()
+        t_round = time.perf_counter()  # a round: its solve and certificate (plus its rows' build below)
         attempt = solve_rows(state, target, cfg, T, extra, previous=previous, initvals=initvals,
                              seed=seed if round_index == first_round else None, worth_fov=worth_fov)
         attempt.refined, attempt.rows, attempt.rounds = round_index > 0, extra, round_index
@@ -233,14 +237,15 @@ def solve_at(
         if round_index == last_round:
             attempt.log = tuple(log)
             return attempt
-        slowest = max(slowest, time.perf_counter() - t_round)
+        slowest = max(slowest, time.perf_counter() - t_round + rows_build)
         if deadline_at is not None and time.perf_counter() + slowest > deadline_at:
             log.append(f"deadline: no time for refinement round {round_index + 1} (predicted {slowest * 1e3:.2f} ms)")
-            attempt.log = tuple(log)
+            attempt.log, attempt.out_of_time = tuple(log), True
             return attempt
         tb = time.perf_counter()
         extra = extra + refinement_blocks(layout, knots_rel, attempt.trajectory, report, round_index + 1, cfg)
-        build += time.perf_counter() - tb
+        rows_build = time.perf_counter() - tb
+        build += rows_build
     raise AssertionError("unreachable")  # pragma: no cover
 
 

@@ -728,17 +728,19 @@ class ReplanConfig:
         0.25 s: 0.15 s gave identical outcomes (6 seeds, wall at 4.5 / 7.5 m): replans that late
         do not pass the trackability certificate anyway, so the freeze only saves solves.
     deadline:
-        A budget (s, wall clock since the step began) for a replanning step; ``None``: no
-        deadline. A solve after the step's first starts only while it, predicted as slow as the
-        first (solve and certificates), fits (a ``retime_retries`` retry only while it and the
-        smallest fraction fit), and each planning call gets the time left
-        (:func:`avp.plan_detailed` ``deadline``: no time-search step or refinement round that
-        would overrun). When nothing more fits, a certified smallest fraction is committed if
-        the step has one, else the committed plan is kept; a solve that still ends past the
-        deadline is discarded as too late (the same fallback). ``None`` by default, so that a
-        run makes the same decisions on any machine (the simulator's figures). Measured
-        (``docs/performance.md``): 4 ms gave no step over 5 ms in 11,438 (p99 3.6 ms, against
-        143 over 5 ms and p99 5.6 ms without) and cost 3-5 perches in 100 on the realistic wall
+        A budget (s, wall clock, from the start of the replanning policy of a step; the first
+        plan has none) for a replanning step; ``None``: no deadline. A solve after the step's
+        first starts only while it, predicted as slow as the first (solve and certificates),
+        fits (a ``retime_retries`` retry only while it and the smallest fraction fit), and a
+        static pad's planning call gets the time left (:func:`avp.plan_detailed` ``deadline``:
+        no time-search step or refinement round that would overrun; the moving-pad and line
+        planners have no budget of their own). When nothing more fits, a certified smallest
+        fraction is committed if the step has one, else the committed plan is kept; a plan that
+        still ends past the deadline, certificates included, is discarded as too late (the same
+        fallback). ``None`` by default, so that a run makes the same decisions on any machine
+        (the simulator's figures). Measured (``docs/performance.md``, CPU time per step): 4 ms
+        gave no step over 5 ms in 11,438 (p99 3.6 ms, against 143 over 5 ms and p99 5.6 ms
+        without) and cost 3-5 perches in 100 on the realistic wall
         of avp's model and 13-17 on rotorpy's, where the retimed retries and fractions of late
         corrections no longer fit; 8 ms cost 2 on rotorpy's wall at 4.5 m.
     measured_orders:

@@ -51,13 +51,15 @@ class PlanStatus(Enum):
     """Outcome of a plan (readable values, as rotorpy's ExitStatus)."""
 
     SOLVED = "solved: every constraint met"
-    SOLVED_WITHOUT_FOV = "solved after dropping the field-of-view rows (16)"
+    SOLVED_WITHOUT_FOV = "solved after dropping the field-of-view rows (16, or a deadline)"
     SOLVED_RELAXED = "solved with soft constraints relaxed (see relaxations)"
     INFEASIBLE = "infeasible: the perching constraints admit no trajectory"
     SOLVER_FAILED = "solver failed: no usable solution from the QP back-end"
     BOUNDS_NOT_CERTIFIED = "actuator bounds not certified within the allowed time changes"
     WORKSPACE_NOT_CERTIFIED = "no trajectory keeps the workspace limits certified (see safety)"
     OUT_OF_TIME = "stopped at the deadline before a certified plan (see log)"
+    """Only with ``plan_detailed(deadline=...)``. Like the other failures, ``ok`` is False; a
+    ``trajectory``, if set, is the last uncertified attempt, for diagnostics only."""
 
     @property
     def has_trajectory(self) -> bool:
@@ -94,7 +96,8 @@ class PlanResult:
     timings:
         :class:`PlanTimings`.
     fov_dropped:
-        The FoV rows were dropped as incompatible (16).
+        The FoV rows were dropped as incompatible (16), or, with a ``deadline``, for lack of time
+        (the log says which).
     duration_scale_steps:
         QP re-solves made by the time search and relaxations after the first one.
     bounds:
@@ -235,14 +238,15 @@ def plan_detailed(
         A time budget (s, wall clock, from the call): an attempt after the first (a time-search
         step, a stage, the FoV re-solve of a certified step), or a workspace refinement round
         within one, starts only while it, predicted as slow as the slowest so far, fits (an
-        attempt cut short is not certified and says so). When none fits the plan ends with
-        ``PlanStatus.OUT_OF_TIME`` (no trajectory stands behind it), or, when only the FoV
-        re-solve is left, as ``SOLVED_WITHOUT_FOV`` with its certified FoV-free plan.
+        attempt cut short is not certified and says so; the first attempt's first round always
+        runs). When none fits the plan ends with ``PlanStatus.OUT_OF_TIME`` (``ok`` is False),
+        or, when only the FoV re-solve is left, with its certified FoV-free plan and
+        ``fov_dropped`` set (``SOLVED_WITHOUT_FOV``, or ``SOLVED_RELAXED`` for a relaxed one).
         ``None``: no budget (the decisions then do not depend on the machine's speed).
     """
     t_start = time.perf_counter()
     if deadline is not None:
-        v.positive_float("deadline", deadline)
+        deadline = v.positive_float("deadline", deadline)
     deadline_at = None if deadline is None else t_start + deadline
     cfg = _check_inputs(state, target, config)
     T0 = check_durations(durations, cfg) if durations is not None else initial_durations(state, target, cfg)
@@ -256,6 +260,7 @@ def plan_detailed(
     build = solve = certify = 0.0
     attempts = 0
     slowest = 0.0  # the longest attempt so far (s): the predicted cost of the next (deadline)
+    cut_short = False  # an attempt's refinement rounds were cut by the deadline
 
     def out_of_time() -> bool:
         """With a deadline: no further attempt, as slow as the slowest so far, fits."""
@@ -347,6 +352,7 @@ def plan_detailed(
                                worth_fov=within_sampled if first and cfg.bounds.certify else None,
                                ws_rows=ws_rows, deadline_at=deadline_at)
             slowest = max(slowest, time.perf_counter() - t_attempt)
+            cut_short = cut_short or attempt.out_of_time
             log.extend(attempt.log)
             attempt.relaxations = tuple(relaxed)
             attempts += 1
@@ -364,7 +370,8 @@ def plan_detailed(
             last = attempt
             if not cfg.bounds.certify:
                 if not attempt.safe:
-                    return finish(PlanStatus.WORKSPACE_NOT_CERTIFIED, attempt, T)
+                    status = PlanStatus.OUT_OF_TIME if attempt.out_of_time else PlanStatus.WORKSPACE_NOT_CERTIFIED
+                    return finish(status, attempt, T)
                 return finish(solved(attempt), attempt, T)
             t_cert = time.perf_counter()
             report = _certify(attempt.trajectory, cfg)
@@ -397,6 +404,10 @@ def plan_detailed(
             if factor is None and search.predicted and not report.certified:
                 log.append(f"time search: no total duration predicted to meet the bounds after {search.predicted} "
                            f"step(s) (the violation does not scale away)")
+    if cut_short:  # not every duration was tried in full: no verdict on the request
+        log.append(f"no certified plan ({attempts} solves): the deadline cut workspace refinement short")
+        return finish(PlanStatus.OUT_OF_TIME, last, T0 if last is None or last.trajectory is None
+                      else last.trajectory.durations)
     if last is None or last.trajectory is None:
         return finish(PlanStatus.INFEASIBLE if last is None or _infeasible(last) else PlanStatus.SOLVER_FAILED, last, T0)
     if unsafe is not None and unsafe.trajectory is not None:
@@ -441,6 +452,9 @@ def _with_fov(
     attempt = solve_at(state, target, cfg, T, previous=previous, initvals=initvals, seed=seed, ws_rows=ws_rows,
                        deadline_at=deadline_at)
     log.extend(attempt.log)
+    if attempt.out_of_time:
+        log.append("FoV rows dropped: the re-solve with them was cut short by the deadline")
+        return attempt, (None, 0.0)
     if attempt.trajectory is None or not attempt.safe or attempt.fov_dropped:
         log.append("FoV rows dropped (16): the plan with them did not solve or certify")
         return attempt, (None, 0.0)

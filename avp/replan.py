@@ -73,9 +73,10 @@ _clock = time.perf_counter
 """The wall clock (s) of the solve times and of ``ReplanConfig.deadline`` (tests replace it)."""
 
 
-class _StepBudget:
-    """``ReplanConfig.deadline`` of one step: the wall time used since the step began, and the
-    predicted cost of one more planning attempt (the step's first: its solve and certificates)."""
+class _StepClock:
+    """``ReplanConfig.deadline`` (s) of one replanning step: the wall time used since the step's
+    policy began (:meth:`Replanner._replan`), and the predicted cost (s) of one more planning
+    attempt (the step's first: its solve and certificates)."""
 
     def __init__(self, deadline: float | None) -> None:
         self.deadline = deadline
@@ -83,6 +84,7 @@ class _StepBudget:
         self.per_attempt: float | None = None
 
     def used(self) -> float:
+        """Seconds since the step began."""
         return _clock() - self.t0
 
     def fits(self, n: int) -> bool:
@@ -94,6 +96,7 @@ class _StepBudget:
         return None if self.deadline is None else max(self.deadline - self.used(), 1e-6)
 
     def overrun(self) -> bool:
+        """The step is past its deadline."""
         return self.deadline is not None and self.used() > self.deadline
 
 
@@ -337,7 +340,7 @@ class Replanner:
         committed = self.trajectory
         assert committed is not None
         rc = self.replan
-        timer = _StepBudget(rc.deadline)
+        clock = _StepClock(rc.deadline)
         t_ex = self._switch_time(committed, t + self.latency)
         remaining = committed.tf - t_ex
         shift, turn = self._change(self.committed_target, self.target)
@@ -387,6 +390,15 @@ class Replanner:
             return record(action, reason, anticipated=start, result=result, solve_time=elapsed_total,
                           fraction=f, anchored=anchored, n_solves=n_solves, snap=snap, time_factor=time_factor)
 
+        def out_of_time(reason: str, result: PlanResult | None) -> ReplanStep:
+            """The deadline ended the step: a certified smallest correction at hand is committed,
+            else the committed plan is kept."""
+            if smallest is not None:
+                return commit(*smallest)
+            return record(ReplanAction.KEPT_PREVIOUS, f"deadline {(clock.deadline or 0.0) * 1e3:.1f} ms: {reason}",
+                          anticipated=start, result=result, solve_time=elapsed_total, anchored=anchored,
+                          n_solves=n_solves)
+
         # Order: the full (first) fraction, then the smallest; only if the smallest certifies,
         # the ones between, largest first (a step that cannot correct at all costs two solves
         # and the failed retimed retries).
@@ -396,14 +408,9 @@ class Replanner:
         order = [fractions[0], fractions[-1], *fractions[1:-1]] if probe_smallest else list(fractions)
         for k, frac in enumerate(order):
             f = frac * f_max
-            if not timer.fits(1):
-                if smallest is not None:
-                    return commit(*smallest)
-                late = f"deadline {(rc.deadline or 0.0) * 1e3:.1f} ms: no time for the {f:.0%} correction"
-                return record(ReplanAction.KEPT_PREVIOUS,
-                              f"{late} after {n_solves} solves ({timer.used() * 1e3:.1f} ms); {last_reason}",
-                              anticipated=start, result=last_result, solve_time=elapsed_total, anchored=anchored,
-                              n_solves=n_solves)
+            if not clock.fits(1):
+                return out_of_time(f"no time for {100 * f:.3g} % of the correction after {n_solves} solve(s) "
+                                   f"in {clock.used() * 1e3:.1f} ms; {last_reason}", last_result)
             goal = _blend(self.committed_target, self.target, f) if f < 1.0 else self.target
             total = self._retimed(remaining, goal)
             # The full correction is solved again with the time left scaled (retime_retries) when
@@ -414,25 +421,21 @@ class Replanner:
             nominal: tuple[PlanResult | None, str] | None = None  # reported if no retry certifies
             tried: list[float] = []
             for factor in factors:
-                if nominal is not None and not timer.fits(2):
+                if nominal is not None and not clock.fits(2):
                     break  # a retry and then the smallest fraction would not fit the deadline: go to the fractions
                 tried.append(factor)
                 durations = self._durations(committed, t_ex, factor * total)
-                t_attempt = timer.used()
+                t_attempt = clock.used()
                 result, elapsed, error = self._plan(start, goal, durations, committed, self._replan_config,
-                                                    deadline=timer.left())
+                                                    deadline=clock.left())
                 elapsed_total += elapsed
                 n_solves += 1
                 last_result = result
-                if timer.overrun():
-                    if smallest is not None:  # a certified correction is at hand: commit it, solve no more
-                        return commit(*smallest)
-                    return record(ReplanAction.KEPT_PREVIOUS, f"too late: the step took {timer.used() * 1e3:.1f} ms > "
-                                  f"deadline {(rc.deadline or 0.0) * 1e3:.1f} ms", anticipated=start, result=result,
-                                  solve_time=elapsed_total, anchored=anchored, n_solves=n_solves)
                 ok, why, snap, only_certificate = self._certified(result)
-                if timer.per_attempt is None:
-                    timer.per_attempt = timer.used() - t_attempt
+                if clock.per_attempt is None:
+                    clock.per_attempt = clock.used() - t_attempt
+                if clock.overrun():  # this plan and its certificates ended past the deadline: discarded
+                    return out_of_time(f"too late: the step took {clock.used() * 1e3:.1f} ms", result)
                 if error is not None:
                     why, only_certificate = error, False
                 if ok:
@@ -515,7 +518,9 @@ class Replanner:
         t0 = _clock()
         try:
             with serial_blas():  # no wait for a second core (avp._blas)
-                if target is self.target:
+                if target is self.target and deadline is None:  # a hook written without the deadline works
+                    result = self._solve(state, durations, previous, config)
+                elif target is self.target:
                     result = self._solve(state, durations, previous, config, deadline=deadline)
                 else:  # a blended (partial) target: only the static-pad hook plans to another target
                     result = Replanner._solve(self, state, durations, previous, config, target=target,

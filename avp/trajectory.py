@@ -62,7 +62,7 @@ class Provenance:
     bounds_certified, workspace_certified:
         The actuator bounds / workspace limits were proven over the whole trajectory.
     fov_dropped:
-        The field-of-view rows were dropped (16).
+        The field-of-view rows were dropped (16), or, with a deadline, for lack of time.
     """
 
     status: str

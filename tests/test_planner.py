@@ -218,16 +218,43 @@ def _searching_request():
     return avp.State.hover([0.0, 0.0, 1.5]), avp.PerchTarget.from_incline([3.0, 0.0, 1.5], math.radians(60.0)), cfg
 
 
-def test_a_deadline_that_leaves_no_time_ends_the_plan_out_of_time_without_a_trajectory():
+def test_a_deadline_that_leaves_no_time_ends_the_plan_out_of_time():
     """A deadline shorter than any attempt: the first attempt runs, then nothing else fits, and
-    the result says so (no status that stands behind a trajectory), where the plan without a
-    deadline searches on to a certified one."""
+    the result says so (not ok: its trajectory, the uncertified attempt, is no plan), where the
+    plan without a deadline searches on to a certified one."""
     state, target, cfg = _searching_request()
     full = avp.plan_detailed(state, target, cfg)
     assert full.status is avp.PlanStatus.SOLVED and full.duration_scale_steps >= 2
     cut = avp.plan_detailed(state, target, cfg, deadline=1e-9)
     assert cut.status is avp.PlanStatus.OUT_OF_TIME and not cut.ok and not cut.status.has_trajectory
     assert cut.duration_scale_steps == 0 and cut.log[-1].startswith("deadline")
+    assert cut.trajectory is None or not cut.trajectory.provenance.bounds_certified
+
+
+@pytest.mark.parametrize("bad", [0.0, -1.0, float("nan"), float("inf"), "soon", []])
+def test_a_meaningless_deadline_is_a_config_error(bad):
+    state, target, cfg = _searching_request()
+    with pytest.raises(avp.ConfigError, match="deadline"):
+        avp.plan_detailed(state, target, cfg, deadline=bad)
+
+
+@pytest.mark.parametrize("certify", [True, False])
+def test_refinement_cut_short_by_the_deadline_is_out_of_time_not_a_workspace_verdict(certify):
+    """A speed limit the first solve breaks needs refinement rounds to certify (without a
+    deadline the plan is SOLVED). With no time left for a round, the attempt is returned
+    uncertified, and the plan ends OUT_OF_TIME, not WORKSPACE_NOT_CERTIFIED (which would claim
+    that no plan keeps the limit)."""
+    state = avp.State.hover([0.0, 0.0, 1.5])
+    target = avp.PerchTarget.from_incline([3.5, 0.0, 1.5], math.radians(90))
+    first = avp.plan(state, target)
+    limit = 0.93 * float(np.linalg.norm(first(np.linspace(first.t0, first.tf, 400), 1), axis=1).max())
+    cfg = avp.PlannerConfig(workspace=avp.Workspace(max_speed=limit),
+                            bounds=avp.BoundsPolicy(certify=certify))
+    full = avp.plan_detailed(state, target, cfg)
+    assert full.ok and any("workspace: " in line for line in full.log)  # it took a refinement round
+    cut = avp.plan_detailed(state, target, cfg, deadline=1e-9)
+    assert cut.status is avp.PlanStatus.OUT_OF_TIME and not cut.ok
+    assert any(line.startswith("deadline: no time for refinement round 1") for line in cut.log)
 
 
 def test_a_generous_deadline_changes_nothing():
@@ -249,6 +276,7 @@ def test_an_attempt_starts_only_while_it_is_predicted_to_fit_the_deadline(monkey
     and 4 s runs it all. The same durations and plan where one is returned."""
     import types
 
+    import avp.attempt
     import avp.planner as planner
 
     state, target, cfg = _searching_request()
@@ -260,13 +288,14 @@ def test_an_attempt_starts_only_while_it_is_predicted_to_fit_the_deadline(monkey
         clock[0] += 1.0
         return real_solve_at(*args, **kw)
 
-    monkeypatch.setattr(planner, "time", types.SimpleNamespace(perf_counter=lambda: clock[0]))
+    fake_time = types.SimpleNamespace(perf_counter=lambda: clock[0])
+    monkeypatch.setattr(planner, "time", fake_time)
+    monkeypatch.setattr(avp.attempt, "time", fake_time)  # the refinement rounds' budget: the same clock
     monkeypatch.setattr(planner, "solve_at", slow_solve_at)
     r = avp.plan_detailed(state, target, cfg, deadline=deadline)
     assert r.status is want
     assert clock[0] <= deadline  # no attempt was started that the prediction said would overrun
     if want is avp.PlanStatus.OUT_OF_TIME:
-        assert r.trajectory is None or not r.ok
         assert clock[0] == 2.0
         return
     assert np.array_equal(r.trajectory.coefficients, full.trajectory.coefficients)

@@ -195,21 +195,24 @@ def _slow_solves(monkeypatch) -> _FakeClock:
 
 def _fraction_probe(monkeypatch, certifies, replan=None, elapsed=None):
     """A replanner after its first plan whose certificate is replaced by ``certifies(fraction)``
-    (and, with ``elapsed``, each planning call reported to take that long, s); returns it and the
-    list of fractions it solved for."""
+    (and, with ``elapsed``, each planning call reported to take that long, s, on a clock that
+    otherwise stands still; a list gives each call its own); returns it and the list of
+    fractions it solved for."""
     rp = Replanner(WALL, sim_config(), replan)
     rp.step(0.0, START)
     tried: list[float] = []
     real_plan = rp._plan
     clock = _slow_solves(monkeypatch) if elapsed is not None else None
+    times = iter(elapsed) if isinstance(elapsed, list) else None
 
-    def plan(state, target, *args, **kw):
+    def plan(state, target, *args, deadline=None):
         tried.append(float(np.linalg.norm(target.point - WALL.point) / 0.04))
-        result, took, error = real_plan(state, target, *args, **kw)
         if clock is None:
-            return result, took, error
-        clock.now += elapsed
-        return result, elapsed, error
+            return real_plan(state, target, *args, deadline=deadline)
+        result, _, error = real_plan(state, target, *args)  # the fake budget is not the planner's seconds
+        took = next(times) if times is not None else elapsed
+        clock.now += took
+        return result, took, error
 
     def certified(result, trackability=True):
         ok = certifies(tried[-1])
@@ -247,8 +250,9 @@ def test_fractions_are_tried_full_then_smallest_then_largest_between(monkeypatch
 
 
 def test_a_deadline_commits_the_certified_smallest_correction(monkeypatch):
-    """With a deadline that the third solve overruns, the 1/8 correction already certified is
-    committed (not thrown away for a KEPT_PREVIOUS)."""
+    """With a deadline that leaves no room for a third solve, the 1/8 correction already
+    certified is committed (not thrown away for a KEPT_PREVIOUS); a first solve that overruns
+    leaves nothing to commit."""
     t = 0.4
     rp, tried = _fraction_probe(monkeypatch, lambda f: f < 0.2, ReplanConfig(deadline=0.5), elapsed=1.0)
     s = rp.step(t, _fly_reference(rp, t), MOVED)
@@ -279,9 +283,43 @@ def test_a_deadline_starts_only_the_solves_predicted_to_fit(monkeypatch, deadlin
     assert s.solve_time <= deadline
     assert s.action is want_action
     if want_action is ReplanAction.KEPT_PREVIOUS:
-        assert rp.trajectory is first and "no time for the 12% correction after 1 solves" in s.reason
+        assert rp.trajectory is first and "no time for 12.5 % of the correction after 1 solve(s)" in s.reason
     else:
         assert s.fraction == pytest.approx(0.125) and rp.trajectory is s.trajectory is not first
+
+
+def test_a_solve_slower_than_predicted_is_discarded_and_the_certified_smallest_committed(monkeypatch):
+    """The third solve (1/2) takes 3 s where the first took 1: it starts (1 + 1 + 1 <= 3.5 s
+    was predicted) but ends past the deadline, so its plan is discarded, although it would
+    certify, and the 1/8 correction certified before it is committed."""
+    t = 0.4
+    rp, tried = _fraction_probe(monkeypatch, lambda f: f < 0.6, ReplanConfig(deadline=3.5), elapsed=[1.0, 1.0, 3.0])
+    s = rp.step(t, _fly_reference(rp, t), MOVED)
+    assert tried == pytest.approx([1.0, 0.125, 0.5])
+    assert s.action is ReplanAction.PARTIAL and s.fraction == pytest.approx(0.125) and s.n_solves == 3
+    assert s.solve_time == pytest.approx(5.0)
+
+
+def test_the_planning_call_gets_the_time_left(monkeypatch):
+    """Each planning call of a step is handed what is left of the deadline (s), so that
+    plan_detailed stops its own search in time; without a deadline, none."""
+    for deadline in (None, 0.5):
+        rp = Replanner(WALL, sim_config(), ReplanConfig(deadline=deadline))
+        rp.step(0.0, START)
+        seen: list[float | None] = []
+        real = rp._solve
+
+        def solve(*args, seen=seen, real=real, **kw):
+            seen.append(kw.get("deadline"))
+            return real(*args, **kw)
+
+        monkeypatch.setattr(rp, "_solve", solve)
+        rp.step(0.4, _fly_reference(rp, 0.4), MOVED)
+        assert seen
+        if deadline is None:
+            assert seen == [None] * len(seen)
+        else:
+            assert all(0.0 < x <= deadline for x in seen)
 
 
 def _replan_to_committed_target(keep_knots: bool, t: float):
@@ -578,7 +616,8 @@ def _failing_full_corrections(rc, monkeypatch, elapsed=None, static=True):
     clock = _slow_solves(monkeypatch) if elapsed is not None else None
 
     def fake_plan(state, target, durations, previous, config, deadline=None):
-        result, took, error = plan(state, target, durations, previous, config, deadline)
+        # with the fake clock, the budget is in fake seconds: the planner gets none
+        result, took, error = plan(state, target, durations, previous, config, deadline if clock is None else None)
         calls.append((target, float(np.sum(durations))))
         if clock is None:
             return result, took, error
