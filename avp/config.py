@@ -742,7 +742,7 @@ class ReplanConfig:
         gave no step over 5 ms in 11,438 (p99 3.6 ms, against 143 over 5 ms and p99 5.6 ms
         without) and cost 3-5 perches in 100 on the realistic wall
         of avp's model and 13-17 on rotorpy's, where the retimed retries and fractions of late
-        corrections no longer fit; 8 ms cost 2 on rotorpy's wall at 4.5 m.
+        corrections no longer fit; 8 ms cost 2 on rotorpy's wall and none on avp's model.
     measured_orders:
         When re-anchoring: derivative orders taken from odometry (2: position and velocity, yaw
         and yaw rate); higher orders come from the committed plan, so commands stay continuous (6).
