@@ -152,6 +152,12 @@ class _Ledger:
         return out, None
 
 
+def no_time_for(predicted: float, deadline_at: float | None) -> bool:
+    """A step of ``predicted`` seconds started now would end after ``deadline_at`` (a
+    ``time.perf_counter`` instant; ``None``: no deadline)."""
+    return deadline_at is not None and time.perf_counter() + predicted > deadline_at
+
+
 def _trajectory(qp: PerchingQp, outcome: QpOutcome, g: float) -> Trajectory | None:
     if not outcome.ok or outcome.c_hat is None:
         return None
@@ -238,7 +244,7 @@ def solve_at(
             attempt.log = tuple(log)
             return attempt
         slowest = max(slowest, time.perf_counter() - t_round + rows_build)
-        if deadline_at is not None and time.perf_counter() + slowest > deadline_at:
+        if no_time_for(slowest, deadline_at):
             log.append(f"deadline: no time for refinement round {round_index + 1} (predicted {slowest * 1e3:.2f} ms)")
             attempt.log, attempt.out_of_time = tuple(log), True
             return attempt

@@ -13,7 +13,7 @@ import numpy as np
 
 from . import _validate as v
 from ._typing import Array
-from .attempt import Attempt, solve_at
+from .attempt import Attempt, no_time_for, solve_at
 from .bounds import BoundReport, certify_spline
 from .config import PlannerConfig, PreImpactMode, Relaxation
 from .errors import (
@@ -264,11 +264,16 @@ def plan_detailed(
 
     def out_of_time() -> bool:
         """With a deadline: no further attempt, as slow as the slowest so far, fits."""
-        if deadline is None or attempts == 0 or time.perf_counter() - t_start + slowest <= deadline:
+        if attempts == 0 or not no_time_for(slowest, deadline_at):
             return False
-        log.append(f"deadline {deadline * 1e3:.2f} ms: stopped after {attempts} attempt(s) in "
+        log.append(f"deadline {(deadline or 0.0) * 1e3:.2f} ms: stopped after {attempts} attempt(s) in "
                    f"{(time.perf_counter() - t_start) * 1e3:.2f} ms (the next predicted {slowest * 1e3:.2f} ms)")
         return True
+
+    def stopped() -> PlanResult:
+        """``OUT_OF_TIME`` with the last attempt (uncertified, for diagnostics)."""
+        return finish(PlanStatus.OUT_OF_TIME, last, T0 if last is None or last.trajectory is None
+                      else last.trajectory.durations)
     relaxed: list[Relaxation] = []
     last: Attempt | None = None
     unsafe: Attempt | None = None  # latest attempt whose bounds held but whose workspace did not
@@ -331,8 +336,7 @@ def plan_detailed(
         factor: float | None = 1.0
         while factor is not None:
             if out_of_time():
-                return finish(PlanStatus.OUT_OF_TIME, last, T0 if last is None or last.trajectory is None
-                              else last.trajectory.durations)
+                return stopped()
             T = T0 * factor
             if factor != 1.0 or stage is not None:
                 log.append(f"durations x{factor:.4g}: total {T.sum():.3f} s")
@@ -406,8 +410,7 @@ def plan_detailed(
                            f"step(s) (the violation does not scale away)")
     if cut_short:  # not every duration was tried in full: no verdict on the request
         log.append(f"no certified plan ({attempts} solves): the deadline cut workspace refinement short")
-        return finish(PlanStatus.OUT_OF_TIME, last, T0 if last is None or last.trajectory is None
-                      else last.trajectory.durations)
+        return stopped()
     if last is None or last.trajectory is None:
         return finish(PlanStatus.INFEASIBLE if last is None or _infeasible(last) else PlanStatus.SOLVER_FAILED, last, T0)
     if unsafe is not None and unsafe.trajectory is not None:
