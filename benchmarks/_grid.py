@@ -1,10 +1,12 @@
 """The command-line grid shared by the closed-loop sweeps: trials, first seed, inclines and
-stand-offs, defaulting to the realistic :class:`avp.sim.evaluate.SimConfig` grid."""
+stand-offs, defaulting to the realistic :class:`avp.sim.evaluate.SimConfig` grid; and the
+replanner's step budget option they share with ``bench_replan.py``."""
 
 from __future__ import annotations
 
 import argparse
 
+from avp.replan import ReplanConfig
 from avp.sim.evaluate import SimConfig
 
 
@@ -17,3 +19,15 @@ def grid_parser(doc: str | None) -> argparse.ArgumentParser:
     ap.add_argument("--inclines", type=float, nargs="+", default=list(base.inclines_deg))
     ap.add_argument("--distances", type=float, nargs="+", default=list(base.distances))
     return ap
+
+
+def add_deadline_option(ap: argparse.ArgumentParser) -> None:
+    """``--deadline-ms``: :attr:`avp.ReplanConfig.deadline` of AVP's steps, in ms."""
+    ap.add_argument("--deadline-ms", type=float, default=None,
+                    help="ReplanConfig.deadline (ms) of AVP's steps: a solve starts only while it is predicted "
+                         "to fit (decisions then depend on this machine's speed)")
+
+
+def replan_config(args: argparse.Namespace) -> ReplanConfig | None:
+    """The replanning policy ``--deadline-ms`` asks for (``None``: the default policy)."""
+    return None if args.deadline_ms is None else ReplanConfig(deadline=args.deadline_ms * 1e-3)

@@ -2,7 +2,7 @@
 
     python benchmarks/bench_replan.py [--seeds 40] [--distances 1.5 4.5 7.5] [--inclines 90 45]
                                       [--previous] [--gc-freeze] [--stages] [--evict-mb MB]
-                                      [--save FILE] [--compare FILE]
+                                      [--deadline-ms MS] [--realistic] [--save FILE] [--compare FILE]
 
 Runs ``avp.sim.run.simulate`` in ``Mode.AVP`` for every seed, distance and incline, with the
 ``Replanner`` the loop builds replaced by a subclass that times each :meth:`step` call with
@@ -44,6 +44,7 @@ from types import SimpleNamespace
 from typing import Any, ClassVar
 
 import numpy as np
+from _grid import add_deadline_option, replan_config
 
 import avp.sim.run as sim_run
 from avp import _avp_rust, replan, trackability
@@ -195,9 +196,7 @@ def main() -> None:
                     help="stream through this many MB before each bare call (cold data caches, as in the loop)")
     ap.add_argument("--stages", action="store_true",
                     help="also print where the steps' CPU goes, per planning call (wrappers add a little)")
-    ap.add_argument("--deadline-ms", type=float, default=None,
-                    help="ReplanConfig.deadline (ms): a solve starts only while it is predicted to fit "
-                         "(decisions then depend on this machine's speed)")
+    add_deadline_option(ap)
     ap.add_argument("--realistic", action="store_true",
                     help="the realistic simulator of the success sweeps (SimConfig().scenario: motor lag, "
                          "odometry drift, biased detections) instead of SimScenario's defaults")
@@ -209,7 +208,7 @@ def main() -> None:
         _EVICT.append(np.zeros(int(args.evict_mb * 2**20 / 8)))
     gc.callbacks.append(_count_gc)
     sim_run.Replanner = TimedReplanner  # type: ignore[misc]  # the loop builds this class
-    replan_cfg = ReplanConfig(deadline=None if args.deadline_ms is None else args.deadline_ms * 1e-3)
+    replan_cfg = replan_config(args)
     if args.previous:
         use_previous_paths()
     if args.stages:

@@ -19,8 +19,8 @@ import time
 import warnings
 
 import numpy as np
+from _grid import add_deadline_option, replan_config
 
-from avp.replan import ReplanConfig
 from avp.sim.evaluate import SimConfig, sweep
 
 
@@ -35,10 +35,9 @@ def main() -> None:
                     help="which estimate variants to run (one each on two processes halves the wall time)")
     ap.add_argument("--no-drag-feedforward", action="store_true", help="rotorpy without the drag feed-forward")
     ap.add_argument("--no-lag-feedforward", action="store_true", help="the controller without its thrust lead")
-    ap.add_argument("--deadline-ms", type=float, default=None,
-                    help="ReplanConfig.deadline (ms) of AVP's steps (decisions then depend on this machine's speed)")
+    add_deadline_option(ap)
     args = ap.parse_args()
-    replan = None if args.deadline_ms is None else ReplanConfig(deadline=args.deadline_ms * 1e-3)
+    replan = replan_config(args)
     backends = [b for b in args.backends if b == "avp" or importlib.util.find_spec("rotorpy") is not None]
     if len(backends) < len(args.backends):
         print('rotorpy is not installed (pip install "avp[rotorpy]"): avp back-end only')

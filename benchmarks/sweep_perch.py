@@ -14,9 +14,8 @@ from __future__ import annotations
 import dataclasses
 import warnings
 
-from _grid import grid_parser
+from _grid import add_deadline_option, grid_parser, replan_config
 
-from avp.replan import ReplanConfig
 from avp.sim.evaluate import SimConfig, sweep
 
 AXES = {
@@ -36,15 +35,14 @@ def main() -> None:
                     help="conditions for the one-at-a-time axes (fewer to save time)")
     ap.add_argument("--perfect", action="store_true", help="perfect target estimate and odometry")
     ap.add_argument("--out", default=None, help="directory for the plots")
-    ap.add_argument("--deadline-ms", type=float, default=None,
-                    help="ReplanConfig.deadline (ms) of AVP's steps (decisions then depend on this machine's speed)")
+    add_deadline_option(ap)
     args = ap.parse_args()
     warnings.simplefilter("ignore")
     cfg = SimConfig(n_trials=args.trials, seed=args.seed, inclines_deg=tuple(args.inclines),
                     distances=tuple(args.distances))
     if args.perfect:
         cfg = cfg.perfect_estimate()
-    replan = None if args.deadline_ms is None else ReplanConfig(deadline=args.deadline_ms * 1e-3)
+    replan = replan_config(args)
     res = sweep(cfg, progress=True, replan=replan)
     print(res.report(), flush=True)
     if args.axes:
