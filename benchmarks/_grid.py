@@ -22,12 +22,20 @@ def grid_parser(doc: str | None) -> argparse.ArgumentParser:
 
 
 def add_deadline_option(ap: argparse.ArgumentParser) -> None:
-    """``--deadline-ms``: :attr:`avp.ReplanConfig.deadline` of AVP's steps, in ms."""
+    """``--deadline-ms``: :attr:`avp.ReplanConfig.deadline` of AVP's steps, in ms; and
+    ``--adapt-latency``: :attr:`avp.ReplanConfig.adapt_latency`."""
     ap.add_argument("--deadline-ms", type=float, default=None,
                     help="ReplanConfig.deadline (ms) of AVP's steps: a solve starts only while it is predicted "
                          "to fit (decisions then depend on this machine's speed)")
+    ap.add_argument("--adapt-latency", action="store_true",
+                    help="ReplanConfig.adapt_latency: switch to a new plan no sooner than latency_margin times "
+                         "the recent median planning call (decisions then depend on this machine's speed)")
 
 
 def replan_config(args: argparse.Namespace) -> ReplanConfig | None:
-    """The replanning policy ``--deadline-ms`` asks for (``None``: the default policy)."""
-    return None if args.deadline_ms is None else ReplanConfig(deadline=args.deadline_ms * 1e-3)
+    """The replanning policy ``--deadline-ms`` and ``--adapt-latency`` ask for (``None``: the
+    default policy)."""
+    if args.deadline_ms is None and not args.adapt_latency:
+        return None
+    return ReplanConfig(deadline=None if args.deadline_ms is None else args.deadline_ms * 1e-3,
+                        adapt_latency=bool(args.adapt_latency))

@@ -2,6 +2,8 @@
 realistic SimConfig and its perfect-estimate variant: success with Wilson 95 % intervals.
 
     python benchmarks/sweep_backends.py --trials 20                 # 90 deg wall and 45 deg slope at 4.5 m
+    python benchmarks/sweep_backends.py --trials 100 --inclines 90 --backends rotorpy --estimates realistic \
+        --modes avp --compute-slowdown 8 [--deadline-ms 20]        # on an onboard computer 8 times slower
 
 Without rotorpy (``pip install "avp[rotorpy]"``) only avp's back-end runs. The rotorpy back-end
 feeds rotorpy's rotor drag forward in avp's controller (``SimConfig.drag_feedforward``);
@@ -35,6 +37,9 @@ def main() -> None:
                     help="which estimate variants to run (one each on two processes halves the wall time)")
     ap.add_argument("--no-drag-feedforward", action="store_true", help="rotorpy without the drag feed-forward")
     ap.add_argument("--no-lag-feedforward", action="store_true", help="the controller without its thrust lead")
+    ap.add_argument("--modes", nargs="+", default=["one_shot", "avp"], choices=["one_shot", "avp"])
+    ap.add_argument("--compute-slowdown", type=float, default=0.0,
+                    help="SimConfig.compute_slowdown: an onboard computer this many times slower than this one")
     add_deadline_option(ap)
     args = ap.parse_args()
     replan = replan_config(args)
@@ -44,7 +49,8 @@ def main() -> None:
     warnings.filterwarnings("ignore")
     base = SimConfig(n_trials=args.trials, seed=args.seed, inclines_deg=tuple(args.inclines),
                      distances=tuple(args.distances), drag_feedforward=not args.no_drag_feedforward,
-                     lag_feedforward=not args.no_lag_feedforward)
+                     lag_feedforward=not args.no_lag_feedforward, modes=tuple(args.modes),
+                     compute_slowdown=args.compute_slowdown)
     rows = []
     for backend in backends:
         for label, cfg in (("realistic", base), ("perfect", base.perfect_estimate())):

@@ -4,6 +4,8 @@ of conditions and one-at-a-time noise axes, errors in s1/s2/normal, plots, repla
     python benchmarks/sweep_perch.py --trials 100                       # base grid (the target)
     python benchmarks/sweep_perch.py --trials 30 --axes --out sweep_out  # + success vs each knob
     python benchmarks/sweep_perch.py --trials 20 --perfect               # perfect estimate
+    python benchmarks/sweep_perch.py --trials 100 --inclines 90 --slowdowns 2 4 8 [--deadline-ms 20]
+                                     # AVP on an onboard computer 2, 4, 8 times slower than this one
 
 Wraps :func:`avp.sim.evaluate.sweep` (the API the CLI wires to). Long: ~1 s per trial and mode
 on one core; not part of the test suite.
@@ -35,6 +37,9 @@ def main() -> None:
                     help="conditions for the one-at-a-time axes (fewer to save time)")
     ap.add_argument("--perfect", action="store_true", help="perfect target estimate and odometry")
     ap.add_argument("--out", default=None, help="directory for the plots")
+    ap.add_argument("--slowdowns", type=float, nargs="+", default=None,
+                    help="also vary SimConfig.compute_slowdown: an onboard computer this many times slower "
+                         "than this one (each step takes that many times its CPU time of simulated time)")
     add_deadline_option(ap)
     args = ap.parse_args()
     warnings.simplefilter("ignore")
@@ -43,6 +48,12 @@ def main() -> None:
     if args.perfect:
         cfg = cfg.perfect_estimate()
     replan = replan_config(args)
+    if args.slowdowns:
+        cfg = dataclasses.replace(cfg, modes=("avp",))  # one-shot plans once, at hover: no slowdown
+        res = sweep(cfg, {"compute_slowdown": args.slowdowns}, progress=True, replan=replan)
+        print(res.report(), flush=True)
+        print(res.table_compute(), flush=True)
+        return
     res = sweep(cfg, progress=True, replan=replan)
     print(res.report(), flush=True)
     if args.axes:

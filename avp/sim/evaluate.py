@@ -382,6 +382,11 @@ class SimConfig:
         Lead the controller's collective thrust by the rotors' lag
         (``ControllerGains.lag_feedforward``, :func:`~avp.sim.controller.thrust_lead`). False:
         the controller without it (docs/simulation.md, "The rotors' lag fed forward", compares).
+    compute_slowdown:
+        How many times slower than this computer the onboard computer is
+        (:attr:`~avp.sim.run.SimScenario.compute_slowdown`): each replanning step lasts that
+        many times its CPU time here, of simulated time. 0 (the default): planning takes no
+        simulated time.
     """
 
     n_trials: int = 100
@@ -414,6 +419,7 @@ class SimConfig:
     backend: str = "avp"
     drag_feedforward: bool = True
     lag_feedforward: bool = True
+    compute_slowdown: float = 0.0
 
     def __post_init__(self) -> None:
         Backend.parse(self.backend, "sim.backend")
@@ -425,7 +431,7 @@ class SimConfig:
             raise ConfigError("sim.inclines_deg", "need at least one incline and one distance")
         for name in ("motor_time_constant", "odometry_sigma_p", "odometry_sigma_v", "odometry_sigma_att_deg",
                      "odometry_drift", "camera_noise_scale", "camera_scale_bias", "camera_normal_tilt_deg",
-                     "camera_latency"):
+                     "camera_latency", "compute_slowdown"):
             val = getattr(self, name)
             if not (isinstance(val, (int, float)) and math.isfinite(val) and val >= 0):
                 raise ConfigError(f"sim.{name}", f"must be a finite number >= 0, got {val!r}")
@@ -456,7 +462,7 @@ class SimConfig:
                            filter_range_ratio=self.filter_range_ratio,
                            filter_estimate_scale=bool(self.filter_estimate_scale),
                            aim_normal=float(self.aim_normal), aim_slope=float(self.aim_slope),
-                           alpha_nominal=self.alpha_nominal)
+                           alpha_nominal=self.alpha_nominal, compute_slowdown=float(self.compute_slowdown))
 
     def perfect_estimate(self) -> SimConfig:
         """The same vehicle with a perfect target estimate and perfect odometry (and a filter that
@@ -470,7 +476,10 @@ class SimConfig:
 class SweepPoint:
     """The runs of one sweep point: ``axis = value`` (``axis`` ``"base"`` for the base config)
     under one condition and mode. ``errors_S`` is ``(n, 3)`` position errors at the evaluation
-    time in the pad frame (s1, s2, normal; m), ``attitude`` the b3-s3 angles (deg)."""
+    time in the pad frame (s1, s2, normal; m), ``attitude`` the b3-s3 angles (deg).
+    ``step_delays``, ``late_commits`` and ``skipped_steps`` add up the runs'
+    :class:`~avp.sim.run.SimResult` fields of the same names (with ``compute_slowdown``; empty
+    and 0 without)."""
 
     axis: str
     value: float
@@ -482,6 +491,9 @@ class SweepPoint:
     errors_S: np.ndarray
     attitude: np.ndarray
     outcomes: dict[str, int]
+    step_delays: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    late_commits: int = 0
+    skipped_steps: int = 0
 
     @property
     def rate(self) -> float:
@@ -525,6 +537,23 @@ class SweepResult:
         med, p95, mx = (float(np.percentile(st, q)) for q in (50, 95, 100))
         return (f"Replan step latency inside the closed-loop runs ({st.size} steps with a solve): median "
                 f"{med * 1e3:.1f} ms, p95 {p95 * 1e3:.1f} ms, max {mx * 1e3:.1f} ms")
+
+    def table_compute(self) -> str:
+        """Per AVP point: success, the simulated step durations (median, p99, max, ms) and, per
+        run, the plans that arrived after their switch time and the loop's ticks skipped while
+        the computer was busy (``compute_slowdown``; ``nan`` and 0 without)."""
+        lines = ["Onboard computer (SimConfig.compute_slowdown: each step lasts that many times its CPU time here)",
+                 f"  {'slowdown':>8s} {'incline':>8s} {'dist':>5s} {'success':>8s} {'step median':>11s} "
+                 f"{'p99':>7s} {'max':>7s} {'late plans/run':>14s} {'skipped ticks/run':>17s}"]
+        for p in self.points:
+            if p.mode != "avp":
+                continue
+            slowdown = p.value if p.axis == "compute_slowdown" else self.config.compute_slowdown
+            d = p.step_delays * 1e3
+            med, p99, mx = (float(np.percentile(d, q)) for q in (50, 99, 100)) if d.size else (math.nan,) * 3
+            lines.append(f"  {slowdown:8.3g} {p.incline_deg:8.0f} {p.distance:5.1f} {100 * p.rate:7.1f}% "
+                         f"{med:11.2f} {p99:7.2f} {mx:7.2f} {p.late_commits / p.n:14.2f} {p.skipped_steps / p.n:17.2f}")
+        return "\n".join(lines)
 
     def report(self) -> str:
         """:meth:`table`, the latency line and the wall time."""
@@ -633,7 +662,8 @@ def sweep(
                     errs: list[np.ndarray] = []
                     atts: list[float] = []
                     outs: dict[str, int] = {}
-                    k = 0
+                    delays: list[np.ndarray] = []
+                    k = late = skipped = 0
                     for s in range(c.seed, c.seed + c.n_trials):
                         r = simulate(sc, mode, seed=s, config=planner, replan=replan)
                         k += r.success
@@ -643,10 +673,15 @@ def sweep(
                             atts.append(math.degrees(r.perch.attitude_error))
                         if mode is Mode.AVP:
                             lat.append(np.array([st.solve_time for st in r.steps[1:] if st.solved]))
+                        if r.step_delays is not None:
+                            delays.append(r.step_delays)
+                        late += r.late_commits
+                        skipped += r.skipped_steps
                         done += 1
                         if progress:
                             _progress(done, total, t0, f"{axis}={value:g} {mode.name.lower()} {inc:g} deg {dist:g} m", stream)
                     points.append(SweepPoint(axis, value, float(inc), float(dist), mode.name.lower(), k, c.n_trials,
-                                             np.array(errs, dtype=float).reshape(-1, 3), np.array(atts), outs))
+                                             np.array(errs, dtype=float).reshape(-1, 3), np.array(atts), outs,
+                                             np.concatenate(delays) if delays else np.zeros(0), late, skipped))
     latencies = np.concatenate(lat) if lat else np.zeros(0)
     return SweepResult(config=cfg, points=points, latencies=latencies, wall_time=time.perf_counter() - t0)

@@ -82,6 +82,11 @@ from .vehicle import RigidBodyState, VehicleParams
 __all__ = ["GROUND_CLEARANCE", "AfterPlan", "Mode", "PlatformMotion", "SimResult", "SimScenario", "sim_config", "simulate"]
 
 
+_cpu_clock = time.thread_time
+"""CPU time (s) of the calling thread: what a replanning step costs here, scaled by
+``SimScenario.compute_slowdown`` (tests replace it)."""
+
+
 GROUND_CLEARANCE = 0.3
 """Height (m) above the simulated world's ground (``SimScenario.ground_z``) below which the
 default planner configuration (and the campaign runner's, unless it sets a ground) does not let
@@ -268,6 +273,19 @@ class SimScenario:
         ``vehicle``; needs ``pip install "avp[rotorpy]"``, else a ``ConfigError`` here). The rest
         of the loop, avp's feed-forward controller included, is the same; with
         ``gains.rotor_drag=None`` :func:`simulate` feeds rotorpy's rotor drag forward.
+    compute_slowdown:
+        The onboard computer's speed, as how many times slower than the computer running the
+        simulation it is (0: planning takes no simulated time, as an ideal computer). Each AVP
+        replanning step then lasts ``compute_slowdown`` times its measured CPU time
+        (``time.thread_time``) of simulated time: the vehicle flies the plan committed before
+        the step until the step is done, a new plan takes over at its switch time ``t_ex`` or,
+        when it arrives later, at its arrival, and the 30 Hz loop's next step starts only when
+        the computer is free (a tick that finds it busy is skipped). ``ReplanConfig.deadline``
+        and ``adapt_latency`` act on the onboard computer's times: the replanner here is given
+        ``deadline / compute_slowdown`` and ``latency_margin * compute_slowdown``.
+        The first plan, made at hover, is not delayed. With a slowdown the runs depend on this
+        computer's timings, so a seed no longer repeats bit for bit. ``bench_pipeline.py`` run on
+        both computers gives the factor (the ratio of their ``plan()`` medians).
     ground_z:
         Height (m) of the ground of the simulated world, or ``None`` for none. A vehicle whose
         centre of mass goes below it before the plan's contact time has crashed (outcome
@@ -300,9 +318,12 @@ class SimScenario:
     platform: PlatformMotion | None = None
     backend: Backend = Backend.AVP
     ground_z: float | None = 0.0
+    compute_slowdown: float = 0.0
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "backend", Backend.parse(self.backend))
+        object.__setattr__(self, "compute_slowdown",
+                           v.nonnegative_float("scenario.compute_slowdown", self.compute_slowdown))
         if self.backend is Backend.ROTORPY:
             require_rotorpy()
         if not 0.0 <= self.incline <= math.pi:
@@ -444,6 +465,11 @@ class SimResult:
         criterion), None without a plan.
     vehicle, camera:
         The simulated vehicle and camera (their ``limits`` / ``camera`` are the planner's).
+    step_delays, skipped_steps, late_commits:
+        With ``scenario.compute_slowdown``: the simulated duration (s) of every replanning step
+        after the first plan, the loop's ticks skipped because the computer was still busy, and
+        the committed plans that arrived after their switch time ``t_ex`` (flown from their
+        arrival). Empty and 0 without a slowdown.
     """
 
     scenario: SimScenario
@@ -471,6 +497,9 @@ class SimResult:
     measurements: tuple[CameraMeasurement, ...] = ()
     detector_scale: float = 0.0
     path_drift: Array | None = None
+    step_delays: Array | None = None
+    skipped_steps: int = 0
+    late_commits: int = 0
 
     @property
     def success(self) -> bool:
@@ -680,6 +709,10 @@ def simulate(
             sc = dataclasses.replace(sc, vehicle=dataclasses.replace(sc.vehicle, limits=limits))
     mode = Mode.parse(mode)
     rcfg = replan if replan is not None else ReplanConfig()
+    slowdown = sc.compute_slowdown
+    if slowdown:  # the onboard computer's budget and latency, on this computer's clock
+        rcfg = dataclasses.replace(rcfg, deadline=None if rcfg.deadline is None else rcfg.deadline / slowdown,
+                                   latency_margin=rcfg.latency_margin * slowdown)
     streams = np.random.SeedSequence(int(seed)).spawn(4)
     rng_odo, rng_cam, rng_bias, _ = (np.random.default_rng(s) for s in streams)
 
@@ -746,6 +779,13 @@ def simulate(
     initial_point = (first_estimate.p_W if first_estimate is not None
                      else (initial.point if initial is not None else None))
     empty = np.zeros((0, 3))
+    # the computer's time (scenario.compute_slowdown): busy until, and the plan flown (with its
+    # predecessor) until a late plan arrives
+    busy_until = -math.inf
+    held: tuple[float, Trajectory, Trajectory | None] | None = None
+    predecessor: Trajectory | None = None  # the plan committed before committed(), as Replanner.reference flies it
+    step_delays: list[float] = []
+    skipped = late = 0
 
     def finish(outcome: str, contact: Contact | None = None, **kw: Any) -> SimResult:
         base: dict[str, Any] = dict(
@@ -760,6 +800,7 @@ def simulate(
             vehicle=sc.vehicle, camera=sc.camera, measurements=tuple(measurements),
             detector_scale=camera.scale,
         )
+        base.update(step_delays=np.array(step_delays, dtype=float), skipped_steps=skipped, late_commits=late)
         base.update(kw)
         return SimResult(**base)
 
@@ -799,6 +840,9 @@ def simulate(
         return replanner.trajectory if replanner is not None else plan0  # type: ignore[return-value]
 
     def reference(tt: float) -> Any:
+        if held is not None and tt < held[0]:  # the new plan has not arrived: fly the one before it
+            traj = held[2] if held[2] is not None and tt < held[1].t0 else held[1]
+            return _hold(traj, tt, idle) if tt > traj.tf else traj.flat_output(max(tt, traj.t0))
         traj = committed()
         if tt > traj.tf:
             return _hold(traj, tt, idle)
@@ -844,8 +888,24 @@ def simulate(
     visible.append(camera.visible(state, pad0.point, pad0.R_WS))
 
     def tick(t: float, state: RigidBodyState) -> None:
+        nonlocal busy_until, held, predecessor, skipped, late
         assert replanner is not None
+        if t < busy_until:  # the onboard computer is still on the previous step
+            skipped += 1
+            return
+        before, before_predecessor = committed(), predecessor
+        c0 = _cpu_clock()
         s = replanner.step(t, _odometry_state(believed(t, state), t, reference(t)), estimate_target())
+        cpu = _cpu_clock() - c0
+        if committed() is not before:
+            predecessor = before
+        if slowdown:
+            delay = slowdown * cpu
+            step_delays.append(delay)
+            busy_until = t + delay
+            if committed() is not before and t + delay > s.t_ex:  # arrives after its switch time
+                held = (t + delay, before, before_predecessor)
+                late += 1
         if s.solved:
             solve_times.append(s.solve_time)
         if s.action in (ReplanAction.REPLANNED, ReplanAction.PARTIAL) and s.anticipated is not None:
