@@ -379,7 +379,7 @@ class Replanner:
         smallest: tuple[PlanResult, SnapReport | None, PerchTarget, float] | None = None
 
         def commit(result: PlanResult, snap: SnapReport | None, goal: PerchTarget, f: float,
-                   time_factor: float = 1.0) -> ReplanStep:
+                   time_factor: float = 1.0, note: str = "") -> ReplanStep:
             self._previous = committed
             self.trajectory = result.trajectory
             self.committed_target = goal
@@ -387,7 +387,7 @@ class Replanner:
             reason = "ok" if f >= 1.0 else f"{f:.0%} of the correction ({shift:.3f} m requested, budget {budget:.3f} m)"
             if time_factor != 1.0:
                 reason += f" (time left x{time_factor:g}: the nominal time failed a certificate)"
-            return record(action, reason, anticipated=start, result=result, solve_time=elapsed_total,
+            return record(action, reason + note, anticipated=start, result=result, solve_time=elapsed_total,
                           fraction=f, anchored=anchored, n_solves=n_solves, snap=snap, time_factor=time_factor)
 
         def out_of_time(reason: str, result: PlanResult | None) -> ReplanStep:
@@ -434,8 +434,13 @@ class Replanner:
                 ok, why, snap, only_certificate = self._certified(result)
                 if clock.per_attempt is None:
                     clock.per_attempt = clock.used() - t_attempt
-                if clock.overrun():  # this plan and its certificates ended past the deadline: discarded
-                    return out_of_time(f"too late: the step took {clock.used() * 1e3:.1f} ms", result)
+                if clock.overrun():  # this plan and its certificates ended past the deadline
+                    late = f"the step took {clock.used() * 1e3:.1f} ms"
+                    if ok:  # certified: committed (discarding it would save no time), and no further solve
+                        assert result is not None
+                        return commit(result, snap, goal, f, factor,
+                                      note=f"; past the deadline of {(clock.deadline or 0.0) * 1e3:.1f} ms ({late})")
+                    return out_of_time(f"too late: {late}", result)
                 if error is not None:
                     why, only_certificate = error, False
                 if ok:
