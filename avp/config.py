@@ -737,12 +737,12 @@ class ReplanConfig:
         planners have no budget of their own). When nothing more fits, a certified smallest
         fraction is committed if the step has one, else the committed plan is kept. A solve that
         ends past the deadline, certificates included, ends the step: its plan is committed if
-        certified (discarding it saves no time: on a simulated onboard computer 16 times slower
-        than the development machine that made every first solve too late and AVP perched 33 /
-        15 % on the wall, one-shot's rate, against 84 / 82 % now; ``docs/simulation.md``), else
-        the same fallback. ``None`` by default, so that a run makes the same decisions on any
-        machine (the simulator's figures); without it the same simulated computer perched 94 /
-        91 %. Measured (``docs/performance.md``, CPU time per step): 4 ms
+        certified, else the same fallback. Such a plan's switch time ``t_ex`` may have passed
+        when the step returns; :meth:`Replanner.reference` then flies it at once (the reason
+        says "past the deadline"). Discarding it saved no time and, on a simulated onboard
+        computer much slower than the development machine, most of the plans (``docs/simulation.md``,
+        "The onboard computer's time"). ``None`` by default, so that a run makes the same
+        decisions on any machine (the simulator's figures). Measured (``docs/performance.md``, CPU time per step): 4 ms
         gave no step over 5 ms in 11,438 (p99 3.6 ms, against 143 over 5 ms and p99 5.6 ms
         without) and cost 3-5 perches in 100 on the realistic wall
         of avp's model and 13-17 on rotorpy's, where the retimed retries and fractions of late

@@ -66,6 +66,8 @@ def main() -> None:
                 rows.append((backend, label, p.incline_deg, p.distance, p.mode, p.successes, p.n, lo, hi, en, att,
                              ", ".join(f"{k} x{v}" for k, v in sorted(p.outcomes.items()) if k != "success")))
             print(f"[{backend} {label}: {wall:.0f} s]", flush=True)
+            if args.compute_slowdown:
+                print(res.table_compute(), flush=True)
     print(f"\nSuccess at the plan's contact time, {args.trials} paired seeds per row (seeds {args.seed}..), "
           f"Wilson 95 % CI; |e_n| mean normal error (m), att mean b3-s3 angle (deg)")
     print(f"{'backend':8s} {'estimate':9s} {'incline':>7s} {'dist':>5s} {'mode':9s} {'success':>8s} {'95% CI':>13s} "

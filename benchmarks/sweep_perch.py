@@ -39,7 +39,8 @@ def main() -> None:
     ap.add_argument("--out", default=None, help="directory for the plots")
     ap.add_argument("--slowdowns", type=float, nargs="+", default=None,
                     help="also vary SimConfig.compute_slowdown: an onboard computer this many times slower "
-                         "than this one (each step takes that many times its CPU time of simulated time)")
+                         "than this one (each step takes that many times its wall time of simulated time; AVP only, "
+                         "not with --axes)")
     add_deadline_option(ap)
     args = ap.parse_args()
     warnings.simplefilter("ignore")
@@ -48,6 +49,8 @@ def main() -> None:
     if args.perfect:
         cfg = cfg.perfect_estimate()
     replan = replan_config(args)
+    if args.slowdowns and args.axes:
+        ap.error("--slowdowns is a sweep of its own: run it without --axes")
     if args.slowdowns:
         cfg = dataclasses.replace(cfg, modes=("avp",))  # one-shot plans once, at hover: no slowdown
         res = sweep(cfg, {"compute_slowdown": args.slowdowns}, progress=True, replan=replan)

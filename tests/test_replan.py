@@ -252,12 +252,18 @@ def test_fractions_are_tried_full_then_smallest_then_largest_between(monkeypatch
 def test_a_deadline_commits_the_certified_smallest_correction(monkeypatch):
     """With a deadline that leaves no room for a third solve, the 1/8 correction already
     certified is committed (not thrown away for a KEPT_PREVIOUS); a first solve that overruns
-    leaves nothing to commit."""
+    ends the step, and its plan is committed if it certifies, else nothing is."""
     t = 0.4
     rp, tried = _fraction_probe(monkeypatch, lambda f: f < 0.2, ReplanConfig(deadline=0.5), elapsed=1.0)
     s = rp.step(t, _fly_reference(rp, t), MOVED)
     assert tried == pytest.approx([1.0])  # the first solve already overran: nothing at hand
     assert s.action is ReplanAction.KEPT_PREVIOUS and "too late" in s.reason
+
+    rp, tried = _fraction_probe(monkeypatch, lambda f: True, ReplanConfig(deadline=0.5), elapsed=1.0)
+    s = rp.step(t, _fly_reference(rp, t), MOVED)
+    assert tried == pytest.approx([1.0])  # overran and certified: committed, however late
+    assert s.action is ReplanAction.REPLANNED and rp.trajectory is s.trajectory
+    assert "past the deadline of 500.0 ms" in s.reason
 
     rp, tried = _fraction_probe(monkeypatch, lambda f: f < 0.2, ReplanConfig(deadline=2.5), elapsed=1.0)
     s = rp.step(t, _fly_reference(rp, t), MOVED)

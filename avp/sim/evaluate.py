@@ -385,7 +385,7 @@ class SimConfig:
     compute_slowdown:
         How many times slower than this computer the onboard computer is
         (:attr:`~avp.sim.run.SimScenario.compute_slowdown`): each replanning step lasts that
-        many times its CPU time here, of simulated time. 0 (the default): planning takes no
+        many times its wall time here, of simulated time. 0 (the default): planning takes no
         simulated time.
     """
 
@@ -477,9 +477,9 @@ class SweepPoint:
     """The runs of one sweep point: ``axis = value`` (``axis`` ``"base"`` for the base config)
     under one condition and mode. ``errors_S`` is ``(n, 3)`` position errors at the evaluation
     time in the pad frame (s1, s2, normal; m), ``attitude`` the b3-s3 angles (deg).
-    ``step_delays``, ``late_commits`` and ``skipped_steps`` add up the runs'
-    :class:`~avp.sim.run.SimResult` fields of the same names (with ``compute_slowdown``; empty
-    and 0 without)."""
+    ``step_delays`` (concatenated), ``late_commits`` and ``skipped_ticks`` (summed) collect the
+    runs' :class:`~avp.sim.run.SimResult` fields of the same names (with ``compute_slowdown``;
+    empty and 0 without)."""
 
     axis: str
     value: float
@@ -493,7 +493,7 @@ class SweepPoint:
     outcomes: dict[str, int]
     step_delays: np.ndarray = field(default_factory=lambda: np.zeros(0))
     late_commits: int = 0
-    skipped_steps: int = 0
+    skipped_ticks: int = 0
 
     @property
     def rate(self) -> float:
@@ -542,7 +542,7 @@ class SweepResult:
         """Per AVP point: success, the simulated step durations (median, p99, max, ms) and, per
         run, the plans that arrived after their switch time and the loop's ticks skipped while
         the computer was busy (``compute_slowdown``; ``nan`` and 0 without)."""
-        lines = ["Onboard computer (SimConfig.compute_slowdown: each step lasts that many times its CPU time here)",
+        lines = ["Onboard computer (SimConfig.compute_slowdown: each step lasts that many times its wall time here)",
                  f"  {'slowdown':>8s} {'incline':>8s} {'dist':>5s} {'success':>8s} {'step median':>11s} "
                  f"{'p99':>7s} {'max':>7s} {'late plans/run':>14s} {'skipped ticks/run':>17s}"]
         for p in self.points:
@@ -552,7 +552,7 @@ class SweepResult:
             d = p.step_delays * 1e3
             med, p99, mx = (float(np.percentile(d, q)) for q in (50, 99, 100)) if d.size else (math.nan,) * 3
             lines.append(f"  {slowdown:8.3g} {p.incline_deg:8.0f} {p.distance:5.1f} {100 * p.rate:7.1f}% "
-                         f"{med:11.2f} {p99:7.2f} {mx:7.2f} {p.late_commits / p.n:14.2f} {p.skipped_steps / p.n:17.2f}")
+                         f"{med:11.2f} {p99:7.2f} {mx:7.2f} {p.late_commits / p.n:14.2f} {p.skipped_ticks / p.n:17.2f}")
         return "\n".join(lines)
 
     def report(self) -> str:
@@ -676,7 +676,7 @@ def sweep(
                         if r.step_delays is not None:
                             delays.append(r.step_delays)
                         late += r.late_commits
-                        skipped += r.skipped_steps
+                        skipped += r.skipped_ticks
                         done += 1
                         if progress:
                             _progress(done, total, t0, f"{axis}={value:g} {mode.name.lower()} {inc:g} deg {dist:g} m", stream)

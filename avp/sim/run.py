@@ -31,9 +31,11 @@ from the pad centre in the plane, ``b3`` within 10 deg of ``s3``. The crossing i
 Determinism: all randomness comes from ``seed`` through independent streams (odometry, camera
 noise, per-run camera bias draws), so the same seed gives the same run and both modes of a seed
 share the initial detections, the odometry stream's draws and the camera bias (paired
-comparison). Simulated time does not advance while a plan is solved; wall-clock solve times are
-recorded but never change the trajectory as long as the :class:`~avp.replan.ReplanConfig` has
-``deadline=None`` and ``adapt_latency=False`` (the default here).
+comparison). By default simulated time does not advance while a plan is solved; wall-clock solve
+times are recorded but never change the trajectory as long as the
+:class:`~avp.replan.ReplanConfig` has ``deadline=None`` and ``adapt_latency=False`` (the default
+here) and ``SimScenario.compute_slowdown`` is 0 (the default: with a slowdown each step takes
+simulated time measured on this computer, so a seed no longer repeats bit for bit).
 """
 
 from __future__ import annotations
@@ -82,9 +84,10 @@ from .vehicle import RigidBodyState, VehicleParams
 __all__ = ["GROUND_CLEARANCE", "AfterPlan", "Mode", "PlatformMotion", "SimResult", "SimScenario", "sim_config", "simulate"]
 
 
-_cpu_clock = time.thread_time
-"""CPU time (s) of the calling thread: what a replanning step costs here, scaled by
-``SimScenario.compute_slowdown`` (tests replace it)."""
+_step_clock = time.perf_counter
+"""The wall clock (s) that times a replanning step here, scaled by
+``SimScenario.compute_slowdown``: the replanner's own clock (``avp.replan._clock``), so a
+``deadline`` and the simulated step are measured alike (tests replace it)."""
 
 
 GROUND_CLEARANCE = 0.3
@@ -276,15 +279,18 @@ class SimScenario:
     compute_slowdown:
         The onboard computer's speed, as how many times slower than the computer running the
         simulation it is (0: planning takes no simulated time, as an ideal computer). Each AVP
-        replanning step then lasts ``compute_slowdown`` times its measured CPU time
-        (``time.thread_time``) of simulated time: the vehicle flies the plan committed before
-        the step until the step is done, a new plan takes over at its switch time ``t_ex`` or,
+        replanning step then lasts ``compute_slowdown`` times its wall time here
+        (``time.perf_counter``, the clock of the replanner's ``deadline``; the step call only,
+        not the simulated sensors and filter) of simulated time: the vehicle flies the plan
+        committed before the step until the step is done, a new plan takes over at its switch time ``t_ex`` or,
         when it arrives later, at its arrival, and the 30 Hz loop's next step starts only when
         the computer is free (a tick that finds it busy is skipped). ``ReplanConfig.deadline``
         and ``adapt_latency`` act on the onboard computer's times: the replanner here is given
-        ``deadline / compute_slowdown`` and ``latency_margin * compute_slowdown``.
+        ``deadline / compute_slowdown`` and ``latency_margin * compute_slowdown`` (so its
+        reasons quote the scaled deadline, and ``ReplanStep.solve_time`` is this computer's).
         The first plan, made at hover, is not delayed. With a slowdown the runs depend on this
-        computer's timings, so a seed no longer repeats bit for bit. ``bench_pipeline.py`` run on
+        computer's timings and load (run it on an otherwise idle computer, one process per
+        core), so a seed no longer repeats bit for bit. ``bench_pipeline.py`` run on
         both computers gives the factor (the ratio of their ``plan()`` medians).
     ground_z:
         Height (m) of the ground of the simulated world, or ``None`` for none. A vehicle whose
@@ -465,7 +471,7 @@ class SimResult:
         criterion), None without a plan.
     vehicle, camera:
         The simulated vehicle and camera (their ``limits`` / ``camera`` are the planner's).
-    step_delays, skipped_steps, late_commits:
+    step_delays, skipped_ticks, late_commits:
         With ``scenario.compute_slowdown``: the simulated duration (s) of every replanning step
         after the first plan, the loop's ticks skipped because the computer was still busy, and
         the committed plans that arrived after their switch time ``t_ex`` (flown from their
@@ -498,7 +504,7 @@ class SimResult:
     detector_scale: float = 0.0
     path_drift: Array | None = None
     step_delays: Array | None = None
-    skipped_steps: int = 0
+    skipped_ticks: int = 0
     late_commits: int = 0
 
     @property
@@ -782,8 +788,7 @@ def simulate(
     # the computer's time (scenario.compute_slowdown): busy until, and the plan flown (with its
     # predecessor) until a late plan arrives
     busy_until = -math.inf
-    held: tuple[float, Trajectory, Trajectory | None] | None = None
-    predecessor: Trajectory | None = None  # the plan committed before committed(), as Replanner.reference flies it
+    held: tuple[float, Trajectory] | None = None
     step_delays: list[float] = []
     skipped = late = 0
 
@@ -800,7 +805,7 @@ def simulate(
             vehicle=sc.vehicle, camera=sc.camera, measurements=tuple(measurements),
             detector_scale=camera.scale,
         )
-        base.update(step_delays=np.array(step_delays, dtype=float), skipped_steps=skipped, late_commits=late)
+        base.update(step_delays=np.array(step_delays, dtype=float), skipped_ticks=skipped, late_commits=late)
         base.update(kw)
         return SimResult(**base)
 
@@ -839,9 +844,16 @@ def simulate(
     def committed() -> Trajectory:
         return replanner.trajectory if replanner is not None else plan0  # type: ignore[return-value]
 
+    def flown() -> Trajectory:
+        """The plan the vehicle flies at the last simulated time: ``committed()``, or the one
+        before it while a late plan is on its way (``compute_slowdown``)."""
+        if held is not None and path_t and path_t[-1] < held[0]:
+            return held[1]
+        return committed()
+
     def reference(tt: float) -> Any:
         if held is not None and tt < held[0]:  # the new plan has not arrived: fly the one before it
-            traj = held[2] if held[2] is not None and tt < held[1].t0 else held[1]
+            traj = held[1]  # started: a step commits only once the committed plan has (Replanner)
             return _hold(traj, tt, idle) if tt > traj.tf else traj.flat_output(max(tt, traj.t0))
         traj = committed()
         if tt > traj.tf:
@@ -888,23 +900,22 @@ def simulate(
     visible.append(camera.visible(state, pad0.point, pad0.R_WS))
 
     def tick(t: float, state: RigidBodyState) -> None:
-        nonlocal busy_until, held, predecessor, skipped, late
+        nonlocal busy_until, held, skipped, late
         assert replanner is not None
         if t < busy_until:  # the onboard computer is still on the previous step
             skipped += 1
             return
-        before, before_predecessor = committed(), predecessor
-        c0 = _cpu_clock()
-        s = replanner.step(t, _odometry_state(believed(t, state), t, reference(t)), estimate_target())
-        cpu = _cpu_clock() - c0
-        if committed() is not before:
-            predecessor = before
+        before = committed()
+        odometry, estimate = _odometry_state(believed(t, state), t, reference(t)), estimate_target()
+        c0 = _step_clock()
+        s = replanner.step(t, odometry, estimate)
+        elapsed = _step_clock() - c0
         if slowdown:
-            delay = slowdown * cpu
+            delay = slowdown * elapsed
             step_delays.append(delay)
             busy_until = t + delay
             if committed() is not before and t + delay > s.t_ex:  # arrives after its switch time
-                held = (t + delay, before, before_predecessor)
+                held = (t + delay, before)
                 late += 1
         if s.solved:
             solve_times.append(s.solve_time)
@@ -912,10 +923,10 @@ def simulate(
             pending.append((s.t_ex, s.anticipated.position.copy()))
 
     state, contact = closed_loop(
-        state, reference, t_plan, lambda: committed().tf + sc.timeout, max_time, 1.0 / sc.replan_rate_hz, dt,
+        state, reference, t_plan, lambda: flown().tf + sc.timeout, max_time, 1.0 / sc.replan_rate_hz, dt,
         sc.vehicle, sc.gains, tick if replanner is not None else None, hook, odo, plant=vehicle_plant)
 
-    final = committed()
+    final = flown()  # a plan still on its way when the flight ended was never flown
     pt, pp, pR = np.array(path_t), np.array(path_p).reshape(-1, 3), np.array(path_R).reshape(-1, 3, 3)
     if contact is not None and GROUND in contact.failures:
         if contact.t > final.tf:  # after the contact time, where the perch is judged: a miss, judged below
