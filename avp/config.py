@@ -740,13 +740,14 @@ class ReplanConfig:
         certified, else the same fallback. Such a plan's switch time ``t_ex`` may have passed
         when the step returns; :meth:`Replanner.reference` then flies it at once (the reason
         says "past the deadline"). Discarding it saved no time and, on a simulated onboard
-        computer much slower than the development machine, most of the plans (``docs/simulation.md``,
-        "The onboard computer's time"). ``None`` by default, so that a run makes the same
-        decisions on any machine (the simulator's figures). Measured (``docs/performance.md``, CPU time per step): 4 ms
-        gave no step over 5 ms in 11,438 (p99 3.6 ms, against 143 over 5 ms and p99 5.6 ms
-        without) and cost 3-5 perches in 100 on the realistic wall
-        of avp's model and 13-17 on rotorpy's, where the retimed retries and fractions of late
-        corrections no longer fit; 8 ms cost 2 on rotorpy's wall and none on avp's model.
+        computer much slower than the development machine, cost most of the perches
+        (``docs/simulation.md``, "The onboard computer's time"). ``None`` by default, so that a
+        run makes the same decisions on any machine (the simulator's figures). Measured
+        (``docs/performance.md``, CPU time per step): 4 ms gave no step over 5 ms in 11,438 (p99
+        3.6 ms, against 143 over 5 ms and p99 5.6 ms without) and, measured while late plans
+        were still discarded, cost 3-5 perches in 100 on the realistic wall of avp's model and
+        13-17 on rotorpy's, where the retimed retries and fractions of late corrections no
+        longer fit; 8 ms cost 2 on rotorpy's wall and none on avp's model.
     measured_orders:
         When re-anchoring: derivative orders taken from odometry (2: position and velocity, yaw
         and yaw rate); higher orders come from the committed plan, so commands stay continuous (6).

@@ -21,7 +21,7 @@ def grid_parser(doc: str | None) -> argparse.ArgumentParser:
     return ap
 
 
-def add_deadline_option(ap: argparse.ArgumentParser) -> None:
+def add_timing_options(ap: argparse.ArgumentParser) -> None:
     """``--deadline-ms``: :attr:`avp.ReplanConfig.deadline` of AVP's steps, in ms; and
     ``--adapt-latency``: :attr:`avp.ReplanConfig.adapt_latency`."""
     ap.add_argument("--deadline-ms", type=float, default=None,

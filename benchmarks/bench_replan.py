@@ -44,7 +44,7 @@ from types import SimpleNamespace
 from typing import Any, ClassVar
 
 import numpy as np
-from _grid import add_deadline_option, replan_config
+from _grid import add_timing_options, replan_config
 
 import avp.sim.run as sim_run
 from avp import _avp_rust, replan, trackability
@@ -196,7 +196,7 @@ def main() -> None:
                     help="stream through this many MB before each bare call (cold data caches, as in the loop)")
     ap.add_argument("--stages", action="store_true",
                     help="also print where the steps' CPU goes, per planning call (wrappers add a little)")
-    add_deadline_option(ap)
+    add_timing_options(ap)
     ap.add_argument("--realistic", action="store_true",
                     help="the realistic simulator of the success sweeps (SimConfig().scenario: motor lag, "
                          "odometry drift, biased detections) instead of SimScenario's defaults")

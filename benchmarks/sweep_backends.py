@@ -21,7 +21,7 @@ import time
 import warnings
 
 import numpy as np
-from _grid import add_deadline_option, replan_config
+from _grid import add_timing_options, replan_config
 
 from avp.sim.evaluate import SimConfig, sweep
 
@@ -40,7 +40,7 @@ def main() -> None:
     ap.add_argument("--modes", nargs="+", default=["one_shot", "avp"], choices=["one_shot", "avp"])
     ap.add_argument("--compute-slowdown", type=float, default=0.0,
                     help="SimConfig.compute_slowdown: an onboard computer this many times slower than this one")
-    add_deadline_option(ap)
+    add_timing_options(ap)
     args = ap.parse_args()
     replan = replan_config(args)
     backends = [b for b in args.backends if b == "avp" or importlib.util.find_spec("rotorpy") is not None]

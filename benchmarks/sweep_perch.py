@@ -16,7 +16,7 @@ from __future__ import annotations
 import dataclasses
 import warnings
 
-from _grid import add_deadline_option, grid_parser, replan_config
+from _grid import add_timing_options, grid_parser, replan_config
 
 from avp.sim.evaluate import SimConfig, sweep
 
@@ -41,7 +41,7 @@ def main() -> None:
                     help="also vary SimConfig.compute_slowdown: an onboard computer this many times slower "
                          "than this one (each step takes that many times its wall time of simulated time; AVP only, "
                          "not with --axes)")
-    add_deadline_option(ap)
+    add_timing_options(ap)
     args = ap.parse_args()
     warnings.simplefilter("ignore")
     cfg = SimConfig(n_trials=args.trials, seed=args.seed, inclines_deg=tuple(args.inclines),

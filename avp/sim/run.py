@@ -282,9 +282,9 @@ class SimScenario:
         replanning step then lasts ``compute_slowdown`` times its wall time here
         (``time.perf_counter``, the clock of the replanner's ``deadline``; the step call only,
         not the simulated sensors and filter) of simulated time: the vehicle flies the plan
-        committed before the step until the step is done, a new plan takes over at its switch time ``t_ex`` or,
-        when it arrives later, at its arrival, and the 30 Hz loop's next step starts only when
-        the computer is free (a tick that finds it busy is skipped). ``ReplanConfig.deadline``
+        committed before the step until the step is done, a new plan takes over at its switch
+        time ``t_ex`` or, when it arrives later, at its arrival, and the 30 Hz loop's next step
+        starts only when the computer is free (a tick that finds it busy is skipped). ``ReplanConfig.deadline``
         and ``adapt_latency`` act on the onboard computer's times: the replanner here is given
         ``deadline / compute_slowdown`` and ``latency_margin * compute_slowdown`` (so its
         reasons quote the scaled deadline, and ``ReplanStep.solve_time`` is this computer's).
@@ -785,8 +785,8 @@ def simulate(
     initial_point = (first_estimate.p_W if first_estimate is not None
                      else (initial.point if initial is not None else None))
     empty = np.zeros((0, 3))
-    # the computer's time (scenario.compute_slowdown): busy until, and the plan flown (with its
-    # predecessor) until a late plan arrives
+    # the computer's time (scenario.compute_slowdown): busy until, and (until, the plan flown)
+    # while a late plan is on its way
     busy_until = -math.inf
     held: tuple[float, Trajectory] | None = None
     step_delays: list[float] = []
