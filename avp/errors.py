@@ -44,6 +44,13 @@ class ConfigError(AvpError, ValueError):
         self.message = message
         super().__init__(f"{field}: {message}")
 
+    def __reduce__(self) -> tuple[Any, ...]:
+        # pickled by its two arguments, so that it crosses a process boundary: the campaign's
+        # process pool and Ray workers hand a trial's error back to the caller by pickle. By
+        # ``args`` (the one formatted string) unpickling called ``ConfigError(text)``, a
+        # TypeError, and the pool reported a BrokenProcessPool instead of the field.
+        return (type(self), (self.field, self.message), self.__dict__)
+
 
 class PlanningError(AvpError):
     """Planning produced no trajectory; ``result`` holds the diagnostics (a ``PlanResult``)."""

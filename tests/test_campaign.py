@@ -49,6 +49,19 @@ def test_pool_gives_the_serial_rows(serial_rows) -> None:
         assert campaign.rows_equal(row, serial_rows[k]), (row, serial_rows[k])
 
 
+def test_a_trials_config_error_reaches_the_caller_from_the_pool() -> None:
+    # The error is raised in a spawned worker (the aim is checked when the trial's scenario is
+    # built) and must come back as itself, field and all: before ConfigError pickled by its two
+    # arguments, unpickling it failed and the pool reported BrokenProcessPool instead.
+    runner = campaign.Runner({"scenario": {"aim_normal": 0.04}})
+    with pytest.raises(ConfigError) as serial:
+        runner(TRIALS[0])
+    with pytest.raises(ConfigError) as pooled:
+        list(campaign.execute(runner, TRIALS[:1], backend="pool", workers=1))
+    assert pooled.value.field == serial.value.field == "scenario.aim_normal"
+    assert str(pooled.value) == str(serial.value)
+
+
 @pytest.mark.skipif(importlib.util.find_spec("ray") is None, reason="ray is not installed (extra [ray])")
 def test_ray_gives_the_serial_rows(serial_rows) -> None:
     import ray

@@ -153,3 +153,20 @@ def test_relaxations_are_applied_in_order_and_reported() -> None:
     assert exc.value.result.status is avp.PlanStatus.SOLVED_RELAXED
     traj = avp.plan(sc.state, sc.target, config, allow_relaxed=True)
     assert traj.provenance is not None and traj.provenance.relaxed
+
+
+@pytest.mark.parametrize("error", [
+    avp.ConfigError("limits.thrust_max", "must be finite"),
+    avp.PlanningError("no plan"),
+    avp.InfeasibleError("infeasible"),
+    avp.SolverError("back-end failed"),
+])
+def test_errors_survive_pickling(error) -> None:
+    # pool and Ray workers return a trial's error by pickle
+    import pickle
+
+    again = pickle.loads(pickle.dumps(error))
+    assert type(again) is type(error)
+    assert str(again) == str(error) and again.args == error.args
+    if isinstance(error, avp.ConfigError):
+        assert (again.field, again.message) == (error.field, error.message)
