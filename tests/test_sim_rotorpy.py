@@ -250,9 +250,12 @@ def test_drag_aware_contact_condition_on_rotorpys_wall(rotorpy: object) -> None:
     aware = simulate(sc, "one_shot", seed=0)
     limits = aware.scenario.vehicle.limits
     assert 0.2 < limits.rotor_drag < 0.4 and aware.vehicle is not None and aware.vehicle.limits is limits
-    free = simulate(sc, "one_shot", seed=0, config=sim_config(limits=sc.vehicle.limits, camera=sc.camera.camera,
-                                                              ground_z=0.3))
+    own = sim_config(limits=sc.vehicle.limits, camera=sc.camera.camera, ground_z=0.3)
+    free = simulate(sc, "one_shot", seed=0, config=own, plan_drag=False)
     assert free.scenario.vehicle.limits.rotor_drag == 0.0
+    # a configuration of the user's that sets no drag gets the back-end's, as simulate's own
+    given = simulate(sc, "one_shot", seed=0, config=own, max_time=0.05)
+    assert given.scenario.vehicle.limits.rotor_drag == limits.rotor_drag
     assert aware.perch is not None and free.perch is not None
     att_aware, att_free = (math.degrees(r.perch.attitude_error) for r in (aware, free))
     assert att_aware < 4.0 and att_free > att_aware + 4.0, (att_aware, att_free)

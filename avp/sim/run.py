@@ -700,13 +700,16 @@ def simulate(
         :func:`~avp.sim.controller.planar_drag`), so that it plans the thrust along the normal
         at contact, as the controller will fly it. The contact thrust is the static planner's
         ``contact_alpha(incline)``; on a moving pad, whose contact thrust is free in the limits,
-        ``d`` (which scales with its square root) is that value's, not the plan's. Default: when ``config`` is None (the
-        campaign runner and ``avp simulate``: unless the configuration sets ``rotor_drag``).
+        ``d`` (which scales with its square root) is that value's, not the plan's. Default
+        (None): when ``config`` is None or leaves ``limits.rotor_drag`` at 0 (the campaign runner
+        and ``avp simulate``: unless the configuration sets ``rotor_drag``). A planner that knows
+        no drag, on a vehicle whose controller feeds it forward, plans a contact it cannot fly
+        (on rotorpy's wall ``b3`` arrives 9 deg off ``s3``): pass ``False`` to fly one anyway.
     """
     sc, cfg = _shared(scenario if scenario is not None else SimScenario(), config)
     if sc.backend is Backend.ROTORPY and sc.gains.rotor_drag is None:  # the back-end's drag model
         sc = dataclasses.replace(sc, gains=rotorpy_gains(sc.gains))
-        if plan_drag if plan_drag is not None else config is None:
+        if plan_drag if plan_drag is not None else cfg.limits.rotor_drag == 0.0:
             # the planner knows the drag the controller feeds forward, at the contact
             # thrust: at contact the thrust, not the acceleration, is along the normal
             drag = planar_drag(sc.vehicle, sc.gains.rotor_drag, cfg.contact_alpha(sc.incline))
