@@ -140,6 +140,8 @@ class Runner:
                 config.workspace, ground_z=scenario.planner_ground_z))
         if "alpha_nominal" not in planner_data and scenario.alpha_nominal is not None:
             config = dataclasses.replace(config, alpha_nominal=scenario.alpha_nominal)
+        if "contact_velocity" not in planner_data and scenario.contact_velocity is not None:
+            config = dataclasses.replace(config, contact_velocity=scenario.contact_velocity)
         own_drag = "rotor_drag" in planner_data.get("limits", {})
         res = simulate(scenario, trial.mode, seed=trial.seed, config=config, replan=s.replan,
                        plan_drag=not own_drag)

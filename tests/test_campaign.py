@@ -189,3 +189,25 @@ def test_the_scenarios_contact_thrust_reaches_the_campaigns_planner(monkeypatch)
         with pytest.raises(RuntimeError, match="stop"):
             campaign.Runner(data)(trial)
         assert seen[-1] == want
+
+
+def test_the_scenarios_contact_velocity_reaches_the_campaigns_planner(monkeypatch) -> None:
+    """``[scenario.contact_velocity]`` is the planner's contact velocity in a campaign (as
+    ``simulate``'s own configuration takes it), unless ``[planner.contact_velocity]`` sets it."""
+    import avp.sim.run
+
+    seen: list[tuple] = []
+
+    def fake_simulate(scenario, mode, *, seed, config, replan, plan_drag):
+        seen.append(config.contact_velocity.components(scenario.incline))
+        raise RuntimeError("stop")  # only the configuration is under test
+
+    monkeypatch.setattr(avp.sim.run, "simulate", fake_simulate)
+    trial = TRIALS[0]  # a wall: the slide is the configured one
+    scen = {"contact_velocity": {"normal": -0.4, "slope": -1.4}}
+    for data, want in (({"scenario": scen}, (-1.4, 0.0, -0.4)),
+                       ({"scenario": scen, "planner": {"contact_velocity": {"normal": -0.5}}}, (-2.0, 0.0, -0.5)),
+                       ({}, (-2.0, 0.0, -0.3))):
+        with pytest.raises(RuntimeError, match="stop"):
+            campaign.Runner(data)(trial)
+        assert seen[-1] == pytest.approx(want), data

@@ -195,3 +195,25 @@ def test_the_simulated_user_asks_for_its_contact_thrust():
     assert abs(r.first_plan.thrust(r.first_plan.tf) - 6.0) < 1e-6
     with pytest.raises(ConfigError, match="scenario.alpha_nominal"):
         SimScenario(alpha_nominal=-2.0)
+
+
+def test_the_scenarios_contact_velocity_is_the_default_planners() -> None:
+    """``SimScenario.contact_velocity`` reaches the configuration ``simulate`` builds (as
+    ``alpha_nominal`` does), ``SimConfig``'s contact speeds reach its scenarios, and a contact
+    speed that leaves the pad or is not a number is refused by name."""
+    from avp.errors import ConfigError
+    from avp.sim.evaluate import SimConfig
+    from avp.sim.run import _shared
+
+    cv = avp.ContactVelocity(normal=-0.5, slope=-1.0)
+    sc = SimScenario(contact_velocity=cv)
+    assert _shared(sc, None)[1].contact_velocity is cv
+    assert _shared(SimScenario(), None)[1].contact_velocity == avp.PlannerConfig().contact_velocity
+    got = SimConfig(contact_normal=-0.6, contact_slope=-1.2).scenario(90.0, 4.5).contact_velocity
+    assert (got.normal, got.slope) == (-0.6, -1.2)
+    for field, bad in (("contact_normal", 0.0), ("contact_normal", 0.2), ("contact_slope", float("nan")),
+                       ("contact_normal", True)):
+        with pytest.raises(ConfigError, match=f"sim.{field}"):
+            SimConfig(**{field: bad})
+    with pytest.raises(ConfigError, match="scenario.contact_velocity"):
+        SimScenario(contact_velocity=(-0.3, -2.0))

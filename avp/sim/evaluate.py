@@ -24,7 +24,7 @@ from typing import Any, TextIO
 
 import numpy as np
 
-from ..config import PlannerConfig
+from ..config import ContactVelocity, PlannerConfig
 from ..errors import ConfigError
 from ..replan import ReplanConfig
 from .backend import Backend
@@ -372,6 +372,14 @@ class SimConfig:
         motor lag the rotors need room above their floor in the final pitch-up; on the wall at
         7.5 m AVP perched 92 / 100 with 6 against 83 / 100 with 4 (seeds 0-99), and 94 against 82
         on seeds 100-199, not used to choose it (before the thrust lead; docs/simulation.md).
+    contact_normal, contact_slope:
+        The velocity at contact the user-side configuration asks of the planner
+        (:class:`avp.ContactVelocity` ``normal`` and ``slope``, m/s; the slide is scaled by
+        ``sin(incline)``): the paper's 0.3 m/s into the pad and 2 m/s down the slope (the
+        planner's default). A pad met early, found too deep by the estimate, lands up the slope
+        by about the slide over the normal speed per centimetre of depth error (6.7 here), so
+        a sweep axis worth having; a slower slide did not pay on rotorpy's wall
+        (docs/simulation.md, "The contact velocity").
     backend:
         Simulator back-end (:class:`~avp.sim.backend.Backend` name): ``"avp"`` or ``"rotorpy"``.
     drag_feedforward:
@@ -416,6 +424,8 @@ class SimConfig:
     aim_normal: float = 0.015
     aim_slope: float = 0.07
     alpha_nominal: float | None = 6.0
+    contact_normal: float = -0.3
+    contact_slope: float = -2.0
     backend: str = "avp"
     drag_feedforward: bool = True
     lag_feedforward: bool = True
@@ -423,6 +433,12 @@ class SimConfig:
 
     def __post_init__(self) -> None:
         Backend.parse(self.backend, "sim.backend")
+        for name in ("contact_normal", "contact_slope"):
+            val = getattr(self, name)
+            if isinstance(val, bool) or not isinstance(val, (int, float)) or not math.isfinite(val):
+                raise ConfigError(f"sim.{name}", f"must be a finite speed (m/s), got {val!r}")
+        if self.contact_normal >= 0:
+            raise ConfigError("sim.contact_normal", f"must be < 0 m/s (into the pad), got {self.contact_normal}")
         if isinstance(self.n_trials, bool) or not isinstance(self.n_trials, int) or self.n_trials < 1:
             raise ConfigError("sim.n_trials", f"must be an integer >= 1, got {self.n_trials!r}")
         for m in self.modes:
@@ -462,7 +478,9 @@ class SimConfig:
                            filter_range_ratio=self.filter_range_ratio,
                            filter_estimate_scale=bool(self.filter_estimate_scale),
                            aim_normal=float(self.aim_normal), aim_slope=float(self.aim_slope),
-                           alpha_nominal=self.alpha_nominal, compute_slowdown=float(self.compute_slowdown))
+                           alpha_nominal=self.alpha_nominal, compute_slowdown=float(self.compute_slowdown),
+                           contact_velocity=ContactVelocity(normal=float(self.contact_normal),
+                                                            slope=float(self.contact_slope)))
 
     def perfect_estimate(self) -> SimConfig:
         """The same vehicle with a perfect target estimate and perfect odometry (and a filter that

@@ -52,7 +52,7 @@ import numpy as np
 
 from .. import _validate as v
 from ..camera import Camera
-from ..config import PlannerConfig, VehicleLimits
+from ..config import ContactVelocity, PlannerConfig, VehicleLimits
 from ..errors import AvpError, ConfigError
 from ..frames import Array, yaw_from_b2
 from ..moving import MovingConfig, MovingReplanner, plan_moving_detailed
@@ -106,13 +106,15 @@ def sim_config(
     camera: Camera | None = None,
     ground_z: float | None = None,
     alpha_nominal: float | None = None,
+    contact_velocity: ContactVelocity | None = None,
 ) -> PlannerConfig:
     """The planner configuration :func:`simulate` uses by default: :class:`PlannerConfig`'s
     defaults with the simulated vehicle's ``limits`` and camera (the same objects), optionally
     with another tilt-rate limit, the planner's ground limit ``ground_z`` (m; :func:`simulate`
     passes the world's ground plus :data:`GROUND_CLEARANCE`) and the contact thrust on steep pads
     ``alpha_nominal`` (m/s^2; ``None``: the planner's default; :func:`simulate` passes the
-    scenario's).
+    scenario's), and the ``contact_velocity`` (``None``: the planner's default; :func:`simulate`
+    passes the scenario's).
 
     Both defaults come from closed-loop runs here: without a rate bound, replans from a noisy
     state close to contact certified only after the relaxations and spun at 100+ rad/s (126
@@ -126,7 +128,9 @@ def sim_config(
     fov = base.fov if camera is None else dataclasses.replace(base.fov, camera=camera)
     workspace = base.workspace if ground_z is None else dataclasses.replace(base.workspace, ground_z=float(ground_z))
     alpha = base.alpha_nominal if alpha_nominal is None else float(alpha_nominal)
-    return dataclasses.replace(base, limits=lim, fov=fov, workspace=workspace, alpha_nominal=alpha)
+    contact = base.contact_velocity if contact_velocity is None else contact_velocity
+    return dataclasses.replace(base, limits=lim, fov=fov, workspace=workspace, alpha_nominal=alpha,
+                               contact_velocity=contact)
 
 
 class Mode(Enum):
@@ -255,6 +259,14 @@ class SimScenario:
         configuration (and the campaign runner's, unless its ``[planner]`` table sets it); a
         ``config`` passed to :func:`simulate` is used as given. ``None``: the planner's default
         (4, the paper's). ``SimConfig`` flies 6.
+    contact_velocity:
+        The velocity at contact the user-side configuration asks of the planner
+        (:class:`avp.ContactVelocity`), built into the planner's configuration as
+        ``alpha_nominal`` is (a ``config`` passed to :func:`simulate` is used as given; in a file
+        the table ``[scenario.contact_velocity]``). ``None``: the planner's default, the paper's
+        0.3 m/s into the pad and 2 m/s down the slope. The ratio of slide to normal speed is how
+        many centimetres along the slope an early contact lands per centimetre of depth error
+        (6.7 with the paper's); ``SimConfig`` sets it from ``contact_normal`` / ``contact_slope``.
     replan_rate_hz:
         Rate of :meth:`Replanner.step` calls in AVP mode.
     timeout:
@@ -318,6 +330,7 @@ class SimScenario:
     aim_normal: float = 0.0
     aim_slope: float = 0.0
     alpha_nominal: float | None = None
+    contact_velocity: ContactVelocity | None = None
     replan_rate_hz: float = 30.0
     timeout: float = 0.5
     after_plan: AfterPlan = AfterPlan.HOLD_ACCELERATION
@@ -348,6 +361,9 @@ class SimScenario:
             object.__setattr__(self, name, val)
         if self.alpha_nominal is not None:
             object.__setattr__(self, "alpha_nominal", v.positive_float("scenario.alpha_nominal", self.alpha_nominal))
+        if self.contact_velocity is not None and not isinstance(self.contact_velocity, ContactVelocity):
+            raise ConfigError("scenario.contact_velocity", "must be an avp.ContactVelocity or None, got "
+                              f"{type(self.contact_velocity).__name__}")
         if self.platform is not None and (self.aim_normal or self.aim_slope):
             raise ConfigError("scenario.aim_normal", "the aim is defined for a static pad; set aim_normal = "
                               "aim_slope = 0 with a platform")
@@ -569,7 +585,7 @@ def _shared(sc: SimScenario, config: PlannerConfig | None) -> tuple[SimScenario,
     """Scenario and planner configuration sharing one vehicle and one camera object."""
     if config is None:
         return sc, sim_config(limits=sc.vehicle.limits, camera=sc.camera.camera, ground_z=sc.planner_ground_z,
-                              alpha_nominal=sc.alpha_nominal)
+                              alpha_nominal=sc.alpha_nominal, contact_velocity=sc.contact_velocity)
     vehicle = sc.vehicle if sc.vehicle.limits is config.limits else dataclasses.replace(sc.vehicle, limits=config.limits)
     camera = sc.camera if sc.camera.camera is config.fov.camera else dataclasses.replace(sc.camera, camera=config.fov.camera)
     return dataclasses.replace(sc, vehicle=vehicle, camera=camera), config
