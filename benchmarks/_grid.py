@@ -21,6 +21,17 @@ def grid_parser(doc: str | None) -> argparse.ArgumentParser:
     return ap
 
 
+def add_contact_options(ap: argparse.ArgumentParser) -> None:
+    """``--contact-normal`` and ``--contact-slope`` (m/s): the contact velocity the simulated
+    user asks for (:attr:`avp.sim.evaluate.SimConfig.contact_normal` / ``contact_slope``)."""
+    base = SimConfig()
+    ap.add_argument("--contact-normal", type=float, default=base.contact_normal,
+                    help="SimConfig.contact_normal: velocity into the pad at contact (m/s, < 0; the paper's -0.3)")
+    ap.add_argument("--contact-slope", type=float, default=base.contact_slope,
+                    help="SimConfig.contact_slope: velocity along s1 at contact on a wall (m/s, times sin(incline); "
+                         "the paper's -2: down the slope)")
+
+
 def add_timing_options(ap: argparse.ArgumentParser) -> None:
     """``--deadline-ms``: :attr:`avp.ReplanConfig.deadline` of AVP's steps, in ms; and
     ``--adapt-latency``: :attr:`avp.ReplanConfig.adapt_latency`."""

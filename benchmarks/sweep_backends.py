@@ -4,6 +4,8 @@ realistic SimConfig and its perfect-estimate variant: success with Wilson 95 % i
     python benchmarks/sweep_backends.py --trials 20                 # 90 deg wall and 45 deg slope at 4.5 m
     python benchmarks/sweep_backends.py --trials 100 --inclines 90 --backends rotorpy --estimates realistic \
         --modes avp --compute-slowdown 8 [--deadline-ms 20]        # on an onboard computer 8 times slower
+    python benchmarks/sweep_backends.py --trials 100 --inclines 90 --backends rotorpy --estimates realistic \
+        --contact-normal -0.4 --contact-slope -1.4                 # another contact velocity (the paper's: -0.3, -2)
 
 Without rotorpy (``pip install "avp[rotorpy]"``) only avp's back-end runs. The rotorpy back-end
 feeds rotorpy's rotor drag forward in avp's controller (``SimConfig.drag_feedforward``);
@@ -21,7 +23,7 @@ import time
 import warnings
 
 import numpy as np
-from _grid import add_timing_options, replan_config
+from _grid import add_contact_options, add_timing_options, replan_config
 
 from avp.sim.evaluate import SimConfig, sweep
 
@@ -41,6 +43,7 @@ def main() -> None:
     ap.add_argument("--compute-slowdown", type=float, default=0.0,
                     help="SimConfig.compute_slowdown: an onboard computer this many times slower than this one")
     add_timing_options(ap)
+    add_contact_options(ap)
     args = ap.parse_args()
     replan = replan_config(args)
     backends = [b for b in args.backends if b == "avp" or importlib.util.find_spec("rotorpy") is not None]
@@ -50,7 +53,8 @@ def main() -> None:
     base = SimConfig(n_trials=args.trials, seed=args.seed, inclines_deg=tuple(args.inclines),
                      distances=tuple(args.distances), drag_feedforward=not args.no_drag_feedforward,
                      lag_feedforward=not args.no_lag_feedforward, modes=tuple(args.modes),
-                     compute_slowdown=args.compute_slowdown)
+                     compute_slowdown=args.compute_slowdown, contact_normal=args.contact_normal,
+                     contact_slope=args.contact_slope)
     rows = []
     for backend in backends:
         for label, cfg in (("realistic", base), ("perfect", base.perfect_estimate())):
