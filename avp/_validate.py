@@ -48,7 +48,10 @@ def vector(field: str, value: Any, size: int = 3) -> npt.NDArray[np.float64]:
 
 
 def finite_float(field: str, value: Any) -> float:
-    """``value`` as a finite float."""
+    """``value`` as a finite float (a bool or a string is refused: neither is a quantity, and a
+    string that parses would be stored as given by a caller that does not keep the result)."""
+    if isinstance(value, (bool, str, bytes)):
+        raise ConfigError(field, f"expected a number, got {value!r}")
     try:
         out = float(value)
     except (TypeError, ValueError) as exc:
@@ -69,7 +72,10 @@ def nonnegative_float(field: str, value: Any) -> float:
 
 
 def positive_float(field: str, value: Any, *, allow_inf: bool = False) -> float:
-    """``value`` as a float > 0 (``inf`` allowed when ``allow_inf``, meaning "no limit")."""
+    """``value`` as a float > 0 (``inf`` allowed when ``allow_inf``, meaning "no limit"; a bool or
+    a string is refused, as in :func:`finite_float`)."""
+    if isinstance(value, (bool, str, bytes)):
+        raise ConfigError(field, f"expected a positive number, got {value!r}")
     try:
         out = float(value)
     except (TypeError, ValueError) as exc:

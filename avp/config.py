@@ -95,20 +95,21 @@ class VehicleLimits:
     rotor_drag: float = 0.0  # 1/s, mass-normalised linear rotor drag d (docstring)
 
     def __post_init__(self) -> None:
-        v.positive_float("limits.mass", self.mass)
-        if isinstance(self.rotor_drag, bool) or not (math.isfinite(self.rotor_drag) and self.rotor_drag >= 0.0):
-            raise ConfigError("limits.rotor_drag", f"must be finite and >= 0 1/s, got {self.rotor_drag}")
-        if not (math.isfinite(self.thrust_min) and self.thrust_min >= 0.0):
-            raise ConfigError("limits.thrust_min", f"must be finite and >= 0 N, got {self.thrust_min}")
-        v.positive_float("limits.thrust_max", self.thrust_max)
+        object.__setattr__(self, "mass", v.positive_float("limits.mass", self.mass))
+        if isinstance(self.rotor_drag, (bool, str)) or not (math.isfinite(self.rotor_drag) and self.rotor_drag >= 0.0):
+            raise ConfigError("limits.rotor_drag", f"must be finite and >= 0 1/s, got {self.rotor_drag!r}")
+        object.__setattr__(self, "rotor_drag", float(self.rotor_drag))
+        if isinstance(self.thrust_min, (bool, str)) or not (math.isfinite(self.thrust_min) and self.thrust_min >= 0.0):
+            raise ConfigError("limits.thrust_min", f"must be finite and >= 0 N, got {self.thrust_min!r}")
+        object.__setattr__(self, "thrust_min", float(self.thrust_min))
+        object.__setattr__(self, "thrust_max", v.positive_float("limits.thrust_max", self.thrust_max))
         if self.thrust_min >= self.thrust_max:
             raise ConfigError(
                 "limits.thrust_min",
                 f"({self.thrust_min} N) must be below limits.thrust_max ({self.thrust_max} N)",
             )
-        v.positive_float("limits.thrust_rate_max", self.thrust_rate_max, allow_inf=True)
-        v.positive_float("limits.tilt_rate_max", self.tilt_rate_max, allow_inf=True)
-        v.positive_float("limits.body_rate_max", self.body_rate_max, allow_inf=True)
+        for name in ("thrust_rate_max", "tilt_rate_max", "body_rate_max"):
+            object.__setattr__(self, name, v.positive_float(f"limits.{name}", getattr(self, name), allow_inf=True))
 
     @property
     def accel_min(self) -> float:
@@ -296,6 +297,21 @@ class BoundsPolicy:
     )
 
     def __post_init__(self) -> None:
+        if not isinstance(self.time_search, TimeSearch):
+            raise ConfigError("bounds.time_search", f"must be an avp.TimeSearch (e.g. TimeSearch.SCALING), got "
+                              f"{self.time_search!r}")
+        if isinstance(self.relaxations, (str, Relaxation)) or not hasattr(self.relaxations, "__iter__"):
+            raise ConfigError("bounds.relaxations", f"must be a sequence of avp.Relaxation, got {self.relaxations!r}")
+        relax = tuple(self.relaxations)
+        for i, r in enumerate(relax):
+            if not isinstance(r, Relaxation):
+                raise ConfigError(f"bounds.relaxations[{i}]", f"must be an avp.Relaxation (e.g. Relaxation.FREE_SLIDE), "
+                                  f"got {r!r}")
+        object.__setattr__(self, "relaxations", relax)
+        if isinstance(self.factors, (str, bytes)) or not hasattr(self.factors, "__iter__"):
+            raise ConfigError("bounds.factors", f"must be a sequence of duration factors, got {self.factors!r}")
+        object.__setattr__(self, "factors", tuple(v.positive_float(f"bounds.factors[{i}]", f)
+                                                  for i, f in enumerate(self.factors)))
         if any(not (math.isfinite(f) and f > 0) for f in self.factors):
             raise ConfigError("bounds.factors", "every factor must be finite and > 0")
         if not (math.isfinite(self.growth) and self.growth > 1.0):
@@ -394,8 +410,12 @@ class Workspace:
         if self.ground_z is not None:
             object.__setattr__(self, "ground_z", v.finite_float("workspace.ground_z", self.ground_z))
         v.positive_float("workspace.max_speed", self.max_speed, allow_inf=True)
-        object.__setattr__(self, "half_spaces", tuple(self.half_spaces))
-        object.__setattr__(self, "spheres", tuple(self.spheres))
+        for name, kind in (("half_spaces", HalfSpace), ("spheres", Sphere)):
+            val = getattr(self, name)
+            if isinstance(val, kind) or not hasattr(val, "__iter__"):
+                raise ConfigError(f"workspace.{name}", f"must be a tuple of avp.{kind.__name__}, got {val!r}; "
+                                  f"wrap a single one: ({kind.__name__}(...),)")
+            object.__setattr__(self, name, tuple(val))
         for h in self.half_spaces:
             if not isinstance(h, HalfSpace):
                 raise ConfigError("workspace.half_spaces", f"expected avp.HalfSpace items, got {type(h).__name__}")
@@ -658,8 +678,17 @@ class PlannerConfig:
             raise ConfigError("config.qp_form", f"must be a QpForm, got {self.qp_form!r}")
         if not isinstance(self.solver, str):
             raise ConfigError("config.solver", f"must be a qpsolvers solver name, got {self.solver!r}")
+        for name, kind in (("contact_velocity", ContactVelocity), ("limits", VehicleLimits),
+                           ("time_allocation", TimeAllocation), ("fov", FovConfig)):
+            if not isinstance(getattr(self, name), kind):
+                raise ConfigError(f"config.{name}", f"must be an avp.{kind.__name__}, got {getattr(self, name)!r}")
         if self.alpha_range is not None:
-            a_lo, a_hi = (float(x) for x in self.alpha_range)
+            try:
+                a_lo, a_hi = (v.finite_float("config.alpha_range", x) for x in self.alpha_range)
+            except (TypeError, ValueError) as exc:
+                if isinstance(exc, ConfigError):
+                    raise
+                raise ConfigError("config.alpha_range", f"must be (lo, hi) m/s^2, got {self.alpha_range!r}") from exc
             if not (math.isfinite(a_lo) and math.isfinite(a_hi) and 0.0 < a_lo <= a_hi):
                 raise ConfigError("config.alpha_range", f"must be (lo, hi) with 0 < lo <= hi, got {self.alpha_range}")
             object.__setattr__(self, "alpha_range", (a_lo, a_hi))

@@ -234,6 +234,13 @@ class Replanner:
     ) -> None:
         if not isinstance(target, self._target_type):
             raise ConfigError("target", f"expected avp.{self._target_type.__name__}, got {type(target).__name__}")
+        if config is not None and not isinstance(config, PlannerConfig):
+            hint = " (a ReplanConfig goes in replan=...)" if isinstance(config, ReplanConfig) else ""
+            raise ConfigError("config", f"expected avp.PlannerConfig or None, got {type(config).__name__}{hint}")
+        if replan is not None and not isinstance(replan, ReplanConfig):
+            raise ConfigError("replan", f"expected avp.ReplanConfig or None, got {type(replan).__name__}")
+        if trajectory is not None and not isinstance(trajectory, Trajectory):
+            raise ConfigError("trajectory", f"expected avp.Trajectory or None, got {type(trajectory).__name__}")
         self.config = config if config is not None else PlannerConfig()
         self.replan = replan if replan is not None else ReplanConfig()
         self._replan_config = self.config

@@ -170,3 +170,41 @@ def test_errors_survive_pickling(error) -> None:
     assert str(again) == str(error) and again.args == error.args
     if isinstance(error, avp.ConfigError):
         assert (again.field, again.message) == (error.field, error.message)
+
+
+@pytest.mark.parametrize("make, field", [
+    # enum members given as their names: before, accepted and silently ignored (no relaxation ran)
+    (lambda: avp.BoundsPolicy(relaxations=("free_slide",)), "bounds.relaxations[0]"),
+    (lambda: avp.BoundsPolicy(time_search="paper"), "bounds.time_search"),
+    (lambda: avp.BoundsPolicy(relaxations="nope"), "bounds.relaxations"),
+    (lambda: avp.BoundsPolicy(factors=(1.2, "x")), "bounds.factors[1]"),
+    # nested configuration of the wrong type: before, a bare AttributeError deep in planning
+    (lambda: avp.PlannerConfig(limits={"mass": 0.5}), "config.limits"),
+    (lambda: avp.PlannerConfig(contact_velocity={"normal": -0.3}), "config.contact_velocity"),
+    (lambda: avp.PlannerConfig(fov=None), "config.fov"),
+    (lambda: avp.PlannerConfig(time_allocation=None), "config.time_allocation"),
+    (lambda: avp.PlannerConfig(alpha_range=5.0), "config.alpha_range"),
+    (lambda: avp.PlannerConfig(alpha_range=("a", 6.0)), "config.alpha_range"),
+    (lambda: avp.Workspace(half_spaces=avp.HalfSpace(point=[0, 0, 3], normal=[0, 0, -1])), "workspace.half_spaces"),
+    (lambda: avp.Workspace(spheres=avp.Sphere(center=[1, 0, 1], radius=0.2)), "workspace.spheres"),
+    # numbers as strings or bools: before, validated and then stored as given
+    (lambda: avp.VehicleLimits(mass="0.5"), "limits.mass"),
+    (lambda: avp.VehicleLimits(mass=True), "limits.mass"),
+    (lambda: avp.VehicleLimits(thrust_min="1"), "limits.thrust_min"),
+    (lambda: avp.VehicleLimits(tilt_rate_max="10"), "limits.tilt_rate_max"),
+    (lambda: avp.ReplanConfig(latency="0.02"), "replan.latency"),
+    # the replanner's configurations in the wrong places: before, a bare AttributeError
+    (lambda: avp.Replanner(standard(90.0, 3.5).target, avp.ReplanConfig()), "config"),
+    (lambda: avp.Replanner(standard(90.0, 3.5).target, replan={"latency": 0.02}), "replan"),
+])
+def test_configuration_objects_check_their_types(make, field) -> None:
+    with pytest.raises(avp.ConfigError) as exc:
+        make()
+    assert exc.value.field == field
+
+
+def test_checked_numbers_are_stored_as_floats() -> None:
+    lim = avp.VehicleLimits(mass=1, thrust_max=20, thrust_min=0, tilt_rate_max=10)
+    assert all(type(getattr(lim, n)) is float for n in ("mass", "thrust_max", "thrust_min", "tilt_rate_max"))
+    bounds = avp.BoundsPolicy(relaxations=[avp.config.Relaxation.FREE_SLIDE], factors=[1.2, 2])
+    assert bounds.relaxations == (avp.config.Relaxation.FREE_SLIDE,) and bounds.factors == (1.2, 2.0)
