@@ -92,6 +92,20 @@ class Camera:
     def __hash__(self) -> int:
         return hash((self.R_BC.tobytes(), self.half_fov, self.horizontal_fov, self.vertical_fov, self.range))
 
+    @classmethod
+    def front(cls, uptilt: float = 0.0, **kwargs: Any) -> Camera:
+        """The front camera (:data:`FRONT_CAMERA_R_BC`) with its optical axis tilted up by
+        ``uptilt`` rad: turned about ``b2`` from ``b1`` towards ``b3``, so that it looks above
+        the horizon when the vehicle hovers (``c3 = cos(uptilt) b1 + sin(uptilt) b3``), as FPV
+        cameras are mounted for forward flight, in which the vehicle pitches nose down. Other
+        fields as :class:`Camera` (``half_fov``, ``range``...)."""
+        th = v.finite_float("camera.uptilt", uptilt)
+        if not abs(th) < math.pi / 2:
+            raise ConfigError("camera.uptilt", f"must be in (-pi/2, pi/2) rad, got {th}")
+        c, s = math.cos(th), math.sin(th)
+        tilt = np.array([[c, 0.0, -s], [0.0, 1.0, 0.0], [s, 0.0, c]])  # about b2: b1 -> c b1 + s b3
+        return cls(R_BC=tilt @ FRONT_CAMERA_R_BC, **kwargs)
+
     @cached_property
     def axis_B(self) -> Array:
         """Optical axis ``c3`` in body coordinates (a contiguous copy of the column, made once)."""

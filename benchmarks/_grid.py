@@ -21,10 +21,13 @@ def grid_parser(doc: str | None) -> argparse.ArgumentParser:
     return ap
 
 
-def add_contact_options(ap: argparse.ArgumentParser) -> None:
+def add_vehicle_options(ap: argparse.ArgumentParser) -> None:
     """``--contact-normal`` and ``--contact-slope`` (m/s): the contact velocity the simulated
-    user asks for (:attr:`avp.sim.evaluate.SimConfig.contact_normal` / ``contact_slope``)."""
+    user asks for (:attr:`avp.sim.evaluate.SimConfig.contact_normal` / ``contact_slope``);
+    ``--camera-uptilt-deg``: its camera's mount (``SimConfig.camera_uptilt_deg``)."""
     base = SimConfig()
+    ap.add_argument("--camera-uptilt-deg", type=float, default=base.camera_uptilt_deg,
+                    help="SimConfig.camera_uptilt_deg: the front camera tilted up by this angle (deg; 0: level)")
     ap.add_argument("--contact-normal", type=float, default=base.contact_normal,
                     help="SimConfig.contact_normal: velocity into the pad at contact (m/s, < 0; the paper's -0.3)")
     ap.add_argument("--contact-slope", type=float, default=base.contact_slope,

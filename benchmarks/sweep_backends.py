@@ -23,7 +23,7 @@ import time
 import warnings
 
 import numpy as np
-from _grid import add_contact_options, add_timing_options, replan_config
+from _grid import add_timing_options, add_vehicle_options, replan_config
 
 from avp.sim.evaluate import SimConfig, sweep
 
@@ -43,7 +43,7 @@ def main() -> None:
     ap.add_argument("--compute-slowdown", type=float, default=0.0,
                     help="SimConfig.compute_slowdown: an onboard computer this many times slower than this one")
     add_timing_options(ap)
-    add_contact_options(ap)
+    add_vehicle_options(ap)
     args = ap.parse_args()
     replan = replan_config(args)
     backends = [b for b in args.backends if b == "avp" or importlib.util.find_spec("rotorpy") is not None]
@@ -54,7 +54,7 @@ def main() -> None:
                      distances=tuple(args.distances), drag_feedforward=not args.no_drag_feedforward,
                      lag_feedforward=not args.no_lag_feedforward, modes=tuple(args.modes),
                      compute_slowdown=args.compute_slowdown, contact_normal=args.contact_normal,
-                     contact_slope=args.contact_slope)
+                     contact_slope=args.contact_slope, camera_uptilt_deg=args.camera_uptilt_deg)
     rows = []
     for backend in backends:
         for label, cfg in (("realistic", base), ("perfect", base.perfect_estimate())):

@@ -16,7 +16,7 @@ from __future__ import annotations
 import dataclasses
 import warnings
 
-from _grid import add_contact_options, add_timing_options, grid_parser, replan_config
+from _grid import add_timing_options, add_vehicle_options, grid_parser, replan_config
 
 from avp.sim.evaluate import SimConfig, sweep
 
@@ -42,12 +42,12 @@ def main() -> None:
                          "than this one (each step takes that many times its wall time of simulated time; AVP only, "
                          "not with --axes)")
     add_timing_options(ap)
-    add_contact_options(ap)
+    add_vehicle_options(ap)
     args = ap.parse_args()
     warnings.simplefilter("ignore")
     cfg = SimConfig(n_trials=args.trials, seed=args.seed, inclines_deg=tuple(args.inclines),
                     distances=tuple(args.distances), contact_normal=args.contact_normal,
-                    contact_slope=args.contact_slope)
+                    contact_slope=args.contact_slope, camera_uptilt_deg=args.camera_uptilt_deg)
     if args.perfect:
         cfg = cfg.perfect_estimate()
     replan = replan_config(args)
