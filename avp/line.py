@@ -30,6 +30,7 @@ import scipy.optimize
 
 from . import _validate as v
 from ._typing import Array
+from ._values import fields_equal, fields_hash
 from .errors import ConfigError
 from .frames import yaw_from_b2
 
@@ -49,7 +50,7 @@ class LineYaw(Enum):
     FREE = "yaw at contact left to the optimiser"
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class LineTarget:
     """A line to perch on.
 
@@ -91,6 +92,9 @@ class LineTarget:
     contact_speed: float = 0.0
     yaw: LineYaw = LineYaw.ACROSS
     side: Array | None = None
+
+    __eq__ = fields_equal  # values, not identity (module _values)
+    __hash__ = fields_hash
 
     def __post_init__(self) -> None:
         try:

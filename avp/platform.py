@@ -56,7 +56,7 @@ def _sinc(x: Array) -> Array:
     return np.where(small, 1.0 - x * x / 6.0, np.sin(safe) / safe)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)  # PerchTarget's value equality, over these fields too
 class MovingTarget(PerchTarget):
     """A perch pad carried by a moving platform.
 

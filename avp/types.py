@@ -14,6 +14,7 @@ import numpy as np
 
 from . import _validate as v
 from ._typing import Array
+from ._values import fields_equal, fields_hash
 from .errors import ConfigError
 
 __all__ = ["PerchTarget", "State"]
@@ -21,7 +22,7 @@ __all__ = ["PerchTarget", "State"]
 _ZERO3 = (0.0, 0.0, 0.0)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class State:
     """Flat-output state of the vehicle at ``time``: the initial condition of a plan.
 
@@ -43,6 +44,9 @@ class State:
     yaw_rate: float = 0.0
     time: float = 0.0
 
+    __eq__ = fields_equal  # values, not identity (module _values)
+    __hash__ = fields_hash
+
     def __post_init__(self) -> None:
         for name in ("position", "velocity", "acceleration", "jerk"):
             object.__setattr__(self, name, v.frozen_array(f"state.{name}", getattr(self, name), (3,)))
@@ -59,7 +63,7 @@ class State:
         return np.stack([self.position, self.velocity, self.acceleration, self.jerk])
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class PerchTarget:
     """A perch pad: its centre ``point`` and orientation ``R_WS = [s1 s2 s3]``.
 
@@ -82,6 +86,9 @@ class PerchTarget:
 
     point: Array
     R_WS: Array
+
+    __eq__ = fields_equal  # values, not identity (module _values)
+    __hash__ = fields_hash
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "point", v.frozen_array("target.point", self.point, (3,)))

@@ -208,3 +208,28 @@ def test_checked_numbers_are_stored_as_floats() -> None:
     assert all(type(getattr(lim, n)) is float for n in ("mass", "thrust_max", "thrust_min", "tilt_rate_max"))
     bounds = avp.BoundsPolicy(relaxations=[avp.config.Relaxation.FREE_SLIDE], factors=[1.2, 2])
     assert bounds.relaxations == (avp.config.Relaxation.FREE_SLIDE,) and bounds.factors == (1.2, 2.0)
+
+
+def test_value_types_compare_and_hash_by_value() -> None:
+    """``State``, ``PerchTarget`` (and ``MovingTarget``, ``LineTarget``) hold arrays: ``==`` raised
+    "truth value of an array is ambiguous" and ``hash`` a TypeError, so ``if estimate !=
+    last_estimate`` crashed. Now equal fields (arrays element-wise) make equal objects."""
+    import dataclasses
+
+    from avp.platform import MovingTarget
+
+    t = standard(90.0, 3.5).target
+    same = avp.PerchTarget(point=t.point.copy(), R_WS=t.R_WS.copy())
+    moved = avp.PerchTarget(point=t.point + [0.0, 0.0, 1e-9], R_WS=t.R_WS)
+    assert t == same and hash(t) == hash(same) and len({t, same}) == 1
+    assert t != moved and not (t == moved)
+    s = avp.State.hover([0.0, 0.0, 1.0])
+    assert s == avp.State.hover([0.0, 0.0, 1.0]) and s != avp.State.hover([0.0, 0.0, 1.0], yaw=0.1)
+    assert s != t and (s == 3) is False
+    m = MovingTarget(point=t.point, R_WS=t.R_WS, heading=0.1, speed=1.0)
+    assert m == MovingTarget(point=t.point, R_WS=t.R_WS, heading=0.1, speed=1.0)
+    assert m != dataclasses.replace(m, speed=2.0) and m != same  # the platform state counts, and the type
+    line = avp.LineTarget(vertices=[[0.0, 0.0, 2.0], [4.0, 0.0, 2.0]])
+    assert line == avp.LineTarget(vertices=[[0.0, 0.0, 2.0], [4.0, 0.0, 2.0]])
+    assert avp.State.hover([0.0, 0.0, -0.0]) == avp.State.hover([0.0, 0.0, 0.0])
+    assert hash(avp.State.hover([0.0, 0.0, -0.0])) == hash(avp.State.hover([0.0, 0.0, 0.0]))
