@@ -23,8 +23,8 @@ if __name__ == "__main__":
         blend = min(t / 1.0, 1.0)  # the estimate converges over the first second
         estimate = avp.PerchTarget(point=(1 - blend) * guess.point + blend * truth.point, R_WS=truth.R_WS)
         step = replanner.step(t, odometry, estimate)
-        print(f"t={t:5.3f} s  {step.action.name:20s} {step.reason[:40]:40s} "
-              f"solve {step.solve_time * 1e3:5.1f} ms  off by {step.target_error * 100:4.1f} cm")
+        print(f"t={t:5.3f} s  {step.action.name:20s} solve {step.solve_time * 1e3:5.1f} ms  "
+              f"off by {step.target_error * 100:4.1f} cm  {step.reason}")
         if step.action is avp.ReplanAction.CANNOT_REACH:
             print(f"  cannot reach the estimate: {step.target_error:.3f} m off, budget {step.reach_budget:.3f} m:"
                   " a real vehicle would go around here")
