@@ -208,6 +208,7 @@ def test_checked_numbers_are_stored_as_floats() -> None:
     assert all(type(getattr(lim, n)) is float for n in ("mass", "thrust_max", "thrust_min", "tilt_rate_max"))
     bounds = avp.BoundsPolicy(relaxations=[avp.config.Relaxation.FREE_SLIDE], factors=[1.2, 2])
     assert bounds.relaxations == (avp.config.Relaxation.FREE_SLIDE,) and bounds.factors == (1.2, 2.0)
+    assert all(type(f) is float for f in bounds.factors)
 
 
 def test_value_types_compare_and_hash_by_value() -> None:

@@ -140,7 +140,10 @@ def test_the_realistic_vehicles_camera_is_tilted_up_and_shared_with_the_planner(
     cam = sc.camera.camera
     assert np.isclose(np.degrees(np.arcsin(cam.axis_B[2])), SimConfig().camera_uptilt_deg)
     assert _shared(sc, None)[1].fov.camera is cam  # one camera: the planner's rows see this mount
-    assert SimConfig(camera_uptilt_deg=0.0).scenario(90.0, 4.5).camera.camera == avp.Camera.front(range=10.0)
+    from avp.sim import CameraParams
+
+    # the tilt is the only change to the sensor's default camera (cone, range, image kept)
+    assert SimConfig(camera_uptilt_deg=0.0).scenario(90.0, 4.5).camera.camera == CameraParams().camera
     for bad in (float("inf"), 75.0, "10", True):
         with pytest.raises(avp.ConfigError, match="sim.camera_uptilt_deg"):
             SimConfig(camera_uptilt_deg=bad)

@@ -361,7 +361,8 @@ class SimConfig:
         rotorpy's wall perched 92 / 94 of 100 seeds not used before (100-199; 4.5 / 7.5 m)
         against 81 / 81 with the level camera, and 96 / 92 % on the grid's seeds 0-99 against
         84 / 84 % (docs/simulation.md, "The camera's uptilt"). 0: the paper's level front
-        camera.
+        camera. A planner ``config`` passed to :func:`~avp.sim.run.simulate` (or ``planner=``
+        to :func:`sweep`) brings its own camera, which the sensor then uses instead.
     initial_frames:
         Detections fused at hover before the first plan.
     filter_scale_error, filter_range_ratio, filter_estimate_scale:
@@ -471,7 +472,8 @@ class SimConfig:
         """The :class:`~avp.sim.run.SimScenario` of one condition with this config's realism."""
         base_cam = CameraParams()
         cam = dataclasses.replace(
-            base_cam, camera=Camera.front(math.radians(self.camera_uptilt_deg), range=base_cam.camera.range),
+            base_cam, camera=dataclasses.replace(base_cam.camera,
+                                                 R_BC=Camera.front(math.radians(self.camera_uptilt_deg)).R_BC),
             sigma0_pos=base_cam.sigma0_pos * self.camera_noise_scale,
             sigma0_ang=base_cam.sigma0_ang * self.camera_noise_scale,
             scale_bias=float(self.camera_scale_bias), bias_sign=self.camera_bias_sign,

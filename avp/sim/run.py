@@ -717,8 +717,10 @@ def simulate(
         at contact, as the controller will fly it. The contact thrust is the static planner's
         ``contact_alpha(incline)``; on a moving pad, whose contact thrust is free in the limits,
         ``d`` (which scales with its square root) is that value's, not the plan's. Default
-        (None): when ``config`` is None or leaves ``limits.rotor_drag`` at 0 (the campaign runner
-        and ``avp simulate``: unless the configuration sets ``rotor_drag``). A planner that knows
+        (None): when the planner's ``limits.rotor_drag`` is 0, that of ``config`` or, without
+        one, of the scenario's vehicle (a nonzero drag there is the user's and is kept; an
+        explicit 0 cannot be told from the default, so pass ``False`` for it). The campaign
+        runner and ``avp simulate`` give it unless the configuration sets ``rotor_drag``. A planner that knows
         no drag, on a vehicle whose controller feeds it forward, plans a contact it cannot fly
         (on rotorpy's wall ``b3`` arrives 9 deg off ``s3``): pass ``False`` to fly one anyway.
     """
