@@ -4,6 +4,7 @@ shapes, rotations. Every failure is a :class:`~avp.errors.ConfigError` naming th
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
@@ -104,3 +105,13 @@ def unit_vector(field: str, value: Any) -> npt.NDArray[np.float64]:
     if n < 1e-9:
         raise ConfigError(field, "must be a nonzero vector")
     return v / n
+
+
+def sequence(field: str, value: Any, what: str, single: tuple[type, ...] = ()) -> tuple[Any, ...]:
+    """``value`` as a tuple of its items; a string, a mapping, a non-iterable or one item of a
+    ``single`` type (a lone element where a sequence of them belongs) is refused, the message
+    saying it must be a sequence of ``what``."""
+    if isinstance(value, (str, bytes, Mapping, *single)) or not hasattr(value, "__iter__"):
+        wrap = f"; wrap a single one: ({single[0].__name__}(...),)" if isinstance(value, single) else ""
+        raise ConfigError(field, f"must be a sequence of {what}, got {value!r}{wrap}")
+    return tuple(value)

@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import itertools
 import math
-from collections.abc import Mapping
 from dataclasses import dataclass, field
 from enum import Enum
 from functools import cached_property
@@ -96,12 +95,8 @@ class VehicleLimits:
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "mass", v.positive_float("limits.mass", self.mass))
-        if isinstance(self.rotor_drag, (bool, str)) or not (math.isfinite(self.rotor_drag) and self.rotor_drag >= 0.0):
-            raise ConfigError("limits.rotor_drag", f"must be finite and >= 0 1/s, got {self.rotor_drag!r}")
-        object.__setattr__(self, "rotor_drag", float(self.rotor_drag))
-        if isinstance(self.thrust_min, (bool, str)) or not (math.isfinite(self.thrust_min) and self.thrust_min >= 0.0):
-            raise ConfigError("limits.thrust_min", f"must be finite and >= 0 N, got {self.thrust_min!r}")
-        object.__setattr__(self, "thrust_min", float(self.thrust_min))
+        for name in ("rotor_drag", "thrust_min"):  # 1/s, N
+            object.__setattr__(self, name, v.nonnegative_float(f"limits.{name}", getattr(self, name)))
         object.__setattr__(self, "thrust_max", v.positive_float("limits.thrust_max", self.thrust_max))
         if self.thrust_min >= self.thrust_max:
             raise ConfigError(
@@ -300,20 +295,15 @@ class BoundsPolicy:
         if not isinstance(self.time_search, TimeSearch):
             raise ConfigError("bounds.time_search", f"must be an avp.TimeSearch (e.g. TimeSearch.SCALING), got "
                               f"{self.time_search!r}")
-        if isinstance(self.relaxations, (str, Relaxation)) or not hasattr(self.relaxations, "__iter__"):
-            raise ConfigError("bounds.relaxations", f"must be a sequence of avp.Relaxation, got {self.relaxations!r}")
-        relax = tuple(self.relaxations)
+        relax = v.sequence("bounds.relaxations", self.relaxations, "avp.Relaxation", (Relaxation,))
         for i, r in enumerate(relax):
             if not isinstance(r, Relaxation):
                 raise ConfigError(f"bounds.relaxations[{i}]", f"must be an avp.Relaxation (e.g. Relaxation.FREE_SLIDE), "
                                   f"got {r!r}")
         object.__setattr__(self, "relaxations", relax)
-        if isinstance(self.factors, (str, bytes)) or not hasattr(self.factors, "__iter__"):
-            raise ConfigError("bounds.factors", f"must be a sequence of duration factors, got {self.factors!r}")
+        factors = v.sequence("bounds.factors", self.factors, "duration factors")
         object.__setattr__(self, "factors", tuple(v.positive_float(f"bounds.factors[{i}]", f)
-                                                  for i, f in enumerate(self.factors)))
-        if any(not (math.isfinite(f) and f > 0) for f in self.factors):
-            raise ConfigError("bounds.factors", "every factor must be finite and > 0")
+                                                  for i, f in enumerate(factors)))
         if not (math.isfinite(self.growth) and self.growth > 1.0):
             raise ConfigError("bounds.growth", f"must be > 1, got {self.growth}")
         if self.max_steps < 0:
@@ -411,11 +401,8 @@ class Workspace:
             object.__setattr__(self, "ground_z", v.finite_float("workspace.ground_z", self.ground_z))
         v.positive_float("workspace.max_speed", self.max_speed, allow_inf=True)
         for name, kind in (("half_spaces", HalfSpace), ("spheres", Sphere)):
-            val = getattr(self, name)
-            if isinstance(val, kind) or not hasattr(val, "__iter__"):
-                raise ConfigError(f"workspace.{name}", f"must be a tuple of avp.{kind.__name__}, got {val!r}; "
-                                  f"wrap a single one: ({kind.__name__}(...),)")
-            object.__setattr__(self, name, tuple(val))
+            object.__setattr__(self, name, v.sequence(f"workspace.{name}", getattr(self, name),
+                                                      f"avp.{kind.__name__}", (kind,)))
         for h in self.half_spaces:
             if not isinstance(h, HalfSpace):
                 raise ConfigError("workspace.half_spaces", f"expected avp.HalfSpace items, got {type(h).__name__}")
@@ -683,12 +670,10 @@ class PlannerConfig:
             if not isinstance(getattr(self, name), kind):
                 raise ConfigError(f"config.{name}", f"must be an avp.{kind.__name__}, got {getattr(self, name)!r}")
         if self.alpha_range is not None:
-            try:
-                a_lo, a_hi = (v.finite_float("config.alpha_range", x) for x in self.alpha_range)
-            except (TypeError, ValueError) as exc:
-                if isinstance(exc, ConfigError):
-                    raise
-                raise ConfigError("config.alpha_range", f"must be (lo, hi) m/s^2, got {self.alpha_range!r}") from exc
+            pair = v.sequence("config.alpha_range", self.alpha_range, "two thrusts (lo, hi), m/s^2")
+            if len(pair) != 2:
+                raise ConfigError("config.alpha_range", f"must be (lo, hi) m/s^2, got {self.alpha_range!r}")
+            a_lo, a_hi = (v.finite_float("config.alpha_range", x) for x in pair)
             if not (math.isfinite(a_lo) and math.isfinite(a_hi) and 0.0 < a_lo <= a_hi):
                 raise ConfigError("config.alpha_range", f"must be (lo, hi) with 0 < lo <= hi, got {self.alpha_range}")
             object.__setattr__(self, "alpha_range", (a_lo, a_hi))
@@ -950,10 +935,8 @@ class ReplanConfig:
             raise ConfigError("replan.partial_fractions",
                               f"must be strictly decreasing (largest first), got {self.partial_fractions!r}")
         object.__setattr__(self, "partial_fractions", fr)
-        if isinstance(self.retime_retries, (str, bytes, Mapping)) or not hasattr(self.retime_retries, "__iter__"):
-            raise ConfigError("replan.retime_retries",
-                              f"must be a sequence of factors on the time left, got {self.retime_retries!r}")
-        rr = tuple(v.nonnegative_float(f"replan.retime_retries[{i}]", f) for i, f in enumerate(self.retime_retries))
+        retries = v.sequence("replan.retime_retries", self.retime_retries, "factors on the time left")
+        rr = tuple(v.nonnegative_float(f"replan.retime_retries[{i}]", f) for i, f in enumerate(retries))
         for i, f in enumerate(rr):
             if not 0.5 <= f <= 2.0 or f == 1.0:
                 raise ConfigError(f"replan.retime_retries[{i}]",

@@ -24,6 +24,7 @@ from typing import Any, TextIO
 
 import numpy as np
 
+from .. import _validate as v
 from ..camera import Camera
 from ..config import ContactVelocity, PlannerConfig
 from ..errors import ConfigError
@@ -138,7 +139,7 @@ class Comparison:
         for c in self.conditions:
             for m in Mode:
                 rate = self.success_rate(c, m)
-                oc = ", ".join(f"{k} x{v}" for k, v in sorted(self.outcomes(c, m).items()))
+                oc = ", ".join(f"{k} x{n}" for k, n in sorted(self.outcomes(c, m).items()))
                 lines.append(f"  {c.label():34s} {m.name.lower():9s} {100 * rate:7.0f}%  {oc}")
         return "\n".join(lines)
 
@@ -446,13 +447,10 @@ class SimConfig:
 
     def __post_init__(self) -> None:
         Backend.parse(self.backend, "sim.backend")
-        for name in ("contact_normal", "contact_slope"):
-            val = getattr(self, name)
-            if isinstance(val, bool) or not isinstance(val, (int, float)) or not math.isfinite(val):
-                raise ConfigError(f"sim.{name}", f"must be a finite speed (m/s), got {val!r}")
-        up = self.camera_uptilt_deg
-        if isinstance(up, bool) or not isinstance(up, (int, float)) or not (math.isfinite(up) and abs(up) < 60.0):
-            raise ConfigError("sim.camera_uptilt_deg", f"must be a finite angle within +-60 deg, got {up!r}")
+        for name in ("contact_normal", "contact_slope"):  # m/s
+            v.finite_float(f"sim.{name}", getattr(self, name))
+        if not abs(v.finite_float("sim.camera_uptilt_deg", self.camera_uptilt_deg)) < 60.0:
+            raise ConfigError("sim.camera_uptilt_deg", f"must be within +-60 deg, got {self.camera_uptilt_deg!r}")
         if self.contact_normal >= 0:
             raise ConfigError("sim.contact_normal", f"must be < 0 m/s (into the pad), got {self.contact_normal}")
         if isinstance(self.n_trials, bool) or not isinstance(self.n_trials, int) or self.n_trials < 1:
