@@ -311,7 +311,7 @@ def _outcome(qp: PerchingQp, config: PlannerConfig, red: ReducedQp | None, solut
              G_full: Array, lo_full: Array, hi_full: Array, build_time: float, solve_time: float) -> QpOutcome:
     """Judge a back-end's answer: finite, lifted to the coefficients, within the tolerances."""
     x = solution.x if solution.found else None
-    if x is None or not np.all(np.isfinite(x)):
+    if x is None or not np.isfinite(x).all():
         return QpOutcome(status=QpStatus.NO_SOLUTION, c_hat=None, solver=config.solver, build_time=build_time, solve_time=solve_time, max_violation=np.inf, solution=solution)
     c_hat = red.lift(x) if red is not None else np.asarray(x, dtype=float)
     violation = _max_violation(qp, c_hat, G_full, lo_full, hi_full)

@@ -29,6 +29,6 @@ def check_durations(durations: Any, config: PlannerConfig) -> Array:
         raise ConfigError("durations", f"expected {config.n_segments} numbers, got {durations!r}") from exc
     if T.shape != (config.n_segments,):
         raise ConfigError("durations", f"expected {config.n_segments} values (config.n_segments), got {T.size}")
-    if not np.all(np.isfinite(T)) or np.any(T <= 0.0):
+    if not np.isfinite(T).all() or (T <= 0.0).any():
         raise ConfigError("durations", f"every segment duration must be finite and > 0 s, got {T.tolist()}")
     return T

@@ -171,7 +171,7 @@ class Trajectory:
         if isinstance(t, float) and self.t0 - TIME_TOL <= t <= self.tf + TIME_TOL:  # one time, in range
             return np.array([min(max(t, self.t0), self.tf)]), ()
         arr = np.asarray(t, dtype=float)
-        if not np.all(np.isfinite(arr)):
+        if not np.isfinite(arr).all():
             raise ConfigError("t", "contains NaN or inf")
         if arr.size and (arr.min() < self.t0 - TIME_TOL or arr.max() > self.tf + TIME_TOL):
             raise ConfigError(

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from functools import cached_property
 from typing import Any
 
 import numpy as np
@@ -162,9 +163,9 @@ class PerchTarget:
         """Outward unit normal (W)."""
         return self.R_WS[:, 2]
 
-    @property
+    @cached_property
     def incline(self) -> float:
-        """Angle between ``s3`` and ``e3`` (rad)."""
+        """Angle between ``s3`` and ``e3`` (rad); computed once (``R_WS`` is read-only)."""
         return float(math.acos(max(-1.0, min(1.0, float(self.R_WS[2, 2])))))
 
     def at(self, time: float) -> PerchTarget:

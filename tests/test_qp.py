@@ -157,3 +157,28 @@ def test_incremental_reduction_equals_a_fresh_one() -> None:
         np.testing.assert_allclose(getattr(a, name), getattr(b, name), rtol=1e-13, atol=1e-13, err_msg=name)
     for x, y in zip(child.stacked_inequalities(), fresh.stacked_inequalities(), strict=True):
         assert np.array_equal(x, y)
+    # the relative violation scales too: the parent's (computed by the solve) plus the new rows'
+    assert "_violation_scales" in base.__dict__
+    for x, y in zip(child.violation_scales(), fresh.violation_scales(), strict=True):
+        assert np.array_equal(x, y)
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    durations=st.lists(st.floats(0.05, 3.0), min_size=3, max_size=3),
+    fractions=st.lists(st.floats(0.0, 1.0), min_size=1, max_size=30),
+    order=st.integers(0, 4), order2=st.integers(0, 4), weight=st.floats(-2.0, 2.0),
+    at_end=st.booleans(),
+)
+def test_point_rows_plus_is_the_sum_of_two_row_sets(durations, fractions, order, order2, weight, at_end) -> None:
+    """``point_rows(..., plus=(r2, w))`` (the band's ``a + d v`` rows in one pass) has exactly the
+    values of the ``order`` rows plus ``w`` times the ``r2`` rows, at any times (one time at the
+    plan's end takes the endpoint basis, many times several segments)."""
+    from avp.qp.rows import point_rows
+
+    layout = layout_for(3, 7)
+    knots = np.concatenate([[0.0], np.cumsum(durations)])
+    times = knots[-1] if at_end else knots[-1] * np.asarray(fractions)
+    combined = point_rows(layout, knots, order, times, plus=(order2, weight))
+    summed = point_rows(layout, knots, order, times) + weight * point_rows(layout, knots, order2, times)
+    assert np.array_equal(combined, summed)

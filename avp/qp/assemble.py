@@ -242,20 +242,30 @@ class PerchingQp:
 
     @cached_property
     def _violation_scales(self) -> tuple[Array, Array, Array]:
+        def inv(x: Array) -> Array:
+            return np.where(np.isfinite(x), 1.0 / np.maximum(1.0, np.abs(x)), 1.0)
+
+        parent = self.__dict__.get("_parent")
+        if parent is not None and "_violation_scales" in parent.__dict__:
+            # a copy with more blocks (same equalities): the parent's scales, then the new rows'
+            inv_b, inv_lo0, inv_hi0 = parent._violation_scales
+            new = self.inequalities[len(parent.inequalities):]
+            if not new:
+                return inv_b, inv_lo0, inv_hi0
+            lo = np.concatenate([b.lower for b in new])
+            hi = np.concatenate([b.upper for b in new])
+            return (inv_b, _read_only(np.concatenate([inv_lo0, inv(lo)])),
+                    _read_only(np.concatenate([inv_hi0, inv(hi)])))
         _, b = self.stacked_equalities()
         _, lo, hi = self.stacked_inequalities()
-
-        def inv(x: Array) -> Array:
-            return _read_only(np.where(np.isfinite(x), 1.0 / np.maximum(1.0, np.abs(x)), 1.0))
-
-        return inv(b), inv(lo), inv(hi)
+        return _read_only(inv(b)), _read_only(inv(lo)), _read_only(inv(hi))
 
     def trajectory(self, c_hat: Array, g: float) -> Trajectory:
         """The :class:`~avp.trajectory.Trajectory` of normalised coefficients ``c_hat``, starting
         at ``t0`` with this QP's durations."""
         coeffs = self.layout.to_physical(c_hat, self.durations)
         knots = self.t0 + self.knots_rel
-        if not (np.isfinite(coeffs).all() and np.all(np.diff(knots) > 0.0)):
+        if not (np.isfinite(coeffs).all() and (np.diff(knots) > 0.0).all()):
             return Trajectory(coeffs, knots, g=g)  # raises the typed error
         return Trajectory._trusted(coeffs, knots, g)
 
@@ -343,7 +353,7 @@ def build_perching_qp(
     knots_rel = np.concatenate([[0.0], np.cumsum(T)])
     # equal durations (every replan) scale by one of them exactly: the rows, which depend on
     # T_i / t_scale, are then the same bits at every step and hit the elimination cache exactly
-    t_scale = float(T[0]) if np.all(T == T[0]) else float(T.mean())
+    t_scale = float(T[0]) if (T == T[0]).all() else float(T.mean())
     P = cost_matrix(layout, T, config.position_cost_order, config.yaw_cost_order)
     A0, b0 = initial_state_rows(layout, T, state, t_scale)
     Ac = continuity_rows(layout, T, config.continuity_order, t_scale)

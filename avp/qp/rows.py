@@ -23,17 +23,26 @@ def point_rows(
     order: int,
     times: Array | float,
     axes: Sequence[int] = (0, 1, 2),
+    plus: tuple[int, float] | None = None,
 ) -> Array:
-    """Rows of shape ``(len(times), len(axes), n_variables)`` for derivative ``order``."""
+    """Rows of shape ``(len(times), len(axes), n_variables)`` for derivative ``order``.
+
+    ``plus = (order2, w)``: rows of ``d^order p + w d^order2 p`` in one pass (the same values
+    as adding ``w`` times the ``order2`` rows, without building them)."""
     t = np.atleast_1d(np.asarray(times, dtype=float))
     if t.size == 1 and float(t[0]) == float(knots_rel[-1]):  # the end of the plan: u = 1
         seg = np.array([layout.n_segments - 1])
         T_end = float(knots_rel[-1] - knots_rel[-2])
-        local = (layout.endpoint_basis[1][order] / T_end**order)[None, :]
+        B1 = layout.endpoint_basis[1]
+        local = (B1[order] / T_end**order)[None, :]
+        if plus is not None:
+            local = local + plus[1] * (B1[plus[0]] / T_end ** plus[0])[None, :]
     else:
         seg, u = layout.locate(knots_rel, t)
         T = knots_rel[seg + 1] - knots_rel[seg]
         local = layout.basis(order, u) / (T**order)[:, None]  # (m, C)
+        if plus is not None:
+            local = local + plus[1] * (layout.basis(plus[0], u) / (T ** plus[0])[:, None])
     ax = tuple(int(a) for a in axes)
     m, n_c, n_s = t.size, layout.n_coeffs, layout.n_segments
     rows = np.zeros((m, len(ax), layout.n_variables))
@@ -43,7 +52,7 @@ def point_rows(
                 start = (a * n_s + s) * n_c
                 rows[i, j, start:start + n_c] = local[i]
         return rows
-    if np.all(seg == seg[0]):  # one segment (e.g. the band (14)): a slice per axis
+    if (seg == seg[0]).all():  # one segment (e.g. the band (14)): a slice per axis
         for j, a in enumerate(ax):
             start = (a * n_s + int(seg[0])) * n_c
             rows[:, j, start:start + n_c] = local
