@@ -47,6 +47,9 @@ class Certificate(Enum):
 
 
 _CODES = (Certificate.WITHIN, Certificate.VIOLATED, Certificate.UNKNOWN, Certificate.NOT_CHECKED)
+_DECIDED_WITHIN = {Certificate.WITHIN: True, Certificate.VIOLATED: False, Certificate.UNKNOWN: False,
+                   Certificate.NOT_CHECKED: True}
+"""Whether a verdict lets a report be certified (WITHIN, or a bound not checked)."""
 
 
 class Bound(Enum):
@@ -107,12 +110,7 @@ class BoundReport:
     @property
     def certified(self) -> bool:
         """True when every checked bound is WITHIN on every segment."""
-        return all(
-            v is Certificate.WITHIN
-            for verdicts in self.verdicts.values()
-            for v in verdicts
-            if v is not Certificate.NOT_CHECKED
-        )
+        return all(_DECIDED_WITHIN[v] for verdicts in self.verdicts.values() for v in verdicts)
 
     @property
     def violations(self) -> list[Violation]:
@@ -249,6 +247,6 @@ def certify_spline(
         codes, times = _avp_rust.certify_spline(c, k, row, g, exact, budget)
     except _avp_rust.KernelError as exc:
         raise ConfigError(exc.arg, exc.detail) from exc
-    verdicts = {b: tuple(_CODES[int(x)] for x in codes[i]) for i, b in enumerate(_BOUNDS)}
-    tmap = {b: tuple(float(x) for x in times[i]) for i, b in enumerate(_BOUNDS)}
+    verdicts = {b: tuple(map(_CODES.__getitem__, cells)) for b, cells in zip(_BOUNDS, codes.tolist(), strict=True)}
+    tmap = {b: tuple(cells) for b, cells in zip(_BOUNDS, times.tolist(), strict=True)}
     return BoundReport(verdicts=verdicts, times=tmap, limits=limits)

@@ -226,7 +226,7 @@ def certify_workspace(traj: Trajectory, target: PerchTarget, workspace: Workspac
             codes, times, residual = _avp_rust.certify_sphere_outside(c, k, r.normal, r.offset)
         else:
             codes, times, residual = _avp_rust.certify_speed(c, k, r.offset)
-        checks.append(RegionCheck(region=r, verdicts=tuple(_CODES[int(x)] for x in codes), times=tuple(float(x) for x in times), residual=float(residual), touch_order=order))
+        checks.append(RegionCheck(region=r, verdicts=tuple(map(_CODES.__getitem__, codes.tolist())), times=tuple(times.tolist()), residual=float(residual), touch_order=order))
     return SafetyReport(checks=tuple(checks))
 
 
