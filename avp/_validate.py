@@ -48,10 +48,15 @@ def vector(field: str, value: Any, size: int = 3) -> npt.NDArray[np.float64]:
     return arr
 
 
+_NOT_QUANTITIES = (bool, np.bool_, str, bytes)
+"""Types a float field refuses though ``float()`` takes them: a bool (Python's or NumPy's) is not
+a quantity, and a string that parses would be stored as given by a caller that does not keep the
+result."""
+
+
 def finite_float(field: str, value: Any) -> float:
-    """``value`` as a finite float (a bool or a string is refused: neither is a quantity, and a
-    string that parses would be stored as given by a caller that does not keep the result)."""
-    if isinstance(value, (bool, str, bytes)):
+    """``value`` as a finite float (a bool or a string is refused, :data:`_NOT_QUANTITIES`)."""
+    if isinstance(value, _NOT_QUANTITIES):
         raise ConfigError(field, f"expected a number, got {value!r}")
     try:
         out = float(value)
@@ -63,9 +68,7 @@ def finite_float(field: str, value: Any) -> float:
 
 
 def nonnegative_float(field: str, value: Any) -> float:
-    """``value`` as a finite float >= 0 (a bool is refused: it is not a quantity)."""
-    if isinstance(value, bool):
-        raise ConfigError(field, f"expected a number, got {value!r}")
+    """``value`` as a finite float >= 0 (a bool or a string is refused, as in :func:`finite_float`)."""
     out = finite_float(field, value)
     if out < 0.0:
         raise ConfigError(field, f"must be >= 0, got {out}")
@@ -75,7 +78,7 @@ def nonnegative_float(field: str, value: Any) -> float:
 def positive_float(field: str, value: Any, *, allow_inf: bool = False) -> float:
     """``value`` as a float > 0 (``inf`` allowed when ``allow_inf``, meaning "no limit"; a bool or
     a string is refused, as in :func:`finite_float`)."""
-    if isinstance(value, (bool, str, bytes)):
+    if isinstance(value, _NOT_QUANTITIES):
         raise ConfigError(field, f"expected a positive number, got {value!r}")
     try:
         out = float(value)

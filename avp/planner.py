@@ -127,6 +127,23 @@ class PlanResult:
     def ok(self) -> bool:
         return self.status.has_trajectory and self.trajectory is not None
 
+    def __repr__(self) -> str:
+        """One line: the status, the plan and what stands behind it (the QP's arrays, the
+        certificates' cells and the log are attributes, not part of the repr)."""
+        parts = [f"status={self.status.name}", f"trajectory={self.trajectory!r}",
+                 f"durations={np.round(self.durations, 4).tolist()}",
+                 f"attempts={self.duration_scale_steps + 1 if self.qp is not None else 0}"]
+        if self.relaxations:
+            parts.append(f"relaxations={[r.name for r in self.relaxations]}")
+        if self.fov_dropped:
+            parts.append("fov_dropped=True")
+        if self.bounds is not None:
+            parts.append(f"bounds_certified={self.bounds.certified}")
+        if self.safety is not None:
+            parts.append(f"workspace_certified={self.safety.certified}")
+        parts.append(f"total={self.timings.total * 1e3:.3f} ms, {len(self.log)} log lines")
+        return f"PlanResult({', '.join(parts)})"
+
 
 def _check_inputs(state: Any, target: Any, config: Any) -> PlannerConfig:
     if not isinstance(state, State):

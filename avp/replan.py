@@ -284,10 +284,16 @@ class Replanner:
     def step(self, t: float, odometry: State, target_estimate: PerchTarget | None = None) -> ReplanStep:
         """One replanning cycle at time ``t`` with ``odometry`` (a :class:`State` at ``t``).
 
+        ``t`` is the one clock of the loop (s): ``odometry.time`` is not read, and ``t`` may not
+        go back from the previous step's (a clock reset needs a new :class:`Replanner`).
+
         Raises only for bad input (:class:`~avp.errors.ConfigError`); planning failures of any
         kind are reported in the returned :class:`ReplanStep`.
         """
         t = v.finite_float("t", t)
+        if self.history and t < self.history[-1].t:
+            raise ConfigError("t", f"went back from {self.history[-1].t:.6g} s to {t:.6g} s: steps must come in time "
+                              "order on one clock (after a clock reset, build a new Replanner)")
         if not isinstance(odometry, State):
             raise ConfigError("odometry", f"expected avp.State, got {type(odometry).__name__}")
         if target_estimate is not None:

@@ -302,3 +302,14 @@ def test_an_attempt_starts_only_while_it_is_predicted_to_fit_the_deadline(monkey
     assert r.fov_dropped is (want is avp.PlanStatus.SOLVED_WITHOUT_FOV)
     if r.fov_dropped:
         assert "FoV rows not added back: no time for the re-solve" in r.log
+
+
+def test_plan_result_repr_is_one_readable_line() -> None:
+    """The repr says the status, the plan, its durations and certificates in one line, without
+    dumping the QP's arrays (it was 10 kB of coefficients)."""
+    target = avp.PerchTarget.from_incline(np.array([0.0, 0.0, 1.5]), math.radians(90))
+    result = avp.plan_detailed(avp.State.hover([-4.0, 0.0, 1.5]), target)
+    text = repr(result)
+    assert "\n" not in text and len(text) < 400
+    assert text.startswith("PlanResult(status=SOLVED, trajectory=Trajectory(") and "bounds_certified=True" in text
+    assert "array(" not in text and "c_hat" not in text

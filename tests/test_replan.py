@@ -739,3 +739,18 @@ def test_retries_leave_room_for_the_smallest_fraction_within_the_deadline(monkey
     assert len(full) == 2 and math.isclose(full[1], full[0] * rc.retime_retries[0], rel_tol=1e-12)
     assert s.action is ReplanAction.PARTIAL
     assert math.isclose(s.fraction, rc.partial_fractions[-1], rel_tol=1e-12)
+
+
+def test_step_refuses_time_going_back_and_keeps_its_state():
+    """A step earlier than the previous one (a clock reset, mixed clocks) is bad input: a typed
+    error naming ``t``, and the replanner's plan and history are as before; the same time again
+    is a step like any other."""
+    rp = Replanner(WALL, sim_config())
+    rp.step(0.0, START)
+    rp.step(0.2, _fly_reference(rp, 0.2))
+    plan, n = rp.trajectory, len(rp.history)
+    with pytest.raises(avp.ConfigError, match=r"^t: went back from 0.2 s to 0.1 s.*new Replanner"):
+        rp.step(0.1, _fly_reference(rp, 0.1))
+    assert rp.trajectory is plan and len(rp.history) == n
+    again = rp.step(0.2, _fly_reference(rp, 0.2))
+    assert again.t == 0.2 and len(rp.history) == n + 1
