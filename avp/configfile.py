@@ -279,6 +279,11 @@ UNITS: dict[str, str] = {
     "LineOptions.recovery_distance": "m", "LineOptions.recovery_height_margin": "m",
     "LineOptions.ground_margin": "m", "LineOptions.flip_window": "s", "LineOptions.flip_thrust": "m/s^2",
     "LineOptions.flip_time": "s",
+    # SimScenario
+    "SimScenario.incline": "rad", "SimScenario.distance": "m", "SimScenario.lateral": "m", "SimScenario.height": "m",
+    "SimScenario.pad_height": "m", "SimScenario.pad_half_size": "m", "SimScenario.aim_normal": "m",
+    "SimScenario.aim_slope": "m", "SimScenario.alpha_nominal": "m/s^2", "SimScenario.contact_velocity": "m/s",
+    "SimScenario.replan_rate_hz": "Hz", "SimScenario.timeout": "s", "SimScenario.ground_z": "m",
 }
 """Units of the dimensioned knobs (``Class.field``); every other knob is dimensionless."""
 
