@@ -54,9 +54,14 @@ a quantity, and a string that parses would be stored as given by a caller that d
 result."""
 
 
+def _is_bool_array(value: Any) -> bool:
+    """A NumPy array of booleans (``float()`` takes a 0-d one as 0.0 or 1.0)."""
+    return isinstance(value, np.ndarray) and value.dtype.kind == "b"
+
+
 def finite_float(field: str, value: Any) -> float:
     """``value`` as a finite float (a bool or a string is refused, :data:`_NOT_QUANTITIES`)."""
-    if isinstance(value, _NOT_QUANTITIES):
+    if isinstance(value, _NOT_QUANTITIES) or _is_bool_array(value):
         raise ConfigError(field, f"expected a number, got {value!r}")
     try:
         out = float(value)
@@ -78,7 +83,7 @@ def nonnegative_float(field: str, value: Any) -> float:
 def positive_float(field: str, value: Any, *, allow_inf: bool = False) -> float:
     """``value`` as a float > 0 (``inf`` allowed when ``allow_inf``, meaning "no limit"; a bool or
     a string is refused, as in :func:`finite_float`)."""
-    if isinstance(value, _NOT_QUANTITIES):
+    if isinstance(value, _NOT_QUANTITIES) or _is_bool_array(value):
         raise ConfigError(field, f"expected a positive number, got {value!r}")
     try:
         out = float(value)

@@ -132,15 +132,14 @@ class PlanResult:
         certificates' cells and the log are attributes, not part of the repr)."""
         parts = [f"status={self.status.name}", f"trajectory={self.trajectory!r}",
                  f"durations={np.round(self.durations, 4).tolist()}",
-                 f"attempts={self.duration_scale_steps + 1 if self.qp is not None else 0}"]
-        if self.relaxations:
-            parts.append(f"relaxations={[r.name for r in self.relaxations]}")
-        if self.fov_dropped:
-            parts.append("fov_dropped=True")
-        if self.bounds is not None:
-            parts.append(f"bounds_certified={self.bounds.certified}")
-        if self.safety is not None:
-            parts.append(f"workspace_certified={self.safety.certified}")
+                 f"attempts={self.duration_scale_steps + 1}"]  # the first attempt always runs
+        if self.trajectory is None:  # else its provenance (in its repr) says all of this
+            if self.relaxations:
+                parts.append(f"relaxations={[r.name for r in self.relaxations]}")
+            if self.bounds is not None:
+                parts.append(f"bounds_certified={self.bounds.certified}")
+            if self.safety is not None:
+                parts.append(f"workspace_certified={self.safety.certified}")
         parts.append(f"total={self.timings.total * 1e3:.3f} ms, {len(self.log)} log lines")
         return f"PlanResult({', '.join(parts)})"
 

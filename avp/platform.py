@@ -177,6 +177,7 @@ class MovingTarget(PerchTarget):
         # Derived from validated fields: skip re-validation (it dominates the cost of at()).
         out = object.__new__(type(self))
         out.__dict__.update(self.__dict__)
+        out.__dict__.pop("incline", None)  # a cached property of R_WS (PerchTarget.incline): recomputed on use
         point = points[0]
         for arr in (point, R):
             arr.setflags(write=False)

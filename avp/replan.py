@@ -254,6 +254,7 @@ class Replanner:
         self._previous: Trajectory | None = None
         self._solve_times: list[float] = []
         self.history: list[ReplanStep] = []
+        self._last_t: float | None = None  # the previous step's time (steps may not go back)
         self.snap_limits: tuple[float, float] = (self.replan.snap_max, self.replan.snap_thrust_max)
         """``(snap_max, snap_thrust_max)`` certified on replans (raised to the first plan's peak)."""
         _warm_blas()  # a first-call cost paid here, not in a step
@@ -291,8 +292,8 @@ class Replanner:
         kind are reported in the returned :class:`ReplanStep`.
         """
         t = v.finite_float("t", t)
-        if self.history and t < self.history[-1].t:
-            raise ConfigError("t", f"went back from {self.history[-1].t:.6g} s to {t:.6g} s: steps must come in time "
+        if self._last_t is not None and t < self._last_t:
+            raise ConfigError("t", f"went back from {self._last_t:.6g} s to {t:.6g} s: steps must come in time "
                               "order on one clock (after a clock reset, build a new Replanner)")
         if not isinstance(odometry, State):
             raise ConfigError("odometry", f"expected avp.State, got {type(odometry).__name__}")
@@ -302,6 +303,7 @@ class Replanner:
                                   f"expected avp.{self._target_type.__name__}, got {type(target_estimate).__name__}")
             self.target = target_estimate
         step = self._initial(t, odometry) if self.trajectory is None else self._replan(t, odometry)
+        self._last_t = t
         self.history.append(step)
         return step
 

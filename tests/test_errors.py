@@ -193,6 +193,7 @@ def test_errors_survive_pickling(error) -> None:
     (lambda: avp.VehicleLimits(mass=np.True_), "limits.mass"),  # NumPy's bool: float() took it as 1.0
     (lambda: avp.VehicleLimits(thrust_min=np.False_), "limits.thrust_min"),
     (lambda: avp.ReplanConfig(latency=np.bool_(True)), "replan.latency"),
+    (lambda: avp.VehicleLimits(mass=np.array(True)), "limits.mass"),  # a 0-d boolean array too
     (lambda: avp.VehicleLimits(thrust_min="1"), "limits.thrust_min"),
     (lambda: avp.VehicleLimits(tilt_rate_max="10"), "limits.tilt_rate_max"),
     (lambda: avp.ReplanConfig(latency="0.02"), "replan.latency"),

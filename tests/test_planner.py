@@ -311,5 +311,13 @@ def test_plan_result_repr_is_one_readable_line() -> None:
     result = avp.plan_detailed(avp.State.hover([-4.0, 0.0, 1.5]), target)
     text = repr(result)
     assert "\n" not in text and len(text) < 400
-    assert text.startswith("PlanResult(status=SOLVED, trajectory=Trajectory(") and "bounds_certified=True" in text
+    assert text.startswith("PlanResult(status=SOLVED, trajectory=Trajectory(") and "(bounds certified;" in text
     assert "array(" not in text and "c_hat" not in text
+    # a relaxed plan after a time search: still one short line, the relaxations said once
+    tight = avp.PlannerConfig(limits=avp.VehicleLimits(mass=1.0, thrust_min=5.0, thrust_max=17.0, tilt_rate_max=3.0))
+    relaxed = avp.plan_detailed(avp.State.hover([0.0, 0.0, 1.5]),
+                                avp.PerchTarget.from_incline([3.0, 0.0, 1.5], math.radians(90)), tight)
+    text = repr(relaxed)
+    assert relaxed.relaxations and relaxed.duration_scale_steps > 0
+    assert "\n" not in text and len(text) < 400 and text.count("FREE_SLIDE") == 1
+    assert f"attempts={relaxed.duration_scale_steps + 1}" in text

@@ -249,13 +249,12 @@ class PerchingQp:
         if parent is not None and "_violation_scales" in parent.__dict__:
             # a copy with more blocks (same equalities): the parent's scales, then the new rows'
             inv_b, inv_lo0, inv_hi0 = parent._violation_scales
-            new = self.inequalities[len(parent.inequalities):]
-            if not new:
+            _, lo, hi = self.stacked_inequalities()
+            k = inv_lo0.size
+            if k == lo.size:
                 return inv_b, inv_lo0, inv_hi0
-            lo = np.concatenate([b.lower for b in new])
-            hi = np.concatenate([b.upper for b in new])
-            return (inv_b, _read_only(np.concatenate([inv_lo0, inv(lo)])),
-                    _read_only(np.concatenate([inv_hi0, inv(hi)])))
+            return (inv_b, _read_only(np.concatenate([inv_lo0, inv(lo[k:])])),
+                    _read_only(np.concatenate([inv_hi0, inv(hi[k:])])))
         _, b = self.stacked_equalities()
         _, lo, hi = self.stacked_inequalities()
         return _read_only(inv(b)), _read_only(inv(lo)), _read_only(inv(hi))
