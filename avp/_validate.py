@@ -3,6 +3,7 @@ shapes, rotations. Every failure is a :class:`~avp.errors.ConfigError` naming th
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Mapping
 from typing import Any
@@ -92,6 +93,20 @@ def positive_float(field: str, value: Any, *, allow_inf: bool = False) -> float:
     if math.isnan(out) or out <= 0.0 or (math.isinf(out) and not allow_inf):
         raise ConfigError(field, f"must be positive{' (or inf for no limit)' if allow_inf else ''} and finite, got {out}")
     return out
+
+
+def flags(prefix: str, obj: Any) -> None:
+    """Every field of the dataclass ``obj`` annotated ``bool`` holds ``True`` or ``False`` (a
+    NumPy boolean is stored as Python's): a string such as ``"no"``, a number or ``None`` is
+    refused, since its truth value would silently switch the option. ``obj`` is frozen or not."""
+    for f in dataclasses.fields(obj):
+        if f.type not in ("bool", bool):
+            continue
+        value = getattr(obj, f.name)
+        if isinstance(value, np.bool_):
+            object.__setattr__(obj, f.name, bool(value))
+        elif not isinstance(value, bool):
+            raise ConfigError(f"{prefix}.{f.name}", f"expected True or False, got {value!r} ({type(value).__name__})")
 
 
 def rotation(field: str, value: Any) -> npt.NDArray[np.float64]:

@@ -133,6 +133,7 @@ class ContactVelocity:
     scale_slope_with_incline: bool = True
 
     def __post_init__(self) -> None:
+        v.flags("contact_velocity", self)
         for name in ("normal", "slope", "lateral"):
             val = getattr(self, name)
             if val is not None:
@@ -222,6 +223,7 @@ class OverhangFlip:
     turn_rate: float | None = None
 
     def __post_init__(self) -> None:
+        v.flags("flip", self)
         if not (math.isfinite(self.min_incline) and math.pi / 2 <= self.min_incline <= math.pi):
             raise ConfigError("flip.min_incline", f"must be in [pi/2, pi] rad, got {self.min_incline}")
         if self.thrust is not None:
@@ -292,6 +294,7 @@ class BoundsPolicy:
     )
 
     def __post_init__(self) -> None:
+        v.flags("bounds", self)
         if not isinstance(self.time_search, TimeSearch):
             raise ConfigError("bounds.time_search", f"must be an avp.TimeSearch (e.g. TimeSearch.SCALING), got "
                               f"{self.time_search!r}")
@@ -395,6 +398,7 @@ class Workspace:
     refinement_margin: float = 0.005
 
     def __post_init__(self) -> None:
+        v.flags("workspace", self)
         if not (math.isfinite(self.body_offset) and self.body_offset >= 0.0):
             raise ConfigError("workspace.body_offset", f"must be finite and >= 0 m, got {self.body_offset}")
         if self.ground_z is not None:
@@ -506,8 +510,7 @@ class FovConfig:
     camera: Camera = field(default_factory=Camera)
 
     def __post_init__(self) -> None:
-        if not isinstance(self.enabled, bool):
-            raise ConfigError("fov.enabled", f"must be a bool, got {self.enabled!r}")
+        v.flags("fov", self)
         for name, lo in (("n_points", 1), ("sqp_iterations", 1)):
             val = getattr(self, name)
             if isinstance(val, bool) or not isinstance(val, (int, np.integer)) or val < lo:
@@ -908,6 +911,7 @@ class ReplanConfig:
     keep_knots_min: float = 0.05
 
     def __post_init__(self) -> None:
+        v.flags("replan", self)
         v.positive_float("replan.latency", self.latency)
         v.positive_float("replan.latency_margin", self.latency_margin)
         v.positive_float("replan.freeze_horizon", self.freeze_horizon)

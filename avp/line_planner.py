@@ -118,6 +118,7 @@ class LineOptions:
     flip_time: float = 0.8
 
     def __post_init__(self) -> None:
+        v.flags("options", self)
         v.positive_float("options.approach_deceleration", self.approach_deceleration)
         if not 0.0 < self.thrust_fraction <= 1.0:
             raise ConfigError("options.thrust_fraction", f"must be in (0, 1], got {self.thrust_fraction}")

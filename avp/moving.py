@@ -116,6 +116,7 @@ class MovingConfig:
     retime: tuple[float, ...] = (1.03, 0.97)
 
     def __post_init__(self) -> None:
+        v.flags("moving", self)
         v.positive_float("moving.normal_speed", self.normal_speed)
         for name in ("slip_max", "slip_weight", "time_weight"):
             val = v.finite_float(f"moving.{name}", getattr(self, name))

@@ -207,6 +207,41 @@ def test_configuration_objects_check_their_types(make, field) -> None:
     assert exc.value.field == field
 
 
+def _switch_configs():
+    from avp.line_planner import LineOptions
+    from avp.moving import MovingConfig
+    from avp.sim.evaluate import SimConfig
+    from avp.sim.run import SimScenario
+    from avp.sim.vehicle import VehicleParams
+
+    return [(avp.ContactVelocity, "contact_velocity"), (avp.OverhangFlip, "flip"), (avp.BoundsPolicy, "bounds"),
+            (avp.Workspace, "workspace"), (avp.FovConfig, "fov"), (avp.ReplanConfig, "replan"),
+            (LineOptions, "options"), (MovingConfig, "moving"), (SimConfig, "sim"), (SimScenario, "scenario"),
+            (VehicleParams, "vehicle")]
+
+
+def test_switches_take_only_true_or_false() -> None:
+    """Every ``bool`` field of the configuration dataclasses refuses a value whose truth would
+    silently switch it (``allow_relaxed="no"`` allowed relaxed plans), naming the field; a
+    NumPy boolean is stored as Python's."""
+    import dataclasses
+
+    n_checked = 0
+    for cls, prefix in _switch_configs():
+        for f in dataclasses.fields(cls):
+            if f.type not in ("bool", bool) or not f.init:
+                continue
+            for bad in ("no", 0, 1, None, 0.0, np.array(True)):
+                with pytest.raises(avp.ConfigError) as exc:
+                    cls(**{f.name: bad})
+                assert exc.value.field == f"{prefix}.{f.name}" and "True or False" in exc.value.message
+            flipped = not getattr(cls(), f.name)
+            made = cls(**{f.name: np.bool_(flipped)})
+            assert type(getattr(made, f.name)) is bool and getattr(made, f.name) is flipped
+            n_checked += 1
+    assert n_checked >= 20  # the switches of the eleven configurations, not a vacuous loop
+
+
 def test_checked_numbers_are_stored_as_floats() -> None:
     lim = avp.VehicleLimits(mass=1, thrust_max=20, thrust_min=0, tilt_rate_max=10)
     assert all(type(getattr(lim, n)) is float for n in ("mass", "thrust_max", "thrust_min", "tilt_rate_max"))

@@ -446,6 +446,7 @@ class SimConfig:
     compute_slowdown: float = 0.0
 
     def __post_init__(self) -> None:
+        v.flags("sim", self)
         Backend.parse(self.backend, "sim.backend")
         for name in ("contact_normal", "contact_slope"):  # m/s
             v.finite_float(f"sim.{name}", getattr(self, name))

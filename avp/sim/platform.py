@@ -27,6 +27,7 @@ from typing import Any
 
 import numpy as np
 
+from .. import _validate as v
 from ..config import PlannerConfig
 from ..errors import ConfigError
 from ..frames import Array
@@ -131,6 +132,7 @@ class MovingSimScenario:
     ``a(t_f)``, whose ``alpha s3`` part pushes away from the pad."""
 
     def __post_init__(self) -> None:
+        v.flags("scenario", self)
         if not isinstance(self.target, MovingTarget):
             raise ConfigError("scenario.target", f"expected avp.platform.MovingTarget, got {type(self.target).__name__}")
         for name in ("behind", "height", "pad_half_size", "replan_rate_hz", "timeout"):

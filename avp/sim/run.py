@@ -340,6 +340,7 @@ class SimScenario:
     compute_slowdown: float = 0.0
 
     def __post_init__(self) -> None:
+        v.flags("scenario", self)
         object.__setattr__(self, "backend", Backend.parse(self.backend))
         object.__setattr__(self, "compute_slowdown",
                            v.nonnegative_float("scenario.compute_slowdown", self.compute_slowdown))

@@ -101,6 +101,7 @@ class VehicleParams:
     allocation_inv: Array = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
+        v.flags("vehicle", self)
         if not isinstance(self.limits, VehicleLimits):
             raise ConfigError("vehicle.limits", f"must be an avp.config.VehicleLimits, got {type(self.limits).__name__}")
         J = np.array(self.inertia, dtype=float)
