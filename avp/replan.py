@@ -24,8 +24,10 @@ certified. The policy
   (a few per cent either side) before the partial fractions: those certificates are not
   monotone in the time left, and a late correction often certifies at a nearby contact time.
   Not with less than ``retime_min_time`` left (none certified there), not for a subclass with
-  its own target model (it keeps the committed contact time), and with a ``deadline`` only
-  while a retry and the smallest fraction, each as slow as the nominal solve, still fit in it.
+  its own target model (it keeps the committed contact time), with a ``deadline`` only
+  while a retry and the smallest fraction, each as slow as the nominal solve, still fit in it,
+  and (``retime_backoff``) not while nothing was committed since a step whose retries all
+  failed.
 - **Certified commits.** A plan is committed only if ``result.ok`` (no relaxed plan unless
   ``allow_relaxed``), its actuator bounds are certified and its snap is certified below
   ``snap_max`` (:mod:`avp.trackability`), which bounds the angular acceleration.
@@ -42,6 +44,7 @@ inside planning): the :class:`ReplanStep` says what happened.
 from __future__ import annotations
 
 import itertools
+import math
 import time
 from dataclasses import dataclass, replace
 from enum import Enum
@@ -204,9 +207,8 @@ def _blend(a: PerchTarget, b: PerchTarget, f: float) -> PerchTarget:
 
 def _target_change(a: PerchTarget, b: PerchTarget) -> tuple[float, float]:
     """Distance (m) between the pad centres and angle (rad) between the normals."""
-    d = float(np.linalg.norm(b.point - a.point))
-    ang = float(np.arccos(np.clip(a.s3 @ b.s3, -1.0, 1.0)))
-    return d, ang
+    p = b.point - a.point
+    return math.sqrt(float(p @ p)), math.acos(min(max(float(a.s3 @ b.s3), -1.0), 1.0))
 
 
 class Replanner:
@@ -255,6 +257,7 @@ class Replanner:
         self._solve_times: list[float] = []
         self.history: list[ReplanStep] = []
         self._last_t: float | None = None  # the previous step's time (steps may not go back)
+        self._retries_failed = False  # a step's retimed retries all failed, nothing committed since
         self.snap_limits: tuple[float, float] = (self.replan.snap_max, self.replan.snap_thrust_max)
         """``(snap_max, snap_thrust_max)`` certified on replans (raised to the first plan's peak)."""
         _warm_blas()  # a first-call cost paid here, not in a step
@@ -358,11 +361,12 @@ class Replanner:
         clock = _StepClock(rc.deadline)
         t_ex = self._switch_time(committed, t + self.latency)
         remaining = committed.tf - t_ex
-        shift, turn = self._change(self.committed_target, self.target)
+        committed_target = self.committed_target
+        shift, turn = self._change(committed_target, self.target)
         budget = 0.5 * rc.reach_acceleration * max(remaining, 0.0) ** 2
 
         def record(action: ReplanAction, reason: str, **kw: object) -> ReplanStep:
-            err, _ = self._change(self.committed_target, self.target)
+            err = shift if self.committed_target is committed_target else self._change(self.committed_target, self.target)[0]
             if action in (ReplanAction.KEPT_PREVIOUS, ReplanAction.FROZEN_NEAR_CONTACT, ReplanAction.PARTIAL) \
                     and err > rc.reach_tolerance and self._static_pad:
                 reason = (f"{action.name.lower()}: committed contact point {err:.3f} m from the estimate "
@@ -392,9 +396,11 @@ class Replanner:
         elapsed_total, n_solves, last_reason = 0.0, 0, ""
         last_result: PlanResult | None = None
         smallest: tuple[PlanResult, SnapReport | None, PerchTarget, float] | None = None
+        backoff_note = ""  # set when the full correction was not retried (retime_backoff)
 
         def commit(result: PlanResult, snap: SnapReport | None, goal: PerchTarget, f: float,
                    time_factor: float = 1.0, note: str = "") -> ReplanStep:
+            self._retries_failed = False
             self._previous = committed
             self.trajectory = result.trajectory
             self.committed_target = goal
@@ -402,6 +408,8 @@ class Replanner:
             reason = "ok" if f >= 1.0 else f"{f:.0%} of the correction ({shift:.3f} m requested, budget {budget:.3f} m)"
             if time_factor != 1.0:
                 reason += f" (time left x{time_factor:g}: the nominal time failed a certificate)"
+            if f < 1.0:
+                reason += backoff_note
             return record(action, reason + note, anticipated=start, result=result, solve_time=elapsed_total,
                           fraction=f, anchored=anchored, n_solves=n_solves, snap=snap, time_factor=time_factor)
 
@@ -430,9 +438,11 @@ class Replanner:
             total = self._retimed(remaining, goal)
             # The full correction is solved again with the time left scaled (retime_retries) when
             # its plan at the nominal time fails only a certificate; a static pad only (the
-            # subclasses keep the committed contact time), and not in the last retime_min_time.
+            # subclasses keep the committed contact time), not in the last retime_min_time, and
+            # (retime_backoff) not again while nothing was committed since retries all failed.
             retry = k == 0 and self._static_pad and remaining >= rc.retime_min_time
-            factors = (1.0, *rc.retime_retries) if retry else (1.0,)
+            backed_off = retry and rc.retime_backoff and self._retries_failed and bool(rc.retime_retries)
+            factors = (1.0, *rc.retime_retries) if retry and not backed_off else (1.0,)
             nominal: tuple[PlanResult | None, str] | None = None  # reported if no retry certifies
             tried: list[float] = []
             for factor in factors:
@@ -468,6 +478,10 @@ class Replanner:
                 last_result, why = nominal[0], nominal[1]
                 if len(tried) > 1:
                     why += " (also at time left " + ", ".join(f"x{x:g}" for x in tried[1:]) + ")"
+                    self._retries_failed = True
+                elif backed_off and nominal[0] is not None and only_certificate:
+                    backoff_note = (" (no retimed retries: they all failed at an earlier step, nothing committed "
+                                    "since)")
             is_smallest = probe_smallest and k == 1
             if ok:
                 assert result is not None
@@ -480,7 +494,7 @@ class Replanner:
                 break  # not even the smallest correction certifies
         if smallest is not None:
             return commit(*smallest)
-        return record(ReplanAction.KEPT_PREVIOUS, last_reason, anticipated=start, result=last_result,
+        return record(ReplanAction.KEPT_PREVIOUS, last_reason + backoff_note, anticipated=start, result=last_result,
                       solve_time=elapsed_total, anchored=anchored, n_solves=n_solves)
 
     def _durations(self, committed: Trajectory, t_ex: float, total: float) -> Array:
