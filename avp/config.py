@@ -847,20 +847,23 @@ class ReplanConfig:
         default's calls. Only for a static pad: a subclass with its own target model (a moving
         pad, a line) keeps the committed contact time.
     retime_backoff:
-        After a step whose ``retime_retries`` all failed, the following steps make none until a
-        step commits a plan (``REPLANNED`` or ``PARTIAL``): the nominal time and the partial
-        fractions only. With nothing committed, the next step solves nearly the same problem
-        (the same committed plan, an estimate and a time left 33 ms on), and its retries fail
-        again: in ``benchmarks/bench_replan.py --seeds 28`` without the backoff, of the steps
-        after one whose retries all failed and that committed nothing, 119 retried and failed
-        and 1 certified a retry; after a partial commit 45 and 1; after any other step 72 and
-        61. Those repeated retries (four solves and more) made most of the steps over 5 ms.
-        Measured with and without (``--no-retime-backoff``), AVP on rotorpy's realistic wall
-        (90 deg, 4.5 / 7.5 m): 96 / 92 of 100 both (seeds 0-99), 92 / 94 both (seeds 100-199);
-        planning calls per run 34.0 / 41.1 against 37.4 / 46.5 (seeds 0-59). A backoff that
-        also held through partial commits lost a perch there (seed 37 at 4.5 m: after three
-        partial commits a retry certified the full correction). ``False``: retries at every
-        step.
+        After a step whose ``retime_retries`` all ran and failed and that committed nothing, the
+        following steps make none until a step commits a plan (:attr:`ReplanStep.committed
+        <avp.replan.ReplanStep.committed>`, a full or partial correction, also one reported as
+        ``CANNOT_REACH``): the nominal time and the partial fractions only, and the step's
+        reason says so. Retries cut short by ``deadline`` do not start it. With nothing
+        committed, the next step solves nearly the same problem (the same committed plan, an
+        estimate and a time left 33 ms on), and its retries fail again: in
+        ``benchmarks/bench_replan.py --seeds 28`` without the backoff, of the steps after one
+        whose retries all failed and that committed nothing, 119 retried and failed and 1
+        certified a retry; after a partial commit 45 and 1; after any other step 72 and 61. The
+        backoff took 108 of the 274 steps over 5 ms there. Measured with and without
+        (``--no-retime-backoff``), AVP on the realistic wall (90 deg, 4.5 / 7.5 m): rotorpy 96 /
+        92 of 100 both (seeds 0-99) and 92 / 94 both (seeds 100-199), avp's model 96 / 94 both
+        (seeds 0-99); planning calls per run on rotorpy 34.0 / 41.1 against 37.4 / 46.5 (seeds
+        0-59). A backoff that also held through partial commits lost a perch there (seed 37 at
+        4.5 m: after three partial commits a retry certified the full correction). ``False``:
+        retries at every step.
     retime_min_time:
         Time left (s) below which a replan makes no ``retime_retries``. Logged on the realistic
         wall (``SimConfig``, 90 deg, 4.5 and 7.5 m, AVP, the retries everywhere): on avp's

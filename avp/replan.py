@@ -26,8 +26,8 @@ certified. The policy
   Not with less than ``retime_min_time`` left (none certified there), not for a subclass with
   its own target model (it keeps the committed contact time), with a ``deadline`` only
   while a retry and the smallest fraction, each as slow as the nominal solve, still fit in it,
-  and (``retime_backoff``) not while nothing was committed since a step whose retries all
-  failed.
+  and (``retime_backoff``) not while nothing was committed since a step whose retries all ran
+  and failed.
 - **Certified commits.** A plan is committed only if ``result.ok`` (no relaxed plan unless
   ``allow_relaxed``), its actuator bounds are certified and its snap is certified below
   ``snap_max`` (:mod:`avp.trackability`), which bounds the angular acceleration.
@@ -257,7 +257,7 @@ class Replanner:
         self._solve_times: list[float] = []
         self.history: list[ReplanStep] = []
         self._last_t: float | None = None  # the previous step's time (steps may not go back)
-        self._retries_failed = False  # a step's retimed retries all failed, nothing committed since
+        self._retries_failed = False  # a step's retimed retries all ran and failed, nothing committed since
         self.snap_limits: tuple[float, float] = (self.replan.snap_max, self.replan.snap_thrust_max)
         """``(snap_max, snap_thrust_max)`` certified on replans (raised to the first plan's peak)."""
         _warm_blas()  # a first-call cost paid here, not in a step
@@ -418,7 +418,7 @@ class Replanner:
             else the committed plan is kept."""
             if smallest is not None:
                 return commit(*smallest)
-            return record(ReplanAction.KEPT_PREVIOUS, f"deadline {(clock.deadline or 0.0) * 1e3:.1f} ms: {reason}",
+            return record(ReplanAction.KEPT_PREVIOUS, f"deadline {(clock.deadline or 0.0) * 1e3:.1f} ms: {reason}{backoff_note}",
                           anticipated=start, result=result, solve_time=elapsed_total, anchored=anchored,
                           n_solves=n_solves)
 
@@ -478,10 +478,11 @@ class Replanner:
                 last_result, why = nominal[0], nominal[1]
                 if len(tried) > 1:
                     why += " (also at time left " + ", ".join(f"x{x:g}" for x in tried[1:]) + ")"
+                if len(factors) > 1 and len(tried) == len(factors):  # every retry ran (none cut by the deadline)
                     self._retries_failed = True
                 elif backed_off and nominal[0] is not None and only_certificate:
-                    backoff_note = (" (no retimed retries: they all failed at an earlier step, nothing committed "
-                                    "since)")
+                    backoff_note = ("; the full correction was not retimed (its retries all failed at an earlier "
+                                    "step, nothing committed since)")
             is_smallest = probe_smallest and k == 1
             if ok:
                 assert result is not None
@@ -584,7 +585,8 @@ class Replanner:
     """The target class :meth:`step` accepts (a subclass for another target model sets its own)."""
 
     def _change(self, a: Any, b: Any) -> tuple[float, float]:
-        """Distance (m) and angle (rad) between two target estimates (the hold and reach tests)."""
+        """Distance (m) and angle (rad) between two target estimates (the hold and reach tests).
+        A function of its two arguments only: a step computes it once for an unchanged pair."""
         return _target_change(a, b)
 
     @property

@@ -2,7 +2,8 @@
 
     python benchmarks/bench_replan.py [--seeds 40] [--distances 1.5 4.5 7.5] [--inclines 90 45]
                                       [--previous] [--gc-freeze] [--stages] [--evict-mb MB]
-                                      [--deadline-ms MS] [--adapt-latency] [--realistic] [--save FILE] [--compare FILE]
+                                      [--deadline-ms MS] [--adapt-latency] [--no-retime-backoff]
+                                      [--realistic] [--save FILE] [--compare FILE]
 
 Runs ``avp.sim.run.simulate`` in ``Mode.AVP`` for every seed, distance and incline, with the
 ``Replanner`` the loop builds replaced by a subclass that times each :meth:`step` call with

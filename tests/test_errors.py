@@ -208,38 +208,69 @@ def test_configuration_objects_check_their_types(make, field) -> None:
 
 
 def _switch_configs():
+    """``{configuration class: (field prefix, constructor taking keyword arguments)}``."""
     from avp.line_planner import LineOptions
     from avp.moving import MovingConfig
+    from avp.platform import MovingTarget
+    from avp.sim.controller import ControllerGains
     from avp.sim.evaluate import SimConfig
+    from avp.sim.platform import MovingSimScenario
     from avp.sim.run import SimScenario
     from avp.sim.vehicle import VehicleParams
 
-    return [(avp.ContactVelocity, "contact_velocity"), (avp.OverhangFlip, "flip"), (avp.BoundsPolicy, "bounds"),
-            (avp.Workspace, "workspace"), (avp.FovConfig, "fov"), (avp.ReplanConfig, "replan"),
-            (LineOptions, "options"), (MovingConfig, "moving"), (SimConfig, "sim"), (SimScenario, "scenario"),
-            (VehicleParams, "vehicle")]
+    pad = MovingTarget(point=[0.0, 0.0, 1.0], R_WS=np.eye(3), heading=0.0, speed=1.0)
+    plain = [(avp.ContactVelocity, "contact_velocity"), (avp.OverhangFlip, "flip"), (avp.BoundsPolicy, "bounds"),
+             (avp.Workspace, "workspace"), (avp.FovConfig, "fov"), (avp.ReplanConfig, "replan"),
+             (LineOptions, "options"), (MovingConfig, "moving"), (SimConfig, "sim"), (SimScenario, "scenario"),
+             (VehicleParams, "vehicle"), (ControllerGains, "gains")]
+    out = {cls: (prefix, cls) for cls, prefix in plain}
+    out[MovingSimScenario] = ("scenario", lambda **kw: MovingSimScenario(pad, **kw))
+    return out
+
+
+def _dataclasses_with_switches():
+    """Every dataclass of the package with an ``__init__`` field annotated ``bool``, and whether
+    it can be built without arguments (the configurations can; the result records cannot)."""
+    import dataclasses
+    import importlib
+    import pkgutil
+
+    found = {}
+    for info in pkgutil.walk_packages(avp.__path__, "avp."):
+        if info.name.endswith("__main__"):
+            continue
+        for obj in vars(importlib.import_module(info.name)).values():
+            if isinstance(obj, type) and dataclasses.is_dataclass(obj) and any(
+                    f.init and f.type in ("bool", bool) for f in dataclasses.fields(obj)):
+                try:
+                    obj()
+                    found[obj] = True
+                except (TypeError, avp.AvpError):
+                    found[obj] = False
+    return found
 
 
 def test_switches_take_only_true_or_false() -> None:
     """Every ``bool`` field of the configuration dataclasses refuses a value whose truth would
     silently switch it (``allow_relaxed="no"`` allowed relaxed plans), naming the field; a
-    NumPy boolean is stored as Python's."""
+    NumPy boolean is stored as Python's. Every dataclass with switches that builds without
+    arguments (a configuration) is among those checked."""
     import dataclasses
 
-    n_checked = 0
-    for cls, prefix in _switch_configs():
-        for f in dataclasses.fields(cls):
-            if f.type not in ("bool", bool) or not f.init:
-                continue
+    configs = _switch_configs()
+    scanned = _dataclasses_with_switches()
+    assert {cls for cls, default in scanned.items() if default} <= set(configs)
+    for cls, (prefix, make) in configs.items():
+        switches = [f.name for f in dataclasses.fields(cls) if f.init and f.type in ("bool", bool)]
+        assert switches, cls
+        for name in switches:
             for bad in ("no", 0, 1, None, 0.0, np.array(True)):
                 with pytest.raises(avp.ConfigError) as exc:
-                    cls(**{f.name: bad})
-                assert exc.value.field == f"{prefix}.{f.name}" and "True or False" in exc.value.message
-            flipped = not getattr(cls(), f.name)
-            made = cls(**{f.name: np.bool_(flipped)})
-            assert type(getattr(made, f.name)) is bool and getattr(made, f.name) is flipped
-            n_checked += 1
-    assert n_checked >= 20  # the switches of the eleven configurations, not a vacuous loop
+                    make(**{name: bad})
+                assert exc.value.field == f"{prefix}.{name}" and "True or False" in exc.value.message
+            flipped = not getattr(make(), name)
+            made = make(**{name: np.bool_(flipped)})
+            assert type(getattr(made, name)) is bool and getattr(made, name) is flipped
 
 
 def test_checked_numbers_are_stored_as_floats() -> None:

@@ -670,39 +670,72 @@ def test_failed_retries_report_the_nominal_plan_and_fall_back_to_the_fractions(m
     assert s.action in (ReplanAction.PARTIAL, ReplanAction.KEPT_PREVIOUS, ReplanAction.CANNOT_REACH)
 
 
+def _nothing_certifies(rp):
+    """``rp._certified`` with every certified plan turned into one that fails only a certificate."""
+    original = Replanner._certified.__get__(rp)
+
+    def certified(result, trackability=True):
+        ok, why, snap, only = original(result, trackability)
+        return (False, "snap 1e9 > limit (forced)", snap, True) if ok else (ok, why, snap, only)
+    return certified
+
+
+def _full_calls(rp, calls, t, dz):
+    """One step with the estimate moved by ``dz``; its full-correction planning calls' totals."""
+    before = len(calls)
+    s = _moved_wall_step(rp, t=t, dz=dz)
+    return s, [T for target, T in calls[before:] if target is rp.target]
+
+
+NOT_RETIMED = "the full correction was not retimed"
+
+
 @pytest.mark.parametrize("backoff", [True, False])
 def test_retries_back_off_after_they_all_failed_until_a_plan_is_committed(monkeypatch, backoff):
-    """``retime_backoff``: after a step whose retries all failed, the next steps solve the full
-    correction at the nominal time only (and say so) while nothing is committed; after a commit
-    (here a partial one), a failing full correction is retried again. Off: every step retries."""
+    """``retime_backoff``: after a step whose retries all failed and that committed nothing, the
+    next steps solve the full correction at the nominal time only (and say so) while nothing is
+    committed; after a commit (here a partial one), a failing full correction is retried again.
+    Off: every step retries."""
     rc = ReplanConfig(retime_backoff=backoff)
     rp, calls = _failing_full_corrections(rc, monkeypatch)
     n_retried = 1 + len(rc.retime_retries)
     partial_ok = rp._certified  # full corrections fail a certificate, the fractions certify
-    original = Replanner._certified.__get__(rp)
-
-    def nothing_certifies(result, trackability=True):
-        ok, why, snap, only = original(result, trackability)
-        return (False, "snap 1e9 > limit (forced)", snap, True) if ok else (ok, why, snap, only)
-
-    def full_calls(t, dz):
-        before = len(calls)
-        s = _moved_wall_step(rp, t=t, dz=dz)
-        return s, [T for target, T in calls[before:] if target is rp.target]
-
-    monkeypatch.setattr(rp, "_certified", nothing_certifies)
-    s1, full1 = full_calls(0.5, 0.02)
+    monkeypatch.setattr(rp, "_certified", _nothing_certifies(rp))
+    s1, full1 = _full_calls(rp, calls, 0.5, 0.02)
     assert s1.action in (ReplanAction.KEPT_PREVIOUS, ReplanAction.CANNOT_REACH) and len(full1) == n_retried
-    s2, full2 = full_calls(0.55, 0.03)
+    assert NOT_RETIMED not in s1.reason
+    s2, full2 = _full_calls(rp, calls, 0.55, 0.03)
     assert s2.action in (ReplanAction.KEPT_PREVIOUS, ReplanAction.CANNOT_REACH)
     assert len(full2) == (1 if backoff else n_retried)
-    assert ("no retimed retries" in s2.reason) is backoff
+    assert (NOT_RETIMED in s2.reason) is backoff
     monkeypatch.setattr(rp, "_certified", partial_ok)
-    s3, full3 = full_calls(0.6, 0.035)  # still no retries, but a fraction is committed
+    s3, full3 = _full_calls(rp, calls, 0.6, 0.035)  # still no retries, but a fraction is committed
     assert s3.action is ReplanAction.PARTIAL and len(full3) == (1 if backoff else n_retried)
-    assert ("no retimed retries" in s3.reason) is backoff
-    s4, full4 = full_calls(0.65, 0.045)  # something was committed: the retries are back
-    assert len(full4) == n_retried and "no retimed retries" not in s4.reason
+    assert (NOT_RETIMED in s3.reason) is backoff
+    s4, full4 = _full_calls(rp, calls, 0.65, 0.045)  # something was committed: the retries are back
+    assert len(full4) == n_retried and NOT_RETIMED not in s4.reason
+
+
+def test_a_commit_in_the_same_step_ends_the_backoff(monkeypatch):
+    """Retries that all fail followed by a committed fraction in the same step do not start the
+    backoff: the committed plan changed, so the next step's problem is another one."""
+    rp, calls = _failing_full_corrections(ReplanConfig(), monkeypatch)
+    n_retried = 1 + len(rp.replan.retime_retries)
+    s1, full1 = _full_calls(rp, calls, 0.5, 0.02)
+    assert s1.action is ReplanAction.PARTIAL and len(full1) == n_retried
+    s2, full2 = _full_calls(rp, calls, 0.55, 0.03)
+    assert len(full2) == n_retried and NOT_RETIMED not in s2.reason
+
+
+def test_retries_cut_by_the_deadline_do_not_start_the_backoff(monkeypatch):
+    """With a deadline that leaves room for one retry only (solves of 1 ms, 3.5 ms), the retries
+    did not all run: the next step retries again rather than backing off."""
+    rp, calls = _failing_full_corrections(ReplanConfig(deadline=3.5e-3), monkeypatch, elapsed=1e-3)
+    monkeypatch.setattr(rp, "_certified", _nothing_certifies(rp))
+    s1, full1 = _full_calls(rp, calls, 0.5, 0.02)
+    assert len(full1) == 2 and s1.fraction == 0.0
+    s2, full2 = _full_calls(rp, calls, 0.55, 0.03)
+    assert len(full2) == 2 and NOT_RETIMED not in s2.reason
 
 
 def test_no_retries_for_a_plan_that_failed_other_than_a_certificate(monkeypatch):

@@ -132,6 +132,9 @@ class ControllerGains:
     rotor_drag: Any = None
     lag_feedforward: bool = True
 
+    def __post_init__(self) -> None:
+        v.flags("gains", self)
+
 
 @dataclass(frozen=True, eq=False)
 class ControlOutput:
