@@ -17,6 +17,7 @@ from . import _validate as v
 from ._typing import Array
 from ._values import fields_equal, fields_hash
 from .errors import ConfigError
+from .frames import contact_frame_error, contact_yaw
 
 __all__ = ["PerchTarget", "State"]
 
@@ -167,6 +168,43 @@ class PerchTarget:
     def incline(self) -> float:
         """Angle between ``s3`` and ``e3`` (rad); computed once (``R_WS`` is read-only)."""
         return float(math.acos(max(-1.0, min(1.0, float(self.R_WS[2, 2])))))
+
+    @cached_property
+    def _contact_yaw(self) -> float:
+        """Terminal yaw ``psi`` of :func:`avp.frames.contact_yaw` (13), computed once per pad
+        (every QP of a plan and every fraction of a replan step uses it)."""
+        return contact_yaw(self.R_WS)[0]
+
+    @cached_property
+    def _contact_frame_error(self) -> dict[float, float]:
+        """:func:`avp.frames.contact_frame_error` of ``R_WS`` by gravity, filled on use."""
+        return {}
+
+    def contact_frame_error(self, g: float) -> float:
+        """:func:`avp.frames.contact_frame_error` of this pad's frame (rad), computed once per
+        ``g``: 0 when the contact attitude reproduces ``R_WS`` exactly."""
+        cache = self._contact_frame_error
+        if g not in cache:
+            cache[g] = contact_frame_error(self.R_WS, g)
+        return cache[g]
+
+    @cached_property
+    def _velocities_W(self) -> dict[tuple[float, float, float], Array]:
+        """:meth:`contact_velocity_W` by ``v_S``, filled on use."""
+        return {}
+
+    def contact_velocity_W(self, v_S: tuple[float, float, float]) -> Array:
+        """The world velocity whose S components are ``v_S``: ``solve(R_WS^T, v_S)``, not
+        ``R_WS v_S`` (the same for an orthonormal frame, and exactly the per-direction conditions
+        ``s_i . v = v_S,i`` for a frame orthonormal only to rounding). Computed once per
+        ``v_S`` (read-only)."""
+        cache = self._velocities_W
+        v_W = cache.get(v_S)
+        if v_W is None:
+            v_W = np.linalg.solve(self.R_WS.T, np.array(v_S, dtype=float))
+            v_W.setflags(write=False)
+            cache[v_S] = v_W
+        return v_W
 
     def at(self, time: float) -> PerchTarget:
         """Pose at ``time``; a static target returns itself."""

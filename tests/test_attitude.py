@@ -291,3 +291,25 @@ def test_rotation_error_angle_is_accurate_near_zero_and_pi(angle, axis, base) ->
     R0 = frames.expm_so3(np.array(base))
     R1 = R0 @ frames.expm_so3(angle * a)
     assert abs(float(frames.rotation_error_angle(R0, R1)) - angle) < 1e-13 + 1e-12 * angle
+
+
+@settings(max_examples=40, deadline=None)
+@given(normal=st.tuples(*[st.floats(-1.0, 1.0)] * 3), up=st.tuples(*[st.floats(-1.0, 1.0)] * 3),
+       v_S=st.tuples(*[st.floats(-3.0, 3.0)] * 3), g=st.sampled_from([9.81, 3.71]))
+def test_a_pads_cached_contact_quantities_equal_the_functions(normal, up, v_S, g) -> None:
+    """``PerchTarget.contact_frame_error``, ``contact_velocity_W`` and the terminal yaw are
+    computed once per pad (every QP of a plan uses them); each equals its function of ``R_WS``
+    bit for bit, also on a second call, and the cached velocity is read-only with
+    ``R_WS^T v_W = v_S``."""
+    n = np.array(normal)
+    assume(np.linalg.norm(n) > 0.1)
+    u = np.array(up)
+    assume(np.linalg.norm(np.cross(n, u)) > 0.1 * np.linalg.norm(u) * np.linalg.norm(n))
+    target = avp.PerchTarget.from_normal([0.0, 0.0, 1.0], n, up_slope=u)
+    for _ in range(2):
+        assert target.contact_frame_error(g) == frames.contact_frame_error(target.R_WS, g)
+        assert target._contact_yaw == frames.contact_yaw(target.R_WS)[0]
+        v_W = target.contact_velocity_W(v_S)
+        assert np.array_equal(v_W, np.linalg.solve(target.R_WS.T, np.array(v_S)))
+        assert not v_W.flags.writeable
+        np.testing.assert_allclose(target.R_WS.T @ v_W, v_S, atol=1e-12)

@@ -62,6 +62,8 @@ def test_equal_splits_and_any_pad_frame_share_one_exact_factorisation(total, sca
     a = build_perching_qp(state, base, config, np.full(3, total / 3))
     b = build_perching_qp(state, other, config, np.full(3, scale * total / 3))
     assert np.array_equal(a.stacked_equalities()[0], b.stacked_equalities()[0])
+    # one read-only object, so the factorisation is found by identity, not by its entries
+    assert a.stacked_equalities()[0] is b.stacked_equalities()[0]
     assemble._FACTORS.clear()
     assert a.elimination[0] is b.elimination[0] and assemble._cached_factors() == 1
     A, rhs = b.stacked_equalities()
@@ -184,3 +186,30 @@ def test_point_rows_plus_is_the_sum_of_two_row_sets(durations, fractions, order,
     combined = point_rows(layout, knots, order, times, plus=(order2, weight))
     summed = point_rows(layout, knots, order, times) + weight * point_rows(layout, knots, order2, times)
     assert combined.tobytes() == summed.tobytes()  # bit for bit (array_equal takes -0.0 for 0.0)
+
+
+@settings(max_examples=30, deadline=None)
+@given(drag=st.sampled_from([0.0, 0.05, 0.4]), incline=st.floats(0.0, 170.0), heading=st.floats(-math.pi, math.pi),
+       total=st.floats(0.5, 6.0))
+def test_the_shared_terminal_rows_meet_the_contact_conditions(drag, incline, heading, total) -> None:
+    """The terminal matrix shared by every pad (cached, read-only: position, a + d v, the whole
+    contact velocity as world rows, yaw) is the same object for two pads, and any spline of the
+    equalities' affine set ends at the pad with ``a + d v = alpha s3 - g e3`` (12) and
+    ``v = R_WS v_S``, evaluated on the trajectory itself."""
+    config = avp.PlannerConfig(fov=avp.FovConfig(enabled=False),
+                               limits=avp.VehicleLimits(rotor_drag=drag))
+    state = avp.State.hover(np.array([-2.5, 0.3, 2.2]))
+    inc = math.radians(incline)
+    a = avp.PerchTarget.from_incline(np.array([0.1, -0.2, 1.5]), inc, heading)
+    b = avp.PerchTarget.from_incline(np.array([0.0, 0.0, 1.0]), math.radians(45.0))
+    T = np.full(3, total / 3)
+    qa, qb = build_perching_qp(state, a, config, T), build_perching_qp(state, b, config, T)
+    assert qa.equalities[2].matrix is qb.equalities[2].matrix and not qa.equalities[2].matrix.flags.writeable
+    _, c_p, _, _ = qa.elimination
+    traj = qa.trajectory(c_p, config.g)
+    d = traj.derivatives(traj.tf)  # (orders, 4): position, velocity, acceleration
+    alpha = config.contact_alpha(a.incline)
+    np.testing.assert_allclose(d[0, :3], a.point, atol=1e-9)
+    np.testing.assert_allclose(d[2, :3] + drag * d[1, :3], alpha * a.s3 - config.g * np.array([0.0, 0.0, 1.0]), atol=1e-8)
+    v_S = [x for x in config.contact_velocity.components(a.incline)]
+    np.testing.assert_allclose(a.R_WS.T @ d[1, :3], v_S, atol=1e-9)

@@ -81,32 +81,69 @@ def _read_only(M: Array) -> Array:
     return M
 
 
-_COST_PRINTS: dict[int, tuple[Array, float]] = {}
-"""Fingerprints of the cost matrices (read-only, cached by :func:`avp.qp.cost.cost_matrix`), by
-identity; each entry keeps its matrix alive, so an id is not reused while it is here."""
+_PRINTS: dict[int, tuple[Array, float]] = {}
+"""Fingerprints of read-only matrices that own their data (the cached cost matrices of
+:func:`avp.qp.cost.cost_matrix` and equality matrices of :func:`_stacked_matrix`), by identity;
+each entry keeps its matrix alive, so an id is not reused while it is here."""
 
 
-def _cost_fingerprint(P: Array) -> float:
-    """:func:`_fingerprint` of a cost matrix, computed once per read-only matrix object that owns
-    its data (the cached cost matrices, which nothing writes; the factor's own ``hit.P is P``
-    shortcut relies on the same)."""
-    if P.flags.writeable or P.base is not None:
-        return _fingerprint(P)
-    hit = _COST_PRINTS.get(id(P))
-    if hit is not None and hit[0] is P:
+def _owned(M: Array) -> bool:
+    """``M`` is read-only and owns its data: nothing writes it, so its identity fixes its values."""
+    return not M.flags.writeable and M.base is None
+
+
+def _cached_fingerprint(M: Array, keep: bool = True) -> float:
+    """:func:`_fingerprint` of ``M``, computed once per read-only matrix object that owns its data
+    (the factor's own ``hit.P is P`` and ``hit.A is A`` shortcuts rely on the same). ``keep``:
+    remember a new one (the cost matrices; a stacked equality matrix is remembered only when
+    :func:`_stacked_matrix` caches it, the others are used once)."""
+    if not _owned(M):
+        return _fingerprint(M)
+    hit = _PRINTS.get(id(M))
+    if hit is not None and hit[0] is M:
         return hit[1]
-    value = _fingerprint(P)
-    if len(_COST_PRINTS) >= ELIMINATION_CACHE_SIZE:
-        _COST_PRINTS.clear()
-    _COST_PRINTS[id(P)] = (P, value)
+    value = _fingerprint(M)
+    if not keep:
+        return value
+    if len(_PRINTS) >= 2 * ELIMINATION_CACHE_SIZE:
+        _PRINTS.clear()
+    _PRINTS[id(M)] = (M, value)
     return value
+
+
+_STACKS: OrderedDict[tuple[int, ...], tuple[tuple[Array, ...], Array]] = OrderedDict()
+"""Stacked equality matrices by the identities of their read-only blocks (least recently used
+first out, :data:`ELIMINATION_CACHE_SIZE` entries); each entry keeps its blocks alive."""
+
+
+def _stacked_matrix(blocks: tuple[Array, ...]) -> Array:
+    """The blocks stacked (read-only). When every block is read-only and owns its data (the
+    cached row builders of :mod:`avp.qp.boundary` and :mod:`avp.qp.perching`) the stack is
+    cached by their identities: the QPs of a replan and of a plan's stages then share one
+    equality matrix object, whose factorisation is found without comparing its entries."""
+    if not all(_owned(M) for M in blocks):
+        return _read_only(np.concatenate(blocks, axis=0))
+    key = tuple(map(id, blocks))
+    with _FACTORS_LOCK:
+        hit = _STACKS.get(key)
+        if hit is not None and all(a is b for a, b in zip(hit[0], blocks, strict=True)):
+            _STACKS.move_to_end(key)
+            return hit[1]
+    A = _read_only(np.concatenate(blocks, axis=0))
+    _cached_fingerprint(A)
+    with _FACTORS_LOCK:
+        _STACKS[key] = (blocks, A)
+        while len(_STACKS) > ELIMINATION_CACHE_SIZE:
+            _STACKS.popitem(last=False)
+    return A
 
 
 def _fingerprint(M: Array) -> float:
     """A cheap, position-sensitive checksum of ``M`` (hits are confirmed by comparison)."""
     flat = M.reshape(-1)
     n = min(flat.size, _WEIGHTS.size)
-    return float(flat[:n] @ _WEIGHTS[:n]) + float(flat[n:].sum())
+    head = float(flat[:n] @ _WEIGHTS[:n])
+    return head + float(flat[n:].sum()) if flat.size > n else head + 0.0
 
 
 def _cached_factors() -> int:
@@ -124,10 +161,10 @@ def _close(M: Array, N: Array) -> bool:
 
 def _factor(A: Array, P: Array) -> _Factor:
     """Pivoted QR of ``A^T`` and the reduced Hessian, cached per ``(A, P)`` up to rounding."""
-    key = (A.shape, P.shape, f"{_fingerprint(A):.9e}", f"{_cost_fingerprint(P):.9e}")
+    key = (A.shape, P.shape, f"{_cached_fingerprint(A, keep=False):.9e}", f"{_cached_fingerprint(P):.9e}")
     with _FACTORS_LOCK:
         for hit in _FACTORS.get(key, ()):
-            if (hit.P is P or _close(hit.P, P)) and _close(hit.A, A):
+            if (hit.P is P or _close(hit.P, P)) and (hit.A is A or _close(hit.A, A)):
                 _FACTORS.move_to_end(key)
                 return hit
     Q, R, piv = scipy.linalg.qr(A.T, pivoting=True, check_finite=False)
@@ -140,8 +177,9 @@ def _factor(A: Array, P: Array) -> _Factor:
     # back-ends' absolute dual tolerances become meaningful (raw entries reach 1e7).
     scale = 1.0 / max(float(np.max(np.abs(np.diag(H)))) if H.size else 1.0, 1e-300)
     H = (0.5 * scale) * (H + H.T)
+    A_kept = A if _owned(A) else A.copy()  # stacked equality matrices are read-only, cached ones shared
     P_kept = P if not P.flags.writeable else P.copy()  # the cached cost matrices are read-only
-    f = _Factor(A.copy(), P_kept, Q[:, :rank], R[:rank, :rank], piv[:rank], Z, PZ, H, scale)
+    f = _Factor(A_kept, P_kept, Q[:, :rank], R[:rank, :rank], piv[:rank], Z, PZ, H, scale)
     for arr in (f.A, f.P, f.Q1, f.R1, f.piv, f.Z, f.PZ, f.H):
         arr.setflags(write=False)
     with _FACTORS_LOCK:
@@ -210,9 +248,9 @@ class PerchingQp:
 
     @cached_property
     def _stacked_equalities(self) -> tuple[Array, Array]:
-        A = np.concatenate([b.matrix for b in self.equalities], axis=0)
+        A = _stacked_matrix(tuple(b.matrix for b in self.equalities))
         b = np.concatenate([b.lower for b in self.equalities])
-        return _read_only(A), _read_only(b)
+        return A, _read_only(b)
 
     @cached_property
     def _stacked_inequalities(self) -> tuple[Array, Array, Array]:
@@ -259,13 +297,25 @@ class PerchingQp:
         _, lo, hi = self.stacked_inequalities()
         return _read_only(inv(b)), _read_only(inv(lo)), _read_only(inv(hi))
 
+    @cached_property
+    def _knots(self) -> tuple[Array, bool]:
+        """The plan's knot times ``t0 + knots_rel`` (read-only, shared by every trajectory of
+        this QP and its copies) and whether they increase strictly."""
+        knots = self.t0 + self.knots_rel
+        return _read_only(knots), bool((np.diff(knots) > 0.0).all())
+
+    @cached_property
+    def _physical_scale(self) -> Array:
+        """``T_i^-k`` per segment and power (:meth:`DecisionLayout.to_physical`), read-only."""
+        return _read_only(self.layout.physical_scale(self.durations))
+
     def trajectory(self, c_hat: Array, g: float) -> Trajectory:
         """The :class:`~avp.trajectory.Trajectory` of normalised coefficients ``c_hat``, starting
         at ``t0`` with this QP's durations."""
-        coeffs = self.layout.to_physical(c_hat, self.durations)
-        knots = self.t0 + self.knots_rel
-        if not (np.isfinite(coeffs).all() and (np.diff(knots) > 0.0).all()):
-            return Trajectory(coeffs, knots, g=g)  # raises the typed error
+        coeffs = self.layout.to_physical(c_hat, self.durations, scale=self._physical_scale)
+        knots, increasing = self._knots
+        if not (increasing and np.isfinite(coeffs).all()):
+            return Trajectory(coeffs, knots.copy(), g=g)  # raises the typed error
         return Trajectory._trusted(coeffs, knots, g)
 
     def with_inequalities(self, *blocks: ConstraintBlock) -> PerchingQp:
@@ -282,7 +332,7 @@ class PerchingQp:
 
     def _same_equalities(self, other: PerchingQp) -> PerchingQp:
         """``other`` has this QP's cost and equalities: hand over the elimination if computed."""
-        for name in ("elimination", "_stacked_equalities", "knots_rel"):
+        for name in ("elimination", "_stacked_equalities", "knots_rel", "_knots", "_physical_scale"):
             if name in self.__dict__:
                 other.__dict__[name] = self.__dict__[name]
         return other
@@ -305,8 +355,8 @@ class PerchingQp:
         if info != 0:
             raise InfeasibleError(f"the equality elimination failed (LAPACK trtrs info {info})")
         c_p = f.Q1 @ y
-        residual = float(np.max(np.abs(A @ c_p - b))) if m else 0.0
-        if residual > 1e-8 * max(1.0, float(np.max(np.abs(b)))):
+        residual = float(np.abs(A @ c_p - b).max()) if m else 0.0
+        if residual > 1e-8 * max(1.0, float(np.abs(b).max()) if m else 0.0):
             raise InfeasibleError(
                 f"the equality constraints are inconsistent (residual {residual:.2e}): the spline has "
                 f"too few degrees of freedom; raise config.n_segments or config.degree"
@@ -349,10 +399,10 @@ def build_perching_qp(
     """The perching QP: cost (4), initial state, continuity, terminal (12)/(13), band (14)."""
     layout = layout_for(config.n_segments, config.degree)
     T = np.asarray(durations, dtype=float)
-    knots_rel = np.concatenate([[0.0], np.cumsum(T)])
+    knots_rel = np.concatenate(((0.0,), T.cumsum()))
     # equal durations (every replan) scale by one of them exactly: the rows, which depend on
     # T_i / t_scale, are then the same bits at every step and hit the elimination cache exactly
-    t_scale = float(T[0]) if (T == T[0]).all() else float(T.mean())
+    t_scale = float(T[0]) if T.min() == T.max() else float(T.mean())
     P = cost_matrix(layout, T, config.position_cost_order, config.yaw_cost_order)
     A0, b0 = initial_state_rows(layout, T, state, t_scale)
     Ac = continuity_rows(layout, T, config.continuity_order, t_scale)

@@ -21,8 +21,8 @@ def initial_state_rows(
     float key; read-only).
     """
     rows = _initial_matrix(layout.n_segments, layout.degree, float(durations[0]) / t_scale)
-    derivs = state.derivatives()
-    values = np.concatenate([derivs[:4, :3].reshape(-1), [state.yaw, state.yaw_rate]])
+    values = np.concatenate((state.position, state.velocity, state.acceleration, state.jerk,
+                             (state.yaw, state.yaw_rate)))
     return rows, values * t_scale ** _INITIAL_ORDERS
 
 

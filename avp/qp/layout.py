@@ -93,10 +93,17 @@ class DecisionLayout:
         u = (tt - knots_rel[seg]) / (knots_rel[seg + 1] - knots_rel[seg])
         return seg, u
 
-    def to_physical(self, c_hat: Array, durations: Array) -> Array:
-        """Decision vector -> ``(S, 4, N + 1)`` coefficients in powers of ``t - t_i`` (seconds)."""
+    def physical_scale(self, durations: Array) -> Array:
+        """``T_i^-k`` (``(S, N + 1)``): normalised coefficient ``k`` of segment ``i`` times it is
+        the coefficient of ``(t - t_i)^k``."""
+        return np.asarray(durations, dtype=float)[:, None] ** -np.arange(self.n_coeffs)[None, :]
+
+    def to_physical(self, c_hat: Array, durations: Array, scale: Array | None = None) -> Array:
+        """Decision vector -> ``(S, 4, N + 1)`` coefficients in powers of ``t - t_i`` (seconds).
+        ``scale``: :meth:`physical_scale` of ``durations`` when the caller has it."""
         c = np.asarray(c_hat, dtype=float).reshape(N_AXES, self.n_segments, self.n_coeffs)
-        scale = np.asarray(durations, dtype=float)[:, None] ** -np.arange(self.n_coeffs)[None, :]
+        if scale is None:
+            scale = self.physical_scale(durations)
         return np.ascontiguousarray((c * scale[None]).transpose(1, 0, 2))
 
     def from_physical(self, coeffs: Array, durations: Array) -> Array:

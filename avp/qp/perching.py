@@ -11,7 +11,6 @@ import numpy as np
 
 from .._typing import Array
 from ..config import PlannerConfig, PreImpactMode
-from ..frames import contact_yaw
 from ..types import PerchTarget
 from .layout import YAW, DecisionLayout, layout_for
 from .rows import point_rows, vector_rows
@@ -28,7 +27,7 @@ def terminal_yaw(target: PerchTarget, near: float) -> float:
     """Yaw (13) whose attitude with ``b3 = s3`` is exactly ``R_WS`` (:func:`avp.frames.contact_yaw`),
     unwrapped to within pi of ``near``. For a contact attitude the construction cannot represent,
     the yaw of the closest one with ``b3 = s3``."""
-    psi, _ = contact_yaw(target.R_WS)
+    psi = target._contact_yaw
     return psi + 2.0 * math.pi * round((near - psi) / (2.0 * math.pi))
 
 
@@ -70,13 +69,12 @@ def terminal_rows(
             rhs.append(-config.g * direction[2] * t_scale**2)
             names.append(f"terminal thrust along s3 (12): no {label} component")
     v_S = config.contact_velocity.components(target.incline)
-    if all(value is not None for value in v_S):
+    world_velocity = all(value is not None for value in v_S)
+    if world_velocity:
         # the whole velocity is given: the same condition as world rows, v(t_f) = R_WS v_S, whose
         # matrix does not depend on the pad's frame, so a re-estimated frame keeps the cached
         # equality elimination (qp.assemble._factor)
-        # solve(R_WS^T, v_S), not R_WS v_S: the same for an orthonormal frame, and exactly the
-        # per-direction conditions s_i . v = v_S,i for a frame orthonormal only to rounding
-        v_W = np.linalg.solve(target.R_WS.T, np.array(v_S, dtype=float))
+        v_W = target.contact_velocity_W(v_S)  # type: ignore[arg-type]
         for axis in range(3):
             rows.append(V[axis])
             rhs.append(v_W[axis] * t_scale)
@@ -91,7 +89,25 @@ def terminal_rows(
     rows.append(Y)
     rhs.append(terminal_yaw(target, yaw_start))
     names.append("terminal yaw (13)")
-    return np.array(rows), np.array(rhs), names
+    if config.alpha_range is None and world_velocity:  # no row depends on the pad's frame
+        matrix = _world_terminal_matrix(layout.n_segments, layout.degree, float(T_last) / t_scale, drag * t_scale)
+    else:
+        matrix = np.array(rows)
+    return matrix, np.array(rhs), names
+
+
+@lru_cache(maxsize=256)
+def _world_terminal_matrix(n_segments: int, degree: int, T_last_over_scale: float, drag_scaled: float) -> Array:
+    """:func:`terminal_rows`' matrix when none of its rows depends on the pad's frame (the
+    acceleration (12) and the whole contact velocity as world rows): position, acceleration
+    (plus ``drag_scaled`` times velocity), velocity, yaw; read-only. Shared by every QP with
+    these durations, so the equality elimination finds it by identity (``qp.assemble``)."""
+    P, V, A, Y = _end_rows(n_segments, degree, T_last_over_scale)
+    if drag_scaled:
+        A = A + drag_scaled * V
+    matrix = np.array([*P, *A, *V, Y])
+    matrix.setflags(write=False)
+    return matrix
 
 
 @lru_cache(maxsize=256)
