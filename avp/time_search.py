@@ -111,13 +111,22 @@ def predicted_factor(traj: Trajectory, limits: VehicleLimits, g: float, lo: floa
 
 def _predict(samples: tuple[Array, Array, Array, Array], limits: VehicleLimits, g: float,
              lo: float, hi: float) -> float | None:
+    return _predict_with_excess(samples, limits, g, lo, hi)[0]
+
+
+def _predict_with_excess(samples: tuple[Array, Array, Array, Array], limits: VehicleLimits, g: float,
+                         lo: float, hi: float) -> tuple[float | None, float]:
+    """:func:`_predict` and the excess at scale 1, from one evaluation of :func:`_excess` (each
+    scale's excess is computed on its own row: the same values as separate calls)."""
     scales = SCALES[(SCALES >= lo) & (SCALES <= hi)]
+    excess = _excess(samples, limits, g, np.concatenate((_ONE, scales)))
+    at_one = float(excess[0])
     if scales.size == 0:
-        return None
-    ok = scales[_excess(samples, limits, g, scales) < -MARGIN]
+        return None, at_one
+    ok = scales[excess[1:] < -MARGIN]
     if ok.size == 0:
-        return None
-    return float(ok[np.argmin(np.abs(np.log(ok)))])
+        return None, at_one
+    return float(ok[np.argmin(np.abs(np.log(ok)))]), at_one
 
 
 class DurationSearch:
@@ -175,15 +184,16 @@ class DurationSearch:
             return None
         current = self.current
         samples = _samples(traj, SAMPLES_PER_SEGMENT)
-        self.measured.append((math.log(current), float(_excess(samples, limits, g, _ONE)[0])))
-        if len(self.measured) == 1:  # the scaling law of this plan
-            s = _predict(samples, limits, g, self.lo / current, self.hi / current)
+        if not self.measured:  # the scaling law of this plan
+            s, excess = _predict_with_excess(samples, limits, g, self.lo / current, self.hi / current)
+            self.measured.append((math.log(current), excess))
             if s is None:
                 return None
             if abs(math.log(s)) < 0.02:  # the samples miss what the certificate found: nudge
                 s = 1.03 if s >= 1.0 else 1.0 / 1.03
             self.direction = 1 if s > 1.0 else -1
             return self._step(current * s)
+        self.measured.append((math.log(current), float(_excess(samples, limits, g, _ONE)[0])))
         k = self._secant()
         return k if k is not None else self._reach()
 

@@ -302,7 +302,8 @@ class PerchingQp:
         """The plan's knot times ``t0 + knots_rel`` (read-only, shared by every trajectory of
         this QP and its copies) and whether they increase strictly."""
         knots = self.t0 + self.knots_rel
-        return _read_only(knots), bool((np.diff(knots) > 0.0).all())
+        k = knots.tolist()
+        return _read_only(knots), all(map(float.__lt__, k[:-1], k[1:]))
 
     @cached_property
     def _physical_scale(self) -> Array:
@@ -420,4 +421,6 @@ def build_perching_qp(
     Gf, lf, hf = flip_rows(layout, knots_rel, target, config)
     if Gf.shape[0]:
         ineq += (ConstraintBlock("overhang flip: thrust through the horizontal", Gf, lf, hf),)
-    return PerchingQp(layout=layout, durations=T, t0=state.time, P=P, equalities=eq, inequalities=ineq)
+    qp = PerchingQp(layout=layout, durations=T, t0=state.time, P=P, equalities=eq, inequalities=ineq)
+    qp.__dict__["knots_rel"] = _read_only(knots_rel)  # the same values as the property computes
+    return qp
