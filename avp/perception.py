@@ -62,7 +62,7 @@ def linearise_on(
         return fov_blocks(qp.layout, knots, times, np.zeros((0, 3)), np.zeros(0), np.zeros((0, 3)),
                           target.point, cfg.fov, cfg.g)
     start = max(qp.t0, reference.t0)
-    t_ref = np.clip(qp.t0 + times * (reference.tf - start) / tf, reference.t0, reference.tf)
+    t_ref = (qp.t0 + times * (reference.tf - start) / tf).clip(reference.t0, reference.tf)
     drag = cfg.limits.rotor_drag
     if drag:  # the attitude of the thrust a + g e3 + d v (VehicleLimits.rotor_drag)
         d = reference.derivatives(t_ref, (0, 1, 2))

@@ -273,7 +273,8 @@ def _plane_block(name: str, P: Array, normal: Array, offset: Array | float) -> C
     # the contraction over the axes, without einsum's dispatch)
     G = normal[0] * P[:, 0, :] + normal[1] * P[:, 1, :] + normal[2] * P[:, 2, :]
     m = P.shape[0]
-    lower = np.full(m, offset, dtype=float) if np.ndim(offset) == 0 else np.broadcast_to(np.asarray(offset, dtype=float), (m,)).copy()
+    lower = np.full(m, offset, dtype=float) if isinstance(offset, float) or np.ndim(offset) == 0 \
+        else np.broadcast_to(np.asarray(offset, dtype=float), (m,)).copy()
     return ConstraintBlock(name, G, lower, np.full(m, np.inf))
 
 

@@ -6,6 +6,7 @@ Coefficients have shape ``(segments, 4, degree + 1)`` in ascending powers of loc
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from enum import IntEnum
 from typing import Any
@@ -171,13 +172,13 @@ class Trajectory:
         if isinstance(t, float) and self.t0 - TIME_TOL <= t <= self.tf + TIME_TOL:  # one time, in range
             return np.array([min(max(t, self.t0), self.tf)]), ()
         arr = np.asarray(t, dtype=float)
-        if not np.isfinite(arr).all():
-            raise ConfigError("t", "contains NaN or inf")
-        if arr.size and (arr.min() < self.t0 - TIME_TOL or arr.max() > self.tf + TIME_TOL):
-            raise ConfigError(
-                "t", f"times must lie in [{self.t0}, {self.tf}] s, got [{arr.min()}, {arr.max()}]"
-            )
-        flat = np.ascontiguousarray(np.clip(arr.reshape(-1), self.t0, self.tf))
+        if arr.size:
+            lo, hi = float(arr.min()), float(arr.max())  # NaN propagates to both
+            if not (math.isfinite(lo) and math.isfinite(hi)):
+                raise ConfigError("t", "contains NaN or inf")
+            if lo < self.t0 - TIME_TOL or hi > self.tf + TIME_TOL:
+                raise ConfigError("t", f"times must lie in [{self.t0}, {self.tf}] s, got [{lo}, {hi}]")
+        flat = arr.reshape(-1).clip(self.t0, self.tf)  # a new contiguous array
         return flat, arr.shape
 
     def derivatives(self, t: Any, orders: Any = (0, 1, 2, 3, 4)) -> Array:

@@ -66,6 +66,30 @@ def test_shapes_and_domain(wall_plan: avp.Trajectory) -> None:
         tr(tr.tf + 0.1)
 
 
+@pytest.mark.parametrize("bad", [math.nan, math.inf, -math.inf])
+def test_times_with_nan_or_inf_anywhere_are_refused(wall_plan: avp.Trajectory, bad: float) -> None:
+    tr = wall_plan
+    for where in range(3):
+        t = np.linspace(tr.t0, tr.tf, 3)
+        t[where] = bad
+        with pytest.raises(avp.ConfigError, match="NaN or inf"):
+            tr.derivatives(t)
+
+
+def test_times_are_checked_against_the_range_and_clipped_within_its_tolerance(wall_plan: avp.Trajectory) -> None:
+    tr = wall_plan
+    with pytest.raises(avp.ConfigError, match="must lie in"):
+        tr(np.array([tr.t0, tr.t0 - 1e-6]))
+    assert tr(np.zeros(0)).shape == (0, 3)
+    # a hair outside the ends (rounding of a caller's grid) reads the end itself
+    edge = np.array([tr.t0 - 1e-10, tr.tf + 1e-10])
+    np.testing.assert_array_equal(tr(edge), tr(np.array([tr.t0, tr.tf])))
+    # strided and 2-D inputs read the same values as contiguous ones
+    grid = np.linspace(tr.t0, tr.tf, 12)
+    np.testing.assert_array_equal(tr(grid[::3]), tr(np.ascontiguousarray(grid[::3])))
+    np.testing.assert_array_equal(tr(grid.reshape(3, 4)[:, ::2]).reshape(-1, 3), tr(grid.reshape(3, 4)[:, ::2].ravel()))
+
+
 def test_attitude_is_a_rotation_with_b3_along_thrust(wall_plan: avp.Trajectory) -> None:
     t = wall_plan.sample(0.01)
     R = wall_plan.attitude(t)
