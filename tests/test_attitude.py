@@ -304,7 +304,7 @@ def test_a_pads_cached_contact_quantities_equal_the_functions(normal, up, v_S, g
     n = np.array(normal)
     assume(np.linalg.norm(n) > 0.1)
     u = np.array(up)
-    assume(np.linalg.norm(np.cross(n, u)) > 0.1 * np.linalg.norm(u) * np.linalg.norm(n))
+    assume(np.linalg.norm(u) > 0.1 and np.linalg.norm(np.cross(n, u)) > 0.1 * np.linalg.norm(u) * np.linalg.norm(n))
     target = avp.PerchTarget.from_normal([0.0, 0.0, 1.0], n, up_slope=u)
     for _ in range(2):
         assert target.contact_frame_error(g) == frames.contact_frame_error(target.R_WS, g)
