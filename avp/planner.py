@@ -268,7 +268,7 @@ def plan_detailed(
     T0 = check_durations(durations, cfg) if durations is not None else initial_durations(state, target, cfg)
     check_request(state, target, cfg, float(T0.sum()))  # physical sense of the request
     log: list[str] = [f"durations {np.round(T0, 4).tolist()} s ({'given' if durations is not None else 'allocated'})"]
-    frame_error = target.contact_frame_error(cfg.g)
+    frame_error = target._frame_error(cfg.g)
     if frame_error > 1e-6:
         log.append(f"contact attitude: R_WS is not representable by the attitude construction (13) (roll "
                    f"beyond {math.degrees(MAX_CONTACT_ROLL):.1f} deg); b3 = s3 exactly, the rotation about s3 "

@@ -21,7 +21,7 @@ its current pose.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from enum import Enum
 from typing import Any
 
@@ -47,6 +47,17 @@ def rot_z(angle: float) -> Array:
     """Rotation by ``angle`` (rad) about ``e3``."""
     c, s = math.cos(angle), math.sin(angle)
     return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+_FIELD_NAMES: dict[type, frozenset[str]] = {}
+
+
+def _field_names(cls: type) -> frozenset[str]:
+    """The dataclass fields of ``cls`` (what :meth:`MovingTarget.at` copies), once per class."""
+    names = _FIELD_NAMES.get(cls)
+    if names is None:
+        names = _FIELD_NAMES[cls] = frozenset(f.name for f in fields(cls))
+    return names
 
 
 def _sinc(x: Array) -> Array:
@@ -176,8 +187,10 @@ class MovingTarget(PerchTarget):
         R = rot_z(w_dt) @ self.R_WS if w_dt != 0.0 else self.R_WS
         # Derived from validated fields: skip re-validation (it dominates the cost of at()).
         out = object.__new__(type(self))
-        out.__dict__.update(self.__dict__)
-        out.__dict__.pop("incline", None)  # a cached property of R_WS (PerchTarget.incline): recomputed on use
+        # the fields only: what the pad caches from R_WS (PerchTarget.incline, its contact yaw...)
+        # belongs to this pose, not to the turned one
+        fields = _field_names(type(self))
+        out.__dict__.update({k: value for k, value in self.__dict__.items() if k in fields})
         point = points[0]
         for arr in (point, R):
             arr.setflags(write=False)

@@ -14,10 +14,10 @@ from typing import Any
 import numpy as np
 
 from . import _validate as v
+from . import frames
 from ._typing import Array
 from ._values import fields_equal, fields_hash
 from .errors import ConfigError
-from .frames import contact_frame_error, contact_yaw
 
 __all__ = ["PerchTarget", "State"]
 
@@ -171,39 +171,40 @@ class PerchTarget:
 
     @cached_property
     def _contact_yaw(self) -> float:
-        """Terminal yaw ``psi`` of :func:`avp.frames.contact_yaw` (13), computed once per pad
-        (every QP of a plan and every fraction of a replan step uses it)."""
-        return contact_yaw(self.R_WS)[0]
+        """Terminal yaw ``psi`` (rad) of :func:`avp.frames.contact_yaw` (13), computed once per
+        pad (every QP of a plan and every fraction of a replan step uses it)."""
+        return frames.contact_yaw(self.R_WS)[0]
 
     @cached_property
-    def _contact_frame_error(self) -> dict[float, float]:
-        """:func:`avp.frames.contact_frame_error` of ``R_WS`` by gravity, filled on use."""
+    def _frame_errors(self) -> dict[float, float]:
+        """:meth:`_frame_error` by gravity, filled on use."""
         return {}
 
-    def contact_frame_error(self, g: float) -> float:
-        """:func:`avp.frames.contact_frame_error` of this pad's frame (rad), computed once per
-        ``g``: 0 when the contact attitude reproduces ``R_WS`` exactly."""
-        cache = self._contact_frame_error
+    def _frame_error(self, g: float) -> float:
+        """:func:`avp.frames.contact_frame_error` of this pad's frame (rad) for gravity ``g``
+        (m/s^2), computed once per ``g``: 0 when the contact attitude reproduces ``R_WS``."""
+        cache = self._frame_errors
         if g not in cache:
-            cache[g] = contact_frame_error(self.R_WS, g)
+            cache[g] = frames.contact_frame_error(self.R_WS, g)
         return cache[g]
 
     @cached_property
-    def _velocities_W(self) -> dict[tuple[float, float, float], Array]:
-        """:meth:`contact_velocity_W` by ``v_S``, filled on use."""
+    def _velocities_W(self) -> dict[tuple[str, ...], Array]:
+        """:meth:`_velocity_W` by the exact bits of ``v_S``, filled on use."""
         return {}
 
-    def contact_velocity_W(self, v_S: tuple[float, float, float]) -> Array:
-        """The world velocity whose S components are ``v_S``: ``solve(R_WS^T, v_S)``, not
-        ``R_WS v_S`` (the same for an orthonormal frame, and exactly the per-direction conditions
-        ``s_i . v = v_S,i`` for a frame orthonormal only to rounding). Computed once per
-        ``v_S`` (read-only)."""
+    def _velocity_W(self, v_S: tuple[float, float, float]) -> Array:
+        """The world velocity (m/s, W) whose S components are ``v_S``: ``solve(R_WS^T, v_S)``,
+        not ``R_WS v_S`` (the same for an orthonormal frame, and exactly the per-direction
+        conditions ``s_i . v = v_S,i`` for a frame orthonormal only to rounding). Computed once
+        per ``v_S``, keyed by its exact bits (``-0.0`` is not ``0.0``); read-only."""
+        key = tuple(float(x).hex() for x in v_S)
         cache = self._velocities_W
-        v_W = cache.get(v_S)
+        v_W = cache.get(key)
         if v_W is None:
             v_W = np.linalg.solve(self.R_WS.T, np.array(v_S, dtype=float))
             v_W.setflags(write=False)
-            cache[v_S] = v_W
+            cache[key] = v_W
         return v_W
 
     def at(self, time: float) -> PerchTarget:

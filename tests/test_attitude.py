@@ -297,19 +297,47 @@ def test_rotation_error_angle_is_accurate_near_zero_and_pi(angle, axis, base) ->
 @given(normal=st.tuples(*[st.floats(-1.0, 1.0)] * 3), up=st.tuples(*[st.floats(-1.0, 1.0)] * 3),
        v_S=st.tuples(*[st.floats(-3.0, 3.0)] * 3), g=st.sampled_from([9.81, 3.71]))
 def test_a_pads_cached_contact_quantities_equal_the_functions(normal, up, v_S, g) -> None:
-    """``PerchTarget.contact_frame_error``, ``contact_velocity_W`` and the terminal yaw are
-    computed once per pad (every QP of a plan uses them); each equals its function of ``R_WS``
-    bit for bit, also on a second call, and the cached velocity is read-only with
-    ``R_WS^T v_W = v_S``."""
+    """The pad's frame error, world contact velocity and terminal yaw are computed once per pad
+    (every QP of a plan uses them); each equals its function of ``R_WS`` bit for bit, also on a
+    second call, and the cached velocity is read-only with ``R_WS^T v_W = v_S``."""
     n = np.array(normal)
     assume(np.linalg.norm(n) > 0.1)
     u = np.array(up)
     assume(np.linalg.norm(u) > 0.1 and np.linalg.norm(np.cross(n, u)) > 0.1 * np.linalg.norm(u) * np.linalg.norm(n))
     target = avp.PerchTarget.from_normal([0.0, 0.0, 1.0], n, up_slope=u)
     for _ in range(2):
-        assert target.contact_frame_error(g) == frames.contact_frame_error(target.R_WS, g)
+        assert target._frame_error(g) == frames.contact_frame_error(target.R_WS, g)
         assert target._contact_yaw == frames.contact_yaw(target.R_WS)[0]
-        v_W = target.contact_velocity_W(v_S)
-        assert np.array_equal(v_W, np.linalg.solve(target.R_WS.T, np.array(v_S)))
+        v_W = target._velocity_W(v_S)
+        assert v_W.tobytes() == np.linalg.solve(target.R_WS.T, np.array(v_S)).tobytes()
         assert not v_W.flags.writeable
         np.testing.assert_allclose(target.R_WS.T @ v_W, v_S, atol=1e-12)
+
+
+def test_the_cached_contact_velocity_tells_minus_zero_from_zero() -> None:
+    """Keyed by the exact bits of ``v_S``: a request with ``-0.0`` gets its own solve, whose
+    zero's sign can differ from the one of ``0.0``."""
+    target = avp.PerchTarget.from_incline([0.0, 0.0, 1.0], 1.0)
+    plus, minus = (-2.0, 0.0, -0.3), (-2.0, -0.0, -0.3)
+    solved = [np.linalg.solve(target.R_WS.T, np.array(v)).tobytes() for v in (plus, minus)]
+    assert solved[0] != solved[1]  # the case is one where the sign shows (plus == minus as tuples)
+    for first, second in ((0, 1), (1, 0)):
+        fresh = avp.PerchTarget(point=target.point, R_WS=target.R_WS)
+        fresh._velocity_W((plus, minus)[first])
+        assert fresh._velocity_W((plus, minus)[second]).tobytes() == solved[second]
+
+
+def test_a_moving_pads_later_pose_does_not_inherit_its_cached_quantities() -> None:
+    """``MovingTarget.at`` turns the pad frame with the platform's yaw rate: the pose's contact
+    yaw, frame error and world velocity are its own frame's, whatever the first pose cached."""
+    pad = avp.MovingTarget.on_platform([2.0, 0.0, 1.0], incline=math.radians(60.0), speed=0.5, turn_rate=0.8)
+    v_S = (2.0, 0.0, -0.3)
+    _ = pad.incline, pad._contact_yaw, pad._frame_error(9.81), pad._velocity_W(v_S)  # fill the caches
+    later = pad.at(pad.time + 1.0)
+    assert not np.allclose(later.R_WS, pad.R_WS)
+    assert later.incline == pytest.approx(math.acos(later.R_WS[2, 2]))
+    assert later._contact_yaw == frames.contact_yaw(later.R_WS)[0]
+    assert later._frame_error(9.81) == frames.contact_frame_error(later.R_WS, 9.81)
+    assert later._velocity_W(v_S).tobytes() == np.linalg.solve(later.R_WS.T, np.array(v_S)).tobytes()
+    # and the first pose's caches are still its own
+    assert pad._velocity_W(v_S).tobytes() == np.linalg.solve(pad.R_WS.T, np.array(v_S)).tobytes()

@@ -17,6 +17,7 @@ import avp.solve
 from avp.qp.assemble import build_perching_qp
 from avp.qp.cost import cost_matrix, gram
 from avp.qp.layout import layout_for
+from avp.qp.perching import _end_rows
 
 
 def _qp(start, T, incline=30.0):
@@ -204,12 +205,17 @@ def test_the_shared_terminal_rows_meet_the_contact_conditions(drag, incline, hea
     b = avp.PerchTarget.from_incline(np.array([0.0, 0.0, 1.0]), math.radians(45.0))
     T = np.full(3, total / 3)
     qa, qb = build_perching_qp(state, a, config, T), build_perching_qp(state, b, config, T)
-    assert qa.equalities[2].matrix is qb.equalities[2].matrix and not qa.equalities[2].matrix.flags.writeable
+    At = qa.equalities[2].matrix
+    assert At is qb.equalities[2].matrix and not At.flags.writeable
+    # bit for bit the rows one at a time (position, a + d v, velocity, yaw), as built before the cache
+    P, V, A, Y = _end_rows(3, config.degree, 1.0)
+    rows = [*P, *(A + (drag * T[0]) * V if drag else A), *V, Y]
+    assert At.tobytes() == np.array(rows).tobytes()
     _, c_p, _, _ = qa.elimination
     traj = qa.trajectory(c_p, config.g)
     d = traj.derivatives(traj.tf)  # (orders, 4): position, velocity, acceleration
     alpha = config.contact_alpha(a.incline)
-    np.testing.assert_allclose(d[0, :3], a.point, atol=1e-9)
+    np.testing.assert_allclose(d[0, :3], a.point + config.workspace.body_offset * a.s3, atol=1e-9)
     np.testing.assert_allclose(d[2, :3] + drag * d[1, :3], alpha * a.s3 - config.g * np.array([0.0, 0.0, 1.0]), atol=1e-8)
-    v_S = [x for x in config.contact_velocity.components(a.incline)]
+    v_S = list(config.contact_velocity.components(a.incline))
     np.testing.assert_allclose(a.R_WS.T @ d[1, :3], v_S, atol=1e-9)

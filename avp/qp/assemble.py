@@ -8,7 +8,9 @@ equalities then hold to rounding whatever the solver's tolerance.
 
 The factorisation depends on the equality *matrix* ``A`` (durations and constraint pattern) and
 the cost ``P``, not on the right-hand side ``b`` (the state and target values): it is cached per
-``(A, P)`` (:data:`ELIMINATION_CACHE_SIZE` entries, found by a cheap fingerprint), and only
+``(A, P)`` (:data:`ELIMINATION_CACHE_SIZE` entries, found by a cheap fingerprint; when ``A`` is
+stacked from the row builders' cached blocks it is itself one cached object, found by identity
+without reading its entries), and only
 ``c_p`` and the linear cost term are recomputed for a new ``b``. Rows and cost are normalised by
 the durations' scale: for equal durations (the allocation rule, every replan) by one of them
 exactly, so ``A`` and ``P`` are the same bits for any total time; and a fully given contact
@@ -134,7 +136,9 @@ def _stacked_matrix(blocks: tuple[Array, ...]) -> Array:
     with _FACTORS_LOCK:
         _STACKS[key] = (blocks, A)
         while len(_STACKS) > ELIMINATION_CACHE_SIZE:
-            _STACKS.popitem(last=False)
+            _, (_, old) = _STACKS.popitem(last=False)
+            if _PRINTS.get(id(old), (None,))[0] is old:  # its fingerprint goes with it
+                del _PRINTS[id(old)]
     return A
 
 
@@ -239,7 +243,8 @@ class PerchingQp:
         return _read_only(np.concatenate([[0.0], np.cumsum(self.durations)]))
 
     def stacked_equalities(self) -> tuple[Array, Array]:
-        """``(A, b)`` of all equality blocks (stacked once per QP, read-only)."""
+        """``(A, b)`` of all equality blocks (stacked once per QP, read-only; ``A`` may be shared
+        by other QPs and the elimination cache: never make it writable)."""
         return self._stacked_equalities
 
     def stacked_inequalities(self) -> tuple[Array, Array, Array]:

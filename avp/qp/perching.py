@@ -74,7 +74,7 @@ def terminal_rows(
         # the whole velocity is given: the same condition as world rows, v(t_f) = R_WS v_S, whose
         # matrix does not depend on the pad's frame, so a re-estimated frame keeps the cached
         # equality elimination (qp.assemble._factor)
-        v_W = target.contact_velocity_W(v_S)  # type: ignore[arg-type]
+        v_W = target._velocity_W(v_S)  # type: ignore[arg-type]
         for axis in range(3):
             rows.append(V[axis])
             rhs.append(v_W[axis] * t_scale)
