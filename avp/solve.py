@@ -170,21 +170,30 @@ class TwoSidedSolution(qpsolvers.Solution):
         Gx = self.G @ self.x
         return float(max(0.0, float(np.max(Gx - self.upper)), float(np.max(self.lower - Gx))))
 
+    def _Px(self) -> Array:
+        """``P x``, computed once (the dual residual and the duality gap both need it)."""
+        x = self.x
+        cached = self.__dict__.get("_Px_cache")
+        if cached is None or cached[0] is not x:
+            cached = (x, self.problem.P @ x)
+            self.__dict__["_Px_cache"] = cached
+        return cached[1]
+
     def dual_residual(self) -> float:
-        P, q = self.problem.P, self.problem.q
+        q = self.problem.q
         if not self.found or self.x is None or self.lam is None or self.G is None:
             return math.inf
-        return float(np.max(np.abs(P @ self.x + q + self.G.T @ self.lam))) if self.x.size else 0.0
+        return float(np.abs(self._Px() + q + self.G.T @ self.lam).max()) if self.x.size else 0.0
 
     def duality_gap(self) -> float:
-        P, q = self.problem.P, self.problem.q
+        q = self.problem.q
         if not self.found or self.x is None or self.lam is None or self.lower is None or self.upper is None:
             return math.inf
         up = np.maximum(self.lam, 0.0)
         lo = np.minimum(self.lam, 0.0)
         # only active sides carry multipliers, so infinite bounds never multiply a nonzero one
         bound = float(np.where(up > 0.0, self.upper, 0.0) @ up + np.where(lo < 0.0, self.lower, 0.0) @ lo)
-        return abs(float(self.x @ (P @ self.x)) + float(q @ self.x) + bound)
+        return abs(float(self.x @ self._Px()) + float(q @ self.x) + bound)
 
 
 def _solve_two_sided(H: Array, g: Array, G: Array, lower: Array, upper: Array,

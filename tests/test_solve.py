@@ -61,3 +61,11 @@ def test_direct_two_sided_daqp_matches_the_qpsolvers_path(incline) -> None:
     assert direct.duality_gap() == pytest.approx(reference.duality_gap(), abs=1e-9)
     assert direct.primal_residual() == pytest.approx(reference.primal_residual(), abs=1e-9)
     assert direct.is_optimal(1e-6)
+    # P x is computed once per x: another x gets its own (the residuals from scratch)
+    direct.x = direct.x + 1e-3
+    Px = red.H @ direct.x
+    assert direct.dual_residual() == float(np.abs(Px + red.g + red.G.T @ direct.lam).max())
+    assert direct.duality_gap() > 0.0 and direct.duality_gap() == pytest.approx(
+        abs(direct.x @ Px + red.g @ direct.x + float(np.where(direct.lam > 0, red.upper, 0.0) @ np.maximum(direct.lam, 0.0)
+                                                    + np.where(direct.lam < 0, red.lower, 0.0) @ np.minimum(direct.lam, 0.0))),
+        rel=1e-12)
