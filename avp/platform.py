@@ -189,8 +189,8 @@ class MovingTarget(PerchTarget):
         out = object.__new__(type(self))
         # the fields only: what the pad caches from R_WS (PerchTarget.incline, its contact yaw...)
         # belongs to this pose, not to the turned one
-        fields = _field_names(type(self))
-        out.__dict__.update({k: value for k, value in self.__dict__.items() if k in fields})
+        names = _field_names(type(self))
+        out.__dict__.update({k: value for k, value in self.__dict__.items() if k in names})
         point = points[0]
         for arr in (point, R):
             arr.setflags(write=False)

@@ -171,13 +171,14 @@ class TwoSidedSolution(qpsolvers.Solution):
         return float(max(0.0, float(np.max(Gx - self.upper)), float(np.max(self.lower - Gx))))
 
     def _Px(self) -> Array:
-        """``P x``, computed once (the dual residual and the duality gap both need it)."""
-        x = self.x
+        """``P x``, computed once per ``x`` and ``P`` object (the dual residual and the duality
+        gap both need it; nothing writes ``x`` in place: a new ``x`` is a new array)."""
+        x, P = self.x, self.problem.P
         cached = self.__dict__.get("_Px_cache")
-        if cached is None or cached[0] is not x:
-            cached = (x, self.problem.P @ x)
+        if cached is None or cached[0] is not x or cached[1] is not P:
+            cached = (x, P, P @ x)
             self.__dict__["_Px_cache"] = cached
-        return cached[1]
+        return cached[2]
 
     def dual_residual(self) -> float:
         q = self.problem.q

@@ -1,5 +1,6 @@
-"""CPU time of ``plan_detailed`` per case as the minimum over rounds of each round's median, and
-a digest of every plan for bit-for-bit comparisons between two versions of the code.
+"""Per-case CPU time of plan_detailed (minimum over rounds of the round's median) and a plan digest.
+
+The digest is for bit-for-bit comparisons between two versions of the code.
 
     python benchmarks/bench_rounds.py [--rounds 8] [--repeats 7]
 
@@ -8,11 +9,12 @@ from minute to minute (other tenants' load changes the caches and the clock). A 
 ``--repeats`` plans of every case in turn; the round's median per case, minimised over the
 rounds, is the cost of the case when the host is quietest, which is what two versions of the
 code can be compared by when they run alternately (a ``git worktree`` of the other version on
-``PYTHONPATH``). The cases: the 12 standard scenarios of ``bench_plan.py`` with the default
+``PYTHONPATH``, with the compiled ``avp/_avp_rust*.so`` copied into it or built there: git does
+not track it). The cases: the 12 standard scenarios of ``bench_plan.py`` with the default
 configuration, and the 30, 60 and 90 deg perches of Gao et al.'s setting
-(``bench_gao_perch.py``). The digest covers each case's status, log, coefficients and knots:
-two versions that print the same digest planned every case identically, bit for bit. Nothing
-is asserted.
+(``bench_gao_perch.py``). The digest covers each case's status, log, coefficients and knots,
+of a first call and of a second one (with the caches the first filled): two versions that
+print the same digest planned every case identically, bit for bit. Nothing is asserted.
 """
 
 from __future__ import annotations
@@ -46,11 +48,12 @@ def main() -> None:
     args = ap.parse_args()
     todo = cases()
     digest = hashlib.sha256()
-    for _name, state, target, config in todo:  # first calls (caches) are not measured
-        result = avp.plan_detailed(state, target, config)
-        digest.update(result.status.name.encode() + "\n".join(result.log).encode())
-        if result.trajectory is not None:
-            digest.update(result.trajectory.coefficients.tobytes() + result.trajectory.knots.tobytes())
+    for _name, state, target, config in todo:  # not measured: the first call fills the caches
+        for _ in range(2):
+            result = avp.plan_detailed(state, target, config)
+            digest.update(result.status.name.encode() + "\n".join(result.log).encode())
+            if result.trajectory is not None:
+                digest.update(result.trajectory.coefficients.tobytes() + result.trajectory.knots.tobytes())
     gc.disable()  # the collector's pauses are not the planner's cost
     best = {name: math.inf for name, *_ in todo}
     for _ in range(args.rounds):

@@ -320,7 +320,8 @@ def test_the_cached_contact_velocity_tells_minus_zero_from_zero() -> None:
     target = avp.PerchTarget.from_incline([0.0, 0.0, 1.0], 1.0)
     plus, minus = (-2.0, 0.0, -0.3), (-2.0, -0.0, -0.3)
     solved = [np.linalg.solve(target.R_WS.T, np.array(v)).tobytes() for v in (plus, minus)]
-    assert solved[0] != solved[1]  # the case is one where the sign shows (plus == minus as tuples)
+    if solved[0] == solved[1]:  # plus == minus as tuples; here LAPACK keeps the zero's sign
+        pytest.skip("this LAPACK build drops the sign of zero in this solve")
     for first, second in ((0, 1), (1, 0)):
         fresh = avp.PerchTarget(point=target.point, R_WS=target.R_WS)
         fresh._velocity_W((plus, minus)[first])
@@ -335,6 +336,7 @@ def test_a_moving_pads_later_pose_does_not_inherit_its_cached_quantities() -> No
     _ = pad.incline, pad._contact_yaw, pad._frame_error(9.81), pad._velocity_W(v_S)  # fill the caches
     later = pad.at(pad.time + 1.0)
     assert not np.allclose(later.R_WS, pad.R_WS)
+    assert not {"incline", "_contact_yaw", "_frame_errors", "_velocities_W"} & set(later.__dict__)
     assert later.incline == pytest.approx(math.acos(later.R_WS[2, 2]))
     assert later._contact_yaw == frames.contact_yaw(later.R_WS)[0]
     assert later._frame_error(9.81) == frames.contact_frame_error(later.R_WS, 9.81)

@@ -109,6 +109,32 @@ def test_cache_is_bounded(monkeypatch) -> None:
     assert assemble._cached_factors() == assemble.ELIMINATION_CACHE_SIZE
 
 
+def test_evicted_stacks_take_their_fingerprints_with_them(monkeypatch) -> None:
+    """The stacked equality matrices are cached by their blocks' identities up to
+    ELIMINATION_CACHE_SIZE; an evicted one leaves neither the stack cache nor the fingerprints,
+    and a QP built again after eviction gets an equal matrix (a new object) and the same
+    elimination."""
+    monkeypatch.setattr(assemble, "ELIMINATION_CACHE_SIZE", 3)
+    assemble._STACKS.clear()
+    assemble._PRINTS.clear()
+    config = avp.PlannerConfig(fov=avp.FovConfig(enabled=False))
+    state = avp.State.hover(np.array([-2.5, 0.3, 2.2]))
+    target = avp.PerchTarget.from_incline(np.array([0.0, 0.0, 1.5]), math.radians(30.0))
+    stacks = []
+    for k in range(12):
+        qp = build_perching_qp(state, target, config, np.array([0.5 + 0.1 * k, 0.6, 0.7]))  # unequal: new blocks
+        stacks.append(qp.stacked_equalities()[0])
+        assert len(assemble._STACKS) <= 3
+    cached = {id(A) for _, A in assemble._STACKS.values()}
+    for A in stacks:
+        entry = assemble._PRINTS.get(id(A))
+        assert (entry is not None and entry[0] is A) == (id(A) in cached)
+    again = build_perching_qp(state, target, config, np.array([0.5, 0.6, 0.7]))
+    A0 = again.stacked_equalities()[0]
+    assert A0 is not stacks[0] and A0.tobytes() == stacks[0].tobytes()
+    assert again.elimination[1].tobytes() == build_perching_qp(state, target, config, np.array([0.5, 0.6, 0.7])).elimination[1].tobytes()
+
+
 def test_cost_matrix_matches_its_definition_and_is_read_only() -> None:
     layout = layout_for(3, 7)
     T = np.array([0.6, 1.1, 0.8])
