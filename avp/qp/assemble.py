@@ -147,6 +147,7 @@ def _fingerprint(M: Array) -> float:
     flat = M.reshape(-1)
     n = min(flat.size, _WEIGHTS.size)
     head = float(flat[:n] @ _WEIGHTS[:n])
+    # "+ 0.0" is what adding the empty tail's sum gave (it turns a -0.0 head into 0.0)
     return head + float(flat[n:].sum()) if flat.size > n else head + 0.0
 
 
