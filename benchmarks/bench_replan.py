@@ -20,7 +20,8 @@ the loop, and timed the same way; a solving step's cost over the sum of its bare
 is the step's overhead (policy, snap certificate, bookkeeping, and the colder CPU caches of a
 step that follows 33 ms of simulation). ``--evict-mb MB`` streams through an array of that many
 MB before each bare call, so the replay meets data caches as cold as the loop leaves them: how
-much of the step's overhead that explains.
+much of the step's overhead that explains. ``--stages`` splits both by stage, so the cost the
+loop adds shows where it falls.
 
 ``--save FILE`` writes what the replanner decided (every step's action, fraction and solves, and
 a digest of every committed plan's coefficients); ``--compare FILE`` checks the run against such
@@ -73,11 +74,11 @@ class TimedReplanner(Replanner):
 
     def step(self, t: float, odometry: Any, target_estimate: Any = None) -> Any:
         gc0, gc2 = _GC[0], _GC[1]
-        _STAGE_ON[0] = True
+        _STAGE_ON[0] = _STAGE_CPU
         w0, c0 = time.perf_counter(), time.thread_time()
         s = super().step(t, odometry, target_estimate)
         c1, w1 = time.thread_time(), time.perf_counter()
-        _STAGE_ON[0] = False
+        _STAGE_ON[0] = None
         traj = self.trajectory
         TimedReplanner.records.append(dict(
             cpu=c1 - c0, wall=w1 - w0, gc=_GC[0] - gc0, gc2=_GC[1] - gc2, action=s.action.name, n_solves=s.n_solves,
@@ -108,8 +109,9 @@ STAGES = (  # (module, function, label): CPU inside Replanner.step, per planning
     ("avp.replan", "certify_snap", "snap certificate"),
     ("avp.replan", "_blend", "partial target blend"),
 )
-_STAGE_CPU: dict[str, float] = defaultdict(float)
-_STAGE_ON = [False]
+_STAGE_CPU: dict[str, float] = defaultdict(float)  # inside the loop's steps
+_STAGE_CPU_BARE: dict[str, float] = defaultdict(float)  # inside the bare replays of their planning calls
+_STAGE_ON: list[dict[str, float] | None] = [None]  # where the wrappers add their CPU now (None: nowhere)
 
 
 def instrument_stages() -> None:
@@ -121,13 +123,14 @@ def instrument_stages() -> None:
         fn = getattr(mod, fn_name)
 
         def timed(*a: Any, _fn: Any = fn, _label: str = label, **kw: Any) -> Any:
-            if not _STAGE_ON[0]:
+            into = _STAGE_ON[0]
+            if into is None:
                 return _fn(*a, **kw)
             c0 = time.thread_time()
             try:
                 return _fn(*a, **kw)
             finally:
-                _STAGE_CPU[_label] += time.thread_time() - c0
+                into[_label] += time.thread_time() - c0
 
         setattr(mod, fn_name, timed)
 
@@ -164,6 +167,7 @@ def bare(args: tuple[Any, ...], warm: bool) -> float:
     state, target, durations, previous, config, deadline = args
     for buf in _EVICT:  # untimed: push the planner's data out of the CPU caches
         buf += 1.0
+    _STAGE_ON[0] = _STAGE_CPU_BARE
     c0 = time.thread_time()
     try:
         with serial_blas():  # as Replanner.step plans (avp._blas)
@@ -171,7 +175,10 @@ def bare(args: tuple[Any, ...], warm: bool) -> float:
                           warm_start=previous if warm else None, deadline=deadline)
     except Exception:  # the step turned the same failure into a result
         pass
-    return time.thread_time() - c0
+    c1 = time.thread_time()
+    _STAGE_ON[0] = None
+    _STAGE_CPU_BARE[STAGES[0][2]] += c1 - c0  # plan_detailed itself (the wrapper sits in avp.replan)
+    return c1 - c0
 
 
 def stats(ms: np.ndarray) -> str:
@@ -196,7 +203,8 @@ def main() -> None:
     ap.add_argument("--evict-mb", type=float, default=0.0,
                     help="stream through this many MB before each bare call (cold data caches, as in the loop)")
     ap.add_argument("--stages", action="store_true",
-                    help="also print where the steps' CPU goes, per planning call (wrappers add a little)")
+                    help="also print where the steps' CPU goes, per planning call, in the loop and in the bare "
+                         "replays of the same calls (wrappers add a little)")
     add_timing_options(ap)
     ap.add_argument("--realistic", action="store_true",
                     help="the realistic simulator of the success sweeps (SimConfig().scenario: motor lag, "
@@ -277,9 +285,14 @@ def main() -> None:
         n_calls = int(n_solves.sum())
         solving_cpu = float(cpu[solving].sum())
         print(f"\nwhere the solving steps' CPU goes, ms per planning call ({n_calls} calls, "
-              f"{solving_cpu / max(n_calls, 1):.3f} ms of step per call):")
+              f"{solving_cpu / max(n_calls, 1):.3f} ms of step per call), in the loop and in the bare replay "
+              f"of the same calls (warm caches{'' if not args.evict_mb else f', {args.evict_mb:g} MB evicted'}):")
+        print(f"  {'':<70} {'loop':>7} {'bare':>7} {'ratio':>6}")
         for _, _, label in STAGES:
-            print(f"  {label:<70} {_STAGE_CPU[label] * 1e3 / max(n_calls, 1):7.3f}")
+            in_loop = _STAGE_CPU[label] * 1e3 / max(n_calls, 1)
+            in_bare = _STAGE_CPU_BARE[label] * 1e3 / max(n_calls, 1)
+            r_txt = f"{in_loop / in_bare:6.2f}" if in_bare > 0 else f"{'-':>6}"
+            print(f"  {label:<70} {in_loop:7.3f} {in_bare:7.3f} {r_txt}")
     outcomes = Counter(v["outcome"].split(":")[0] for v in decisions.values())
     print("\noutcomes:", dict(outcomes))
 
