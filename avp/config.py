@@ -758,13 +758,19 @@ class ReplanConfig:
         when the step returns; :meth:`Replanner.reference` then flies it at once (the reason
         says "past the deadline"). Discarding it saved no time and, on a simulated onboard
         computer much slower than the development machine, cost most of the perches
-        (``docs/simulation.md``, "The onboard computer's time"). ``None`` by default, so that a
-        run makes the same decisions on any machine (the simulator's figures). Measured
-        (``docs/performance.md``, CPU time per step): 4 ms gave no step over 5 ms in 11,438 (p99
-        3.6 ms, against 143 over 5 ms and p99 5.6 ms without) and, measured while late plans
-        were still discarded, cost 3-5 perches in 100 on the realistic wall of avp's model and
-        13-17 on rotorpy's, where the retimed retries and fractions of late corrections no
-        longer fit; 8 ms cost 2 on rotorpy's wall and none on avp's model.
+        (``docs/simulation.md``, "The onboard computer's time"). A step cut before its partial
+        corrections leaves the rest of its order (the retimed retries still due, then the
+        fractions) to the next step that solves, which begins there (its reason says so), not
+        with the full correction again; once the retries have all run and failed over such
+        steps, ``retime_backoff`` holds as after one step. ``None`` by default, so that a run
+        makes the same decisions on any machine (the simulator's figures). Measured on
+        2026-12-04 (``docs/performance.md``): 4 ms gave 0 and 1 steps over 5 ms in 11,438 (two
+        runs; the longest 4.6 and 5.2 ms) in the closed loop of avp's model (p99 3.4 ms, against
+        79 over 5 ms and p99 4.3 ms without) at no measurable cost in perches there, but on rotorpy's realistic wall, where a planning
+        call inside the loop takes about 2.2 ms and a step has time for one solve, AVP perched
+        89 / 82 of 100 at 4.5 / 7.5 m (81-84 / 76-78 before steps went on where the deadline cut
+        them) against 96 / 92 without a deadline: the retimed retries and fractions of a late
+        correction, solved in one step without a deadline, are spread over several steps.
     measured_orders:
         When re-anchoring: derivative orders taken from odometry (2: position and velocity, yaw
         and yaw rate); higher orders come from the committed plan, so commands stay continuous (6).

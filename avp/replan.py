@@ -28,6 +28,11 @@ certified. The policy
   while a retry and the smallest fraction, each as slow as the nominal solve, still fit in it,
   and (``retime_backoff``) not while nothing was committed since a step whose retries all ran
   and failed.
+- **Deadline.** With ``deadline``, a solve starts only while it is predicted to fit. A step cut
+  before its partial corrections leaves the rest of its order (the retimed retries still due,
+  then the fractions) to the next step that solves, which goes on from there rather than
+  beginning again with the full correction: with time for one solve per step, a full correction
+  that fails would otherwise take every step. Without a deadline nothing is carried over.
 - **Certified commits.** A plan is committed only if ``result.ok`` (no relaxed plan unless
   ``allow_relaxed``), its actuator bounds are certified and its snap is certified below
   ``snap_max`` (:mod:`avp.trackability`), which bounds the angular acceleration.
@@ -258,6 +263,10 @@ class Replanner:
         self.history: list[ReplanStep] = []
         self._last_t: float | None = None  # the previous step's time (steps may not go back)
         self._retries_failed = False  # a step's retimed retries all ran and failed, nothing committed since
+        self._resume: int | None = None
+        """Where the next solving step begins its candidates when the deadline cut the last one
+        (``_replan``): the index of the first untried retimed retry (``retime_retries[i - 1]``),
+        or 0 for the partial corrections; ``None``: from the start."""
         self.snap_limits: tuple[float, float] = (self.replan.snap_max, self.replan.snap_thrust_max)
         """``(snap_max, snap_thrust_max)`` certified on replans (raised to the first plan's peak)."""
         _warm_blas()  # a first-call cost paid here, not in a step
@@ -415,9 +424,12 @@ class Replanner:
 
         def out_of_time(reason: str, result: PlanResult | None) -> ReplanStep:
             """The deadline ended the step: a certified smallest correction at hand is committed,
-            else the committed plan is kept."""
+            else the committed plan is kept (and when the smallest was not tried, the next step
+            begins with it)."""
             if smallest is not None:
                 return commit(*smallest)
+            if probe_smallest and not smallest_tried:  # the next solving step goes on from here
+                self._resume = pending_retry if pending_retry is not None else 0
             return record(ReplanAction.KEPT_PREVIOUS, f"deadline {(clock.deadline or 0.0) * 1e3:.1f} ms: {reason}{backoff_note}",
                           anticipated=start, result=result, solve_time=elapsed_total, anchored=anchored,
                           n_solves=n_solves)
@@ -428,23 +440,46 @@ class Replanner:
         # With a deadline, a solve starts only while it is predicted to fit, and a certified
         # smallest correction is committed when the time runs out.
         probe_smallest = len(fractions) >= 3
+        smallest_tried = False  # the smallest fraction was solved in this step
+        pending_retry: int | None = None  # the next retimed retry of the full correction, when one is due
         order = [fractions[0], fractions[-1], *fractions[1:-1]] if probe_smallest else list(fractions)
+        # With a deadline, a step cut before its partial corrections leaves the rest of its
+        # candidates (the retimed retries still due, then the fractions) to the next step that
+        # solves, which goes on from there instead of beginning again with the full correction:
+        # with time for one solve per step, a full correction that fails would otherwise take
+        # every step, and no retry or partial correction would ever be tried.
+        resume = self._resume if probe_smallest else None
+        self._resume = None
+        if resume == 0:
+            order = order[1:]
+            backoff_note = ("; began with the partial corrections (the deadline cut the previous solving step "
+                            "before them)")
         for k, frac in enumerate(order):
+            is_full = k == 0 and resume != 0
+            is_smallest = probe_smallest and k == (0 if resume == 0 else 1)
             f = frac * f_max
             if not clock.fits(1):
                 return out_of_time(f"no time for {100 * f:.3g} % of the correction after {n_solves} solve(s) "
                                    f"in {clock.used() * 1e3:.1f} ms; {last_reason}", last_result)
+            smallest_tried = smallest_tried or is_smallest
             goal = _blend(self.committed_target, self.target, f) if f < 1.0 else self.target
             total = self._retimed(remaining, goal)
             # The full correction is solved again with the time left scaled (retime_retries) when
             # its plan at the nominal time fails only a certificate; a static pad only (the
             # subclasses keep the committed contact time), not in the last retime_min_time, and
             # (retime_backoff) not again while nothing was committed since retries all failed.
-            retry = k == 0 and self._static_pad and remaining >= rc.retime_min_time
+            retry = is_full and self._static_pad and remaining >= rc.retime_min_time
             backed_off = retry and rc.retime_backoff and self._retries_failed and bool(rc.retime_retries)
-            factors = (1.0, *rc.retime_retries) if retry and not backed_off else (1.0,)
+            all_factors = (1.0, *rc.retime_retries) if retry and not backed_off else (1.0,)
+            # a step resuming at a retry: the nominal time failed only a certificate at the step before
+            first = resume if is_full and resume and resume < len(all_factors) else 0
+            factors = all_factors[first:]
+            if first:
+                backoff_note = (f"; began with the retimed retry x{factors[0]:g} (the deadline cut the previous "
+                                f"solving step before it)")
             nominal: tuple[PlanResult | None, str] | None = None  # reported if no retry certifies
             tried: list[float] = []
+            retryable = False  # the first plan of this correction failed only a certificate
             for factor in factors:
                 if nominal is not None and not clock.fits(2):
                     break  # a retry and then the smallest fraction would not fit the deadline: go to the fractions
@@ -457,6 +492,12 @@ class Replanner:
                 n_solves += 1
                 last_result = result
                 ok, why, snap, only_certificate = self._certified(result)
+                if error is not None:
+                    why, only_certificate = error, False
+                if nominal is None:  # only a plan that failed a certificate is retried
+                    retryable = only_certificate
+                nxt = first + len(tried)
+                pending_retry = nxt if not ok and retryable and nxt < len(all_factors) else None
                 if clock.per_attempt is None:
                     clock.per_attempt = clock.used() - t_attempt
                 if clock.overrun():  # this plan and its certificates ended past the deadline
@@ -466,8 +507,6 @@ class Replanner:
                         return commit(result, snap, goal, f, factor,
                                       note=f"; past the deadline of {(clock.deadline or 0.0) * 1e3:.1f} ms ({late})")
                     return out_of_time(f"too late: {late}", result)
-                if error is not None:
-                    why, only_certificate = error, False
                 if ok:
                     break
                 if nominal is None:
@@ -478,12 +517,11 @@ class Replanner:
                 last_result, why = nominal[0], nominal[1]
                 if len(tried) > 1:
                     why += " (also at time left " + ", ".join(f"x{x:g}" for x in tried[1:]) + ")"
-                if len(factors) > 1 and len(tried) == len(factors):  # every retry ran (none cut by the deadline)
+                if len(all_factors) > 1 and first + len(tried) == len(all_factors):  # every retry ran
                     self._retries_failed = True
                 elif backed_off and nominal[0] is not None and only_certificate:
                     backoff_note = ("; the full correction was not retimed (its retries all failed at an earlier "
                                     "step, nothing committed since)")
-            is_smallest = probe_smallest and k == 1
             if ok:
                 assert result is not None
                 if not is_smallest:

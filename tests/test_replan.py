@@ -809,6 +809,71 @@ def test_retries_leave_room_for_the_smallest_fraction_within_the_deadline(monkey
     assert math.isclose(s.fraction, rc.partial_fractions[-1], rel_tol=1e-12)
 
 
+RESUMED = "began with the partial corrections"
+
+
+@pytest.mark.parametrize("deadline", [1.5, None])
+def test_a_step_cut_before_its_fractions_leaves_them_to_the_next(monkeypatch, deadline):
+    """Solves of 1 s and a 1.5 s deadline: one solve per step. The full correction fails, so the
+    next solving step begins with the smallest fraction (which certifies and is committed), not
+    with the full correction again; the step after that begins with the full correction. Without
+    a deadline every step tries them all, full first."""
+    rp, tried = _fraction_probe(monkeypatch, lambda f: f < 0.2, ReplanConfig(deadline=deadline), elapsed=1.0)
+    s1 = rp.step(0.4, _fly_reference(rp, 0.4), MOVED)
+    n1 = len(tried)
+    s2 = rp.step(0.45, _fly_reference(rp, 0.45), MOVED)
+    n2 = len(tried)
+    s3 = rp.step(0.5, _fly_reference(rp, 0.5), MOVED)
+    if deadline is None:
+        assert tried[:n1] == pytest.approx([1.0, 0.125, 0.5, 0.25]) and s1.action is ReplanAction.PARTIAL
+        assert tried[n1] == pytest.approx(1.0) and RESUMED not in s2.reason + s3.reason
+        return
+    assert tried[:n1] == pytest.approx([1.0]) and s1.action is ReplanAction.KEPT_PREVIOUS
+    assert "no time for 12.5 %" in s1.reason and RESUMED not in s1.reason
+    assert tried[n1:n2] == pytest.approx([0.125]) and RESUMED in s2.reason
+    assert s2.action is ReplanAction.PARTIAL and s2.fraction == pytest.approx(0.125)
+    assert rp.trajectory is s2.trajectory
+    assert tried[n2] == pytest.approx(1.0) and RESUMED not in s3.reason  # from the start again
+
+
+def test_a_step_whose_smallest_fraction_ran_leaves_nothing_to_the_next(monkeypatch):
+    """A deadline that cuts a step after its smallest fraction was tried (and failed) carries
+    nothing over: the next step begins with the full correction."""
+    rp, tried = _fraction_probe(monkeypatch, lambda f: False, ReplanConfig(deadline=2.5), elapsed=1.0)
+    rp.step(0.4, _fly_reference(rp, 0.4), MOVED)
+    assert tried == pytest.approx([1.0, 0.125])
+    s2 = rp.step(0.45, _fly_reference(rp, 0.45), MOVED)
+    assert tried[2:] == pytest.approx([1.0, 0.125]) and RESUMED not in s2.reason
+
+
+def test_retries_cut_by_the_deadline_are_made_at_the_next_steps(monkeypatch):
+    """Full corrections that fail only a certificate, solves of 1 ms, a 1.5 ms deadline: the
+    nominal time, then each retimed retry, then the fractions, one per step, each step going on
+    where the one before was cut; once every retry ran and failed (over several steps) and
+    nothing was committed, the next full correction is not retimed (``retime_backoff``)."""
+    rc = ReplanConfig(deadline=1.5e-3)
+    rp, calls = _failing_full_corrections(rc, monkeypatch, elapsed=1e-3)
+    monkeypatch.setattr(rp, "_certified", _nothing_certifies(rp))
+    steps, full, other = [], [], []
+    for i in range(5):
+        before = len(calls)
+        steps.append(_moved_wall_step(rp, t=0.5 + 0.05 * i, dz=0.02 + 0.001 * i))
+        new = calls[before:]
+        assert len(new) == 1 and steps[-1].n_solves == 1  # one solve fits each step
+        full.append([T for target, T in new if target is rp.target])
+        other.append([T for target, T in new if target is not rp.target])
+    nominal = [None if not f else f[0] for f in full]
+    # step 0: the nominal time; steps 1, 2: the retries; step 3: the fractions; step 4: from the start
+    assert full[0] and full[1] and full[2] and not full[3] and other[3] and full[4]
+    assert "began with the retimed retry x0.97" in steps[1].reason
+    assert "began with the retimed retry x1.03" in steps[2].reason
+    assert RESUMED in steps[3].reason
+    assert NOT_RETIMED in steps[4].reason  # every retry ran (over two steps) and failed
+    left = [rp.trajectory.tf - s.t_ex for s in steps]  # nothing was committed: the first plan's
+    for i, factor in enumerate((1.0, *rc.retime_retries)):  # the normal correction is 0 on a wall
+        assert nominal[i] == pytest.approx(factor * left[i], rel=1e-9)
+
+
 def test_step_refuses_time_going_back_and_keeps_its_state():
     """A step earlier than the previous one (a clock reset, mixed clocks) is bad input: a typed
     error naming ``t``, and the replanner's plan and history are as before; the same time again
