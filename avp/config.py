@@ -761,16 +761,11 @@ class ReplanConfig:
         (``docs/simulation.md``, "The onboard computer's time"). A step cut before its partial
         corrections leaves the rest of its order (the retimed retries still due, then the
         fractions) to the next step that solves, which begins there (its reason says so), not
-        with the full correction again; once the retries have all run and failed over such
-        steps, ``retime_backoff`` holds as after one step. ``None`` by default, so that a run
-        makes the same decisions on any machine (the simulator's figures). Measured on
-        2026-12-04 (``docs/performance.md``): 4 ms gave 0 and 1 steps over 5 ms in 11,438 (two
-        runs; the longest 4.6 and 5.2 ms) in the closed loop of avp's model (p99 3.4 ms, against
-        79 over 5 ms and p99 4.3 ms without) at no measurable cost in perches there, but on rotorpy's realistic wall, where a planning
-        call inside the loop takes about 2.2 ms and a step has time for one solve, AVP perched
-        89 / 82 of 100 at 4.5 / 7.5 m (81-84 / 76-78 before steps went on where the deadline cut
-        them) against 96 / 92 without a deadline: the retimed retries and fractions of a late
-        correction, solved in one step without a deadline, are spread over several steps.
+        with the full correction again; a held step drops it. ``None`` by default, so that a run
+        makes the same decisions on any machine (the simulator's figures). With 4 ms, at most
+        one step in 11,438 took over 5 ms in the closed loop of avp's model; on rotorpy's
+        realistic wall, where a step then has time for one solve, AVP perched about 7 / 10 fewer
+        of 100 at 4.5 / 7.5 m than without a deadline (``docs/performance.md``, 2026-12-04).
     measured_orders:
         When re-anchoring: derivative orders taken from odometry (2: position and velocity, yaw
         and yaw rate); higher orders come from the committed plan, so commands stay continuous (6).
@@ -857,7 +852,8 @@ class ReplanConfig:
         following steps make none until a step commits a plan (:attr:`ReplanStep.committed
         <avp.replan.ReplanStep.committed>`, a full or partial correction, also one reported as
         ``CANNOT_REACH``): the nominal time and the partial fractions only, and the step's
-        reason says so. Retries cut short by ``deadline`` do not start it. With nothing
+        reason says so. Retries a ``deadline`` spread over several steps start it once the
+        last of them has run and failed; retries it cut and never made do not. With nothing
         committed, the next step solves nearly the same problem (the same committed plan, an
         estimate and a time left 33 ms on), and its retries fail again: in
         ``benchmarks/bench_replan.py --seeds 28`` without the backoff, of the steps after one

@@ -25,14 +25,16 @@ certified. The policy
   monotone in the time left, and a late correction often certifies at a nearby contact time.
   Not with less than ``retime_min_time`` left (none certified there), not for a subclass with
   its own target model (it keeps the committed contact time), with a ``deadline`` only
-  while a retry and the smallest fraction, each as slow as the nominal solve, still fit in it,
-  and (``retime_backoff``) not while nothing was committed since a step whose retries all ran
-  and failed.
+  while a retry and the smallest fraction, each as slow as the step's first solve, still fit in
+  it (a step that goes on from a retry the step before could not make begins with it), and
+  (``retime_backoff``) not while nothing was committed since the retries all ran and failed, in
+  one step or, cut by the deadline, over several.
 - **Deadline.** With ``deadline``, a solve starts only while it is predicted to fit. A step cut
   before its partial corrections leaves the rest of its order (the retimed retries still due,
   then the fractions) to the next step that solves, which goes on from there rather than
   beginning again with the full correction: with time for one solve per step, a full correction
-  that fails would otherwise take every step. Without a deadline nothing is carried over.
+  that fails would otherwise take every step. A held step (the estimate back at the committed
+  target) drops what was left; without a deadline nothing is carried over.
 - **Certified commits.** A plan is committed only if ``result.ok`` (no relaxed plan unless
   ``allow_relaxed``), its actuator bounds are certified and its snap is certified below
   ``snap_max`` (:mod:`avp.trackability`), which bounds the angular acceleration.
@@ -76,6 +78,10 @@ __all__ = ["ReplanAction", "ReplanConfig", "ReplanStep", "Replanner", "anticipat
 
 _PLANNING_ERRORS = (AvpError, ValueError, ArithmeticError, np.linalg.LinAlgError, RuntimeError)
 """Exceptions a planning call may raise that :meth:`Replanner.step` turns into a result."""
+
+_NOT_RETIMED = ("; the full correction was not retimed (its retries all ran and failed, nothing committed "
+                "since)")
+"""What a step's reason adds when ``retime_backoff`` held its retries."""
 
 _clock = time.perf_counter
 """The wall clock (s) of the solve times and of ``ReplanConfig.deadline`` (tests replace it)."""
@@ -394,6 +400,7 @@ class Replanner:
         e_v = float(np.linalg.norm(odometry.velocity - ref[1, :3]))
         anchored = e_p <= rc.anchor_position and e_v <= rc.anchor_velocity
         if anchored and shift <= rc.target_tolerance and turn <= rc.target_tolerance and self._can_hold:
+            self._resume = None  # nothing to correct: what a cut step left is moot
             return record(ReplanAction.HELD, f"tracking {e_p:.3f} m / {e_v:.3f} m/s, estimate moved {shift:.4f} m",
                           anchored=True)
         try:
@@ -417,18 +424,18 @@ class Replanner:
             reason = "ok" if f >= 1.0 else f"{f:.0%} of the correction ({shift:.3f} m requested, budget {budget:.3f} m)"
             if time_factor != 1.0:
                 reason += f" (time left x{time_factor:g}: the nominal time failed a certificate)"
-            if f < 1.0:
+            if f < 1.0 or time_factor != 1.0:
                 reason += backoff_note
             return record(action, reason + note, anticipated=start, result=result, solve_time=elapsed_total,
                           fraction=f, anchored=anchored, n_solves=n_solves, snap=snap, time_factor=time_factor)
 
         def out_of_time(reason: str, result: PlanResult | None) -> ReplanStep:
             """The deadline ended the step: a certified smallest correction at hand is committed,
-            else the committed plan is kept (and when the smallest was not tried, the next step
-            begins with it)."""
+            else the committed plan is kept, and when no partial correction was tried the next
+            solving step goes on from where this one stopped (``_resume``)."""
             if smallest is not None:
                 return commit(*smallest)
-            if probe_smallest and not smallest_tried:  # the next solving step goes on from here
+            if len(order) > 1 and not fraction_tried:
                 self._resume = pending_retry if pending_retry is not None else 0
             return record(ReplanAction.KEPT_PREVIOUS, f"deadline {(clock.deadline or 0.0) * 1e3:.1f} ms: {reason}{backoff_note}",
                           anticipated=start, result=result, solve_time=elapsed_total, anchored=anchored,
@@ -440,15 +447,11 @@ class Replanner:
         # With a deadline, a solve starts only while it is predicted to fit, and a certified
         # smallest correction is committed when the time runs out.
         probe_smallest = len(fractions) >= 3
-        smallest_tried = False  # the smallest fraction was solved in this step
+        fraction_tried = False  # a partial correction was solved in this step
         pending_retry: int | None = None  # the next retimed retry of the full correction, when one is due
         order = [fractions[0], fractions[-1], *fractions[1:-1]] if probe_smallest else list(fractions)
-        # With a deadline, a step cut before its partial corrections leaves the rest of its
-        # candidates (the retimed retries still due, then the fractions) to the next step that
-        # solves, which goes on from there instead of beginning again with the full correction:
-        # with time for one solve per step, a full correction that fails would otherwise take
-        # every step, and no retry or partial correction would ever be tried.
-        resume = self._resume if probe_smallest else None
+        # where a step the deadline cut left off (module docstring, "Deadline")
+        resume = self._resume if len(order) > 1 and rc.deadline is not None else None
         self._resume = None
         if resume == 0:
             order = order[1:]
@@ -461,7 +464,7 @@ class Replanner:
             if not clock.fits(1):
                 return out_of_time(f"no time for {100 * f:.3g} % of the correction after {n_solves} solve(s) "
                                    f"in {clock.used() * 1e3:.1f} ms; {last_reason}", last_result)
-            smallest_tried = smallest_tried or is_smallest
+            fraction_tried = fraction_tried or not is_full
             goal = _blend(self.committed_target, self.target, f) if f < 1.0 else self.target
             total = self._retimed(remaining, goal)
             # The full correction is solved again with the time left scaled (retime_retries) when
@@ -494,14 +497,18 @@ class Replanner:
                 ok, why, snap, only_certificate = self._certified(result)
                 if error is not None:
                     why, only_certificate = error, False
-                if nominal is None:  # only a plan that failed a certificate is retried
-                    retryable = only_certificate
+                if nominal is None:  # only a plan that failed a certificate is retried (a resumed
+                    retryable = only_certificate or first > 0  # retry's nominal did, the step before)
                 nxt = first + len(tried)
                 pending_retry = nxt if not ok and retryable and nxt < len(all_factors) else None
                 if clock.per_attempt is None:
                     clock.per_attempt = clock.used() - t_attempt
                 if clock.overrun():  # this plan and its certificates ended past the deadline
                     late = f"the step took {clock.used() * 1e3:.1f} ms"
+                    if not ok and retryable and len(all_factors) > 1 and nxt == len(all_factors):
+                        self._retries_failed = True  # the last retry due ran and failed (retime_backoff)
+                    elif not ok and retryable and backed_off:
+                        backoff_note = _NOT_RETIMED
                     if ok:  # certified: committed (discarding it would save no time), and no further solve
                         assert result is not None
                         return commit(result, snap, goal, f, factor,
@@ -511,7 +518,7 @@ class Replanner:
                     break
                 if nominal is None:
                     nominal = (result, why)
-                    if not only_certificate:
+                    if not retryable:
                         break  # only a plan that failed a certificate is retried
             if not ok and nominal is not None:  # report the nominal time's plan and reason
                 last_result, why = nominal[0], nominal[1]
@@ -520,8 +527,7 @@ class Replanner:
                 if len(all_factors) > 1 and first + len(tried) == len(all_factors):  # every retry ran
                     self._retries_failed = True
                 elif backed_off and nominal[0] is not None and only_certificate:
-                    backoff_note = ("; the full correction was not retimed (its retries all failed at an earlier "
-                                    "step, nothing committed since)")
+                    backoff_note = _NOT_RETIMED
             if ok:
                 assert result is not None
                 if not is_smallest:

@@ -74,7 +74,7 @@ class TimedReplanner(Replanner):
 
     def step(self, t: float, odometry: Any, target_estimate: Any = None) -> Any:
         gc0, gc2 = _GC[0], _GC[1]
-        _STAGE_ON[0] = _STAGE_CPU
+        _STAGE_ON[0] = _STAGE_CPU if self.trajectory is not None else None  # replans only
         w0, c0 = time.perf_counter(), time.thread_time()
         s = super().step(t, odometry, target_estimate)
         c1, w1 = time.thread_time(), time.perf_counter()
@@ -162,22 +162,27 @@ def _set_factor_cache(state: OrderedDict[Any, list[Any]]) -> None:
 _EVICT: list[np.ndarray] = []  # the --evict-mb buffer, when asked for
 
 
-def bare(args: tuple[Any, ...], warm: bool) -> float:
-    """CPU seconds of one bare ``plan_detailed`` at a step's planning arguments."""
+def bare(args: tuple[Any, ...], warm: bool, stages: bool) -> float:
+    """CPU seconds of one bare ``plan_detailed`` at a step's planning arguments; ``stages``: its
+    stages count in the bare column of ``--stages`` (a replan's call, not a first plan's)."""
     state, target, durations, previous, config, deadline = args
     for buf in _EVICT:  # untimed: push the planner's data out of the CPU caches
         buf += 1.0
-    _STAGE_ON[0] = _STAGE_CPU_BARE
+    _STAGE_ON[0] = _STAGE_CPU_BARE if stages else None
     c0 = time.thread_time()
     try:
         with serial_blas():  # as Replanner.step plans (avp._blas)
-            plan_detailed(state, target, config, durations=durations, previous=previous,
-                          warm_start=previous if warm else None, deadline=deadline)
+            c_in = time.thread_time()  # plan_detailed's own stage row, timed inside the block as in the loop
+            try:
+                plan_detailed(state, target, config, durations=durations, previous=previous,
+                              warm_start=previous if warm else None, deadline=deadline)
+            finally:
+                if stages:
+                    _STAGE_CPU_BARE[STAGES[0][2]] += time.thread_time() - c_in
     except Exception:  # the step turned the same failure into a result
         pass
     c1 = time.thread_time()
     _STAGE_ON[0] = None
-    _STAGE_CPU_BARE[STAGES[0][2]] += c1 - c0  # plan_detailed itself (the wrapper sits in avp.replan)
     return c1 - c0
 
 
@@ -226,6 +231,8 @@ def main() -> None:
         simulate(SimScenario(distance=args.distances[0]), Mode.AVP, seed=10**6, replan=replan_cfg)  # not counted
         gc.collect()
         gc.freeze()
+        _STAGE_CPU.clear()  # the set-up run's stages are not counted
+        _STAGE_CPU_BARE.clear()
     rows: list[dict[str, Any]] = []
     decisions: dict[str, Any] = {}
     c_all = time.thread_time()
@@ -241,7 +248,7 @@ def main() -> None:
                 _set_factor_cache(before)  # the replay meets the elimination cache the loop met
                 base = defaultdict(float)
                 for i, a in calls:
-                    base[i] += bare(a, ReplanConfig().warm_start)
+                    base[i] += bare(a, ReplanConfig().warm_start, stages=i > 0)
                 _set_factor_cache(after)  # and the next run the one this run left
                 for i, rec in enumerate(recs):
                     rec["bare"] = base.get(i, 0.0)

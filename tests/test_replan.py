@@ -874,6 +874,101 @@ def test_retries_cut_by_the_deadline_are_made_at_the_next_steps(monkeypatch):
         assert nominal[i] == pytest.approx(factor * left[i], rel=1e-9)
 
 
+def test_retries_that_overrun_the_deadline_over_several_steps_start_the_backoff(monkeypatch):
+    """Solves slower than the whole deadline (2 ms against 1.5 ms): each step makes one, ends past
+    the deadline, and the next goes on from there. Once the last retry due has run and failed,
+    ``retime_backoff`` holds as after one step that ran them all."""
+    rc = ReplanConfig(deadline=1.5e-3)
+    rp, _calls = _failing_full_corrections(rc, monkeypatch, elapsed=2e-3)
+    monkeypatch.setattr(rp, "_certified", _nothing_certifies(rp))
+    steps = [_moved_wall_step(rp, t=0.5 + 0.05 * i, dz=0.02 + 0.001 * i) for i in range(6)]
+    assert [s.n_solves for s in steps] == [1] * 6 and all("too late" in s.reason for s in steps)
+    assert "began with the retimed retry x0.97" in steps[1].reason
+    assert "began with the retimed retry x1.03" in steps[2].reason
+    assert RESUMED in steps[3].reason
+    assert NOT_RETIMED in steps[4].reason  # the nominal time only: no retry is due after it
+    assert RESUMED in steps[5].reason and "retimed retry" not in steps[5].reason
+
+
+def test_a_resumed_retry_that_fails_otherwise_leaves_the_next_retry(monkeypatch):
+    """The nominal time failed only a certificate at the step before; the retry this step goes on
+    with fails for another reason (here: forced). The correction stays retryable, so the next
+    step makes the retry still due, as one step without a deadline would have."""
+    rc = ReplanConfig(deadline=1.5e-3)
+    rp, calls = _failing_full_corrections(rc, monkeypatch, elapsed=1e-3)
+    fails_certificate = _nothing_certifies(rp)
+    n_full = [0]
+
+    def certified(result, trackability=True):
+        if calls[-1][0] is rp.target:
+            n_full[0] += 1
+            if n_full[0] == 2:  # the first retry
+                return False, "forced: not a certificate", None, False
+        return fails_certificate(result, trackability)
+
+    monkeypatch.setattr(rp, "_certified", certified)
+    steps = [_moved_wall_step(rp, t=0.5 + 0.05 * i, dz=0.02 + 0.001 * i) for i in range(3)]
+    assert "began with the retimed retry x0.97" in steps[1].reason
+    assert "began with the retimed retry x1.03" in steps[2].reason
+
+
+def test_a_resumed_retry_that_certifies_says_where_the_step_began(monkeypatch):
+    """One solve per step; the nominal time fails a certificate and the retimed retries certify:
+    the next step commits the first retry, and its reason says the step began there."""
+    rc = ReplanConfig(deadline=1.5e-3)
+    rp, calls = _failing_full_corrections(rc, monkeypatch, elapsed=1e-3)
+    nominal_fails = rp._certified
+    n_full = [0]
+
+    def certified(result, trackability=True):
+        if calls[-1][0] is rp.target:
+            n_full[0] += 1
+            if n_full[0] > 1:  # the retries: as the planner certified them
+                return Replanner._certified(rp, result, trackability)
+        return nominal_fails(result, trackability)
+
+    monkeypatch.setattr(rp, "_certified", certified)
+    s0 = _moved_wall_step(rp, t=0.5)
+    s1 = _moved_wall_step(rp, t=0.55)
+    assert s0.action in (ReplanAction.KEPT_PREVIOUS, ReplanAction.CANNOT_REACH) and s0.n_solves == 1
+    assert s1.action is ReplanAction.REPLANNED and s1.time_factor == pytest.approx(0.97)
+    assert "began with the retimed retry x0.97" in s1.reason
+
+
+def test_what_a_cut_step_left_is_dropped_when_held_or_without_a_deadline(monkeypatch):
+    """A held step (the estimate back at the committed target) drops where a cut step left off,
+    and so does a replanner whose deadline was switched off: the next correction begins with the
+    full correction at the nominal time."""
+    for switch_off in (False, True):
+        rc = ReplanConfig(deadline=1.5e-3)
+        rp, calls = _failing_full_corrections(rc, monkeypatch, elapsed=1e-3)
+        monkeypatch.setattr(rp, "_certified", _nothing_certifies(rp))
+        s0 = _moved_wall_step(rp, t=0.5)
+        assert s0.n_solves == 1 and rp._resume == 1
+        if switch_off:
+            rp.replan = ReplanConfig()
+        else:
+            held = rp.step(0.55, _fly_reference(rp, 0.55), WALL)
+            assert held.action is ReplanAction.HELD
+        before = len(calls)
+        s2 = _moved_wall_step(rp, t=0.6)
+        full = [T for target, T in calls[before:] if target is rp.target]
+        assert "began with" not in s2.reason
+        assert full[0] == pytest.approx(rp.trajectory.tf - s2.t_ex, rel=1e-9)  # the nominal time first
+        monkeypatch.undo()
+
+
+def test_two_fractions_are_carried_over_too(monkeypatch):
+    """With ``partial_fractions=(1, 1/2)`` and one solve per step, the step after a cut one begins
+    with the half correction."""
+    rc = ReplanConfig(deadline=1.5, partial_fractions=(1.0, 0.5))
+    rp, tried = _fraction_probe(monkeypatch, lambda f: f < 0.6, rc, elapsed=1.0)
+    s0 = rp.step(0.4, _fly_reference(rp, 0.4), MOVED)
+    s1 = rp.step(0.45, _fly_reference(rp, 0.45), MOVED)
+    assert tried == pytest.approx([1.0, 0.5]) and s0.action is ReplanAction.KEPT_PREVIOUS
+    assert s1.action is ReplanAction.PARTIAL and s1.fraction == pytest.approx(0.5) and RESUMED in s1.reason
+
+
 def test_step_refuses_time_going_back_and_keeps_its_state():
     """A step earlier than the previous one (a clock reset, mixed clocks) is bad input: a typed
     error naming ``t``, and the replanner's plan and history are as before; the same time again
