@@ -748,10 +748,10 @@ class ReplanConfig:
         A budget (s, wall clock, from the start of the replanning policy of a step; the first
         plan has none) for a replanning step; ``None``: no deadline. A solve after the step's
         first starts only while it, predicted as slow as the first (solve and certificates),
-        fits (a ``retime_retries`` retry only while it and the smallest fraction fit), and a
-        static pad's planning call gets the time left (:func:`avp.plan_detailed` ``deadline``:
-        no time-search step or refinement round that would overrun; the moving-pad and line
-        planners have no budget of their own). When nothing more fits, a certified smallest
+        fits (a ``retime_retries`` retry only while it and the smallest fraction, when the
+        order has one, fit), and a static pad's planning call gets the time left
+        (:func:`avp.plan_detailed` ``deadline``: no time-search step or refinement round that
+        would overrun; the moving-pad and line planners have no budget of their own). When nothing more fits, a certified smallest
         fraction is committed if the step has one, else the committed plan is kept. A solve that
         ends past the deadline, certificates included, ends the step: its plan is committed if
         certified, else the same fallback. Such a plan's switch time ``t_ex`` may have passed

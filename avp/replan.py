@@ -24,11 +24,11 @@ certified. The policy
   (a few per cent either side) before the partial fractions: those certificates are not
   monotone in the time left, and a late correction often certifies at a nearby contact time.
   Not with less than ``retime_min_time`` left (none certified there), not for a subclass with
-  its own target model (it keeps the committed contact time), with a ``deadline`` only
-  while a retry and the smallest fraction, each as slow as the step's first solve, still fit in
-  it (a step that goes on from a retry the step before could not make begins with it), and
-  (``retime_backoff``) not while nothing was committed since the retries all ran and failed, in
-  one step or, cut by the deadline, over several.
+  its own target model (it keeps the committed contact time), with a ``deadline`` only while
+  a retry and the smallest fraction (when there is one), each as slow as the step's first
+  solve, still fit in it (a step that goes on from a retry the step before could not make
+  begins with it), and (``retime_backoff``) not while nothing was committed since the retries
+  all ran and failed, in one step or, cut by the deadline, over several.
 - **Deadline.** With ``deadline``, a solve starts only while it is predicted to fit. A step cut
   before its partial corrections leaves the rest of its order (the retimed retries still due,
   then the fractions) to the next step that solves, which goes on from there rather than
@@ -79,8 +79,8 @@ __all__ = ["ReplanAction", "ReplanConfig", "ReplanStep", "Replanner", "anticipat
 _PLANNING_ERRORS = (AvpError, ValueError, ArithmeticError, np.linalg.LinAlgError, RuntimeError)
 """Exceptions a planning call may raise that :meth:`Replanner.step` turns into a result."""
 
-_NOT_RETIMED = ("; the full correction was not retimed (its retries all ran and failed, nothing committed "
-                "since)")
+_NOT_RETIMED = ("; the full correction was not retimed (its retries all failed at an earlier step, nothing "
+                "committed since)")
 """What a step's reason adds when ``retime_backoff`` held its retries."""
 
 _clock = time.perf_counter
@@ -435,7 +435,7 @@ class Replanner:
             solving step goes on from where this one stopped (``_resume``)."""
             if smallest is not None:
                 return commit(*smallest)
-            if len(order) > 1 and not fraction_tried:
+            if not fraction_tried and (pending_retry is not None or len(order) > 1):
                 self._resume = pending_retry if pending_retry is not None else 0
             return record(ReplanAction.KEPT_PREVIOUS, f"deadline {(clock.deadline or 0.0) * 1e3:.1f} ms: {reason}{backoff_note}",
                           anticipated=start, result=result, solve_time=elapsed_total, anchored=anchored,
@@ -451,8 +451,10 @@ class Replanner:
         pending_retry: int | None = None  # the next retimed retry of the full correction, when one is due
         order = [fractions[0], fractions[-1], *fractions[1:-1]] if probe_smallest else list(fractions)
         # where a step the deadline cut left off (module docstring, "Deadline")
-        resume = self._resume if len(order) > 1 and rc.deadline is not None else None
+        resume = self._resume if rc.deadline is not None else None
         self._resume = None
+        if resume == 0 and len(order) < 2:  # no fraction to begin with
+            resume = None
         if resume == 0:
             order = order[1:]
             backoff_note = ("; began with the partial corrections (the deadline cut the previous solving step "
@@ -483,8 +485,9 @@ class Replanner:
             nominal: tuple[PlanResult | None, str] | None = None  # reported if no retry certifies
             tried: list[float] = []
             retryable = False  # the first plan of this correction failed only a certificate
+            room = 2 if k + 1 < len(order) else 1  # a retry, and the smallest fraction when one follows
             for factor in factors:
-                if nominal is not None and not clock.fits(2):
+                if nominal is not None and not clock.fits(room):
                     break  # a retry and then the smallest fraction would not fit the deadline: go to the fractions
                 tried.append(factor)
                 durations = self._durations(committed, t_ex, factor * total)
@@ -520,7 +523,8 @@ class Replanner:
                     nominal = (result, why)
                     if not retryable:
                         break  # only a plan that failed a certificate is retried
-            if not ok and nominal is not None:  # report the nominal time's plan and reason
+            if not ok and nominal is not None:  # report the first plan of the correction and its reason (the
+                # nominal time's; in a step that began with a retry, that retry's, as its reason says)
                 last_result, why = nominal[0], nominal[1]
                 if len(tried) > 1:
                     why += " (also at time left " + ", ".join(f"x{x:g}" for x in tried[1:]) + ")"
@@ -539,6 +543,9 @@ class Replanner:
                 break  # not even the smallest correction certifies
         if smallest is not None:
             return commit(*smallest)
+        if pending_retry is not None and not fraction_tried:  # no fraction to try: the deadline cut the retries
+            self._resume = pending_retry
+            backoff_note += "; the deadline left the retimed retries still due to the next step"
         return record(ReplanAction.KEPT_PREVIOUS, last_reason + backoff_note, anticipated=start, result=last_result,
                       solve_time=elapsed_total, anchored=anchored, n_solves=n_solves)
 

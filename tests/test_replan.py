@@ -909,7 +909,23 @@ def test_a_resumed_retry_that_fails_otherwise_leaves_the_next_retry(monkeypatch)
     monkeypatch.setattr(rp, "_certified", certified)
     steps = [_moved_wall_step(rp, t=0.5 + 0.05 * i, dz=0.02 + 0.001 * i) for i in range(3)]
     assert "began with the retimed retry x0.97" in steps[1].reason
+    assert "forced: not a certificate" in steps[1].reason  # the retry failed otherwise
     assert "began with the retimed retry x1.03" in steps[2].reason
+
+
+def test_retries_are_carried_over_with_no_fraction_to_try(monkeypatch):
+    """``partial_fractions=(1,)``: with one solve per step, the retimed retries the deadline cut
+    are made at the next steps (a retry does not wait for room for a fraction that does not
+    exist), and once they have all failed ``retime_backoff`` holds."""
+    rc = ReplanConfig(deadline=1.5e-3, partial_fractions=(1.0,))
+    rp, calls = _failing_full_corrections(rc, monkeypatch, elapsed=1e-3)
+    monkeypatch.setattr(rp, "_certified", _nothing_certifies(rp))
+    steps = [_moved_wall_step(rp, t=0.5 + 0.05 * i, dz=0.02 + 0.001 * i) for i in range(4)]
+    assert [s.n_solves for s in steps] == [1] * 4 and len(calls) == 4
+    assert "the deadline left the retimed retries still due to the next step" in steps[0].reason
+    assert "began with the retimed retry x0.97" in steps[1].reason
+    assert "began with the retimed retry x1.03" in steps[2].reason
+    assert NOT_RETIMED in steps[3].reason
 
 
 def test_a_resumed_retry_that_certifies_says_where_the_step_began(monkeypatch):
