@@ -485,6 +485,7 @@ class Replanner:
             nominal: tuple[PlanResult | None, str] | None = None  # reported if no retry certifies
             tried: list[float] = []
             retryable = False  # the first plan of this correction failed only a certificate
+            late: str | None = None  # set when a plan ended past the deadline
             room = 2 if k + 1 < len(order) else 1  # a retry, and the smallest fraction when one follows
             for factor in factors:
                 if nominal is not None and not clock.fits(room):
@@ -506,23 +507,13 @@ class Replanner:
                 pending_retry = nxt if not ok and retryable and nxt < len(all_factors) else None
                 if clock.per_attempt is None:
                     clock.per_attempt = clock.used() - t_attempt
+                if not ok and nominal is None:
+                    nominal = (result, why)
                 if clock.overrun():  # this plan and its certificates ended past the deadline
                     late = f"the step took {clock.used() * 1e3:.1f} ms"
-                    if not ok and retryable and len(all_factors) > 1 and nxt == len(all_factors):
-                        self._retries_failed = True  # the last retry due ran and failed (retime_backoff)
-                    elif not ok and retryable and backed_off:
-                        backoff_note = _NOT_RETIMED
-                    if ok:  # certified: committed (discarding it would save no time), and no further solve
-                        assert result is not None
-                        return commit(result, snap, goal, f, factor,
-                                      note=f"; past the deadline of {(clock.deadline or 0.0) * 1e3:.1f} ms ({late})")
-                    return out_of_time(f"too late: {late}", result)
-                if ok:
                     break
-                if nominal is None:
-                    nominal = (result, why)
-                    if not retryable:
-                        break  # only a plan that failed a certificate is retried
+                if ok or not retryable:
+                    break  # certified, or not a plan a retry may fix
             if not ok and nominal is not None:  # report the first plan of the correction and its reason (the
                 # nominal time's; in a step that began with a retry, that retry's, as its reason says)
                 last_result, why = nominal[0], nominal[1]
@@ -532,6 +523,12 @@ class Replanner:
                     self._retries_failed = True
                 elif backed_off and nominal[0] is not None and only_certificate:
                     backoff_note = _NOT_RETIMED
+            if late is not None:  # the step ends here
+                if ok:  # certified: committed (discarding it would save no time), and no further solve
+                    assert result is not None
+                    return commit(result, snap, goal, f, factor,
+                                  note=f"; past the deadline of {(clock.deadline or 0.0) * 1e3:.1f} ms ({late})")
+                return out_of_time(f"too late: {late}", result)
             if ok:
                 assert result is not None
                 if not is_smallest:
