@@ -4,6 +4,7 @@ right-hand side share it, and a cached answer is exactly the uncached one)."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -48,13 +49,17 @@ def test_right_hand_side_changes_reuse_the_factorisation_exactly() -> None:
 
 @settings(max_examples=40, deadline=None)
 @given(total=st.floats(0.3, 9.0), scale=st.floats(0.2, 5.0), incline=st.floats(0.0, 170.0),
-       heading=st.floats(-math.pi, math.pi), tilt=st.floats(0.0, 0.2))
-def test_equal_splits_and_any_pad_frame_share_one_exact_factorisation(total, scale, incline, heading, tilt) -> None:
+       heading=st.floats(-math.pi, math.pi), tilt=st.floats(0.0, 0.2),
+       drag=st.one_of(st.just(0.0), st.floats(0.05, 0.8)))
+def test_equal_splits_and_any_pad_frame_share_one_exact_factorisation(total, scale, incline, heading, tilt,
+                                                                      drag) -> None:
     """Every replan splits the time left equally and re-estimates the pad's frame. The equality
     matrix is then the same bits for any total time and any frame (rows scaled by one segment's
-    duration exactly; the whole contact velocity as world rows ``v = R_WS v_S``), so the cached
-    factorisation is an exact hit, and its splines still meet ``v_S`` in the new frame."""
-    config = avp.PlannerConfig(fov=avp.FovConfig(enabled=False))
+    duration exactly; the whole contact velocity as world rows ``v = R_WS v_S``; a rotor drag's
+    ``d v(t_f)`` on the right-hand side of (12)), so the cached factorisation is an exact hit, and
+    its splines still meet ``v_S`` in the new frame and, with drag, (12) on ``a + d v``."""
+    base_config = avp.PlannerConfig(fov=avp.FovConfig(enabled=False))
+    config = dataclasses.replace(base_config, limits=dataclasses.replace(base_config.limits, rotor_drag=drag))
     state = avp.State.hover(np.array([-2.5, 0.3, 2.2]))
     base = avp.PerchTarget.from_incline(np.array([0.0, 0.0, 1.5]), math.radians(30.0))
     n = np.array([math.sin(math.radians(incline)) * math.cos(heading), math.sin(math.radians(incline)) *
@@ -74,6 +79,10 @@ def test_equal_splits_and_any_pad_frame_share_one_exact_factorisation(total, sca
     v_S = other.R_WS.T @ traj.derivatives(traj.tf)[1, :3]
     want = list(config.contact_velocity.components(other.incline))
     np.testing.assert_allclose(v_S, want, atol=1e-9 * max(1.0, float(np.max(np.abs(want)))))
+    end = traj.derivatives(traj.tf)
+    thrust = end[2, :3] + drag * end[1, :3]  # (12): a + d v = alpha s3 - g e3
+    c0 = config.contact_alpha(other.incline) * other.s3 - config.g * np.array([0.0, 0.0, 1.0])
+    np.testing.assert_allclose(thrust, c0, atol=1e-9 * max(1.0, float(np.max(np.abs(c0)))))
 
 
 def test_time_scaled_durations_reuse_the_factorisation_to_rounding() -> None:
@@ -219,10 +228,11 @@ def test_point_rows_plus_is_the_sum_of_two_row_sets(durations, fractions, order,
 @given(drag=st.sampled_from([0.0, 0.05, 0.4]), incline=st.floats(0.0, 170.0), heading=st.floats(-math.pi, math.pi),
        total=st.floats(0.5, 6.0))
 def test_the_shared_terminal_rows_meet_the_contact_conditions(drag, incline, heading, total) -> None:
-    """The terminal matrix shared by every pad (cached, read-only: position, a + d v, the whole
-    contact velocity as world rows, yaw) is the same object for two pads, and any spline of the
-    equalities' affine set ends at the pad with ``a + d v = alpha s3 - g e3`` (12) and
-    ``v = R_WS v_S``, evaluated on the trajectory itself."""
+    """The terminal matrix shared by every pad (cached, read-only: position, acceleration, the
+    whole contact velocity as world rows, yaw; the drag's ``d v`` is on the right-hand side) is
+    the same object for two pads and any drag, and any spline of the equalities' affine set ends
+    at the pad with ``a + d v = alpha s3 - g e3`` (12) and ``v = R_WS v_S``, evaluated on the
+    trajectory itself."""
     config = avp.PlannerConfig(fov=avp.FovConfig(enabled=False),
                                limits=avp.VehicleLimits(rotor_drag=drag))
     state = avp.State.hover(np.array([-2.5, 0.3, 2.2]))
@@ -233,10 +243,11 @@ def test_the_shared_terminal_rows_meet_the_contact_conditions(drag, incline, hea
     qa, qb = build_perching_qp(state, a, config, T), build_perching_qp(state, b, config, T)
     At = qa.equalities[2].matrix
     assert At is qb.equalities[2].matrix and not At.flags.writeable
-    # bit for bit the rows one at a time (position, a + d v, velocity, yaw), as built before the cache
+    # bit for bit the rows one at a time (position, acceleration, velocity, yaw), as built before the cache
     P, V, A, Y = _end_rows(3, config.degree, 1.0)
-    rows = [*P, *(A + (drag * T[0]) * V if drag else A), *V, Y]
-    assert At.tobytes() == np.array(rows).tobytes()
+    assert At.tobytes() == np.array([*P, *A, *V, Y]).tobytes()
+    drag_free = dataclasses.replace(config, limits=avp.VehicleLimits(rotor_drag=0.0))
+    assert build_perching_qp(state, a, drag_free, T).equalities[2].matrix is At
     _, c_p, _, _ = qa.elimination
     traj = qa.trajectory(c_p, config.g)
     d = traj.derivatives(traj.tf)  # (orders, 4): position, velocity, acceleration

@@ -41,7 +41,9 @@ def terminal_rows(
     T_last: float | None = None,
 ) -> tuple[Array, Array, list[str]]:
     """Equalities at ``t_f``: position, acceleration (12), requested velocity components in S,
-    yaw (13). Returns rows, right-hand side and a name per row. ``T_last``: the last segment's
+    yaw (13). With a rotor drag ``d`` (12) is on ``a + d v``; when the whole contact velocity is
+    given, as ``a = c0 - d v_W`` (the same condition). Returns rows, right-hand side and a name
+    per row. ``T_last``: the last segment's
     duration (default from the knots; pass the duration itself to keep its exact bits)."""
     rows, rhs, names = [], [], []
     # position, t_scale * velocity, t_scale^2 * acceleration and yaw rows at t_f: they depend on
@@ -50,7 +52,15 @@ def terminal_rows(
         T_last = float(knots_rel[-1] - knots_rel[-2])
     P, V, A, Y = _end_rows(layout.n_segments, layout.degree, float(T_last) / t_scale)
     drag = config.limits.rotor_drag
-    if drag:  # the thrust direction is a + g e3 + d v (VehicleLimits.rotor_drag): rows on a + d v
+    v_S = config.contact_velocity.components(target.incline)
+    world_velocity = all(value is not None for value in v_S)
+    v_W = target._velocity_W(v_S) if world_velocity else None  # type: ignore[arg-type]
+    # The thrust direction is a + g e3 + d v (VehicleLimits.rotor_drag): rows on a + d v. When
+    # the whole contact velocity is given, v(t_f) = v_W is an equality of its own, so (12) is
+    # a(t_f) = c0 - d v_W: the same condition with rows free of d and of t_scale, which keep the
+    # cached equality elimination when the time left changes (every replan).
+    shift_by_velocity = bool(drag) and config.alpha_range is None and world_velocity
+    if drag and not shift_by_velocity:
         A = A + (drag * t_scale) * V
     p_contact = target.point + config.workspace.body_offset * target.s3  # centre of mass at contact
     for axis in range(3):
@@ -59,6 +69,9 @@ def terminal_rows(
         names.append(f"terminal position {'xyz'[axis]}")
     if config.alpha_range is None:
         c0 = terminal_acceleration(target, config.contact_alpha(target.incline), config.g)
+        if shift_by_velocity:
+            assert v_W is not None
+            c0 = c0 - drag * v_W
         for axis in range(3):
             rows.append(A[axis])
             rhs.append(c0[axis] * t_scale**2)
@@ -68,13 +81,10 @@ def terminal_rows(
             rows.append(direction @ A)
             rhs.append(-config.g * direction[2] * t_scale**2)
             names.append(f"terminal thrust along s3 (12): no {label} component")
-    v_S = config.contact_velocity.components(target.incline)
-    world_velocity = all(value is not None for value in v_S)
-    if world_velocity:
+    if v_W is not None:
         # the whole velocity is given: the same condition as world rows, v(t_f) = R_WS v_S, whose
         # matrix does not depend on the pad's frame, so a re-estimated frame keeps the cached
         # equality elimination (qp.assemble._factor)
-        v_W = target._velocity_W(v_S)  # type: ignore[arg-type]
         for axis in range(3):
             rows.append(V[axis])
             rhs.append(v_W[axis] * t_scale)
@@ -90,21 +100,20 @@ def terminal_rows(
     rhs.append(terminal_yaw(target, yaw_start))
     names.append("terminal yaw (13)")
     if config.alpha_range is None and world_velocity:  # no row depends on the pad's frame
-        matrix = _world_terminal_matrix(layout.n_segments, layout.degree, float(T_last) / t_scale, drag * t_scale)
+        matrix = _world_terminal_matrix(layout.n_segments, layout.degree, float(T_last) / t_scale)
     else:
         matrix = np.array(rows)
     return matrix, np.array(rhs), names
 
 
 @lru_cache(maxsize=256)
-def _world_terminal_matrix(n_segments: int, degree: int, T_last_over_scale: float, drag_scaled: float) -> Array:
+def _world_terminal_matrix(n_segments: int, degree: int, T_last_over_scale: float) -> Array:
     """:func:`terminal_rows`' matrix when none of its rows depends on the pad's frame (the
-    acceleration (12) and the whole contact velocity as world rows): position, acceleration
-    (plus ``drag_scaled`` times velocity), velocity, yaw; read-only. Shared by every QP with
-    these durations, so the equality elimination finds it by identity (``qp.assemble``)."""
+    acceleration (12), the rotor drag moved to its right-hand side, and the whole contact
+    velocity as world rows): position, acceleration, velocity, yaw; read-only. Shared by every
+    QP with these durations, so the equality elimination finds it by identity
+    (``qp.assemble``)."""
     P, V, A, Y = _end_rows(n_segments, degree, T_last_over_scale)
-    if drag_scaled:
-        A = A + drag_scaled * V
     matrix = np.array([*P, *A, *V, Y])
     matrix.setflags(write=False)
     return matrix
