@@ -3,7 +3,7 @@
     python benchmarks/bench_replan.py [--seeds 40] [--distances 1.5 4.5 7.5] [--inclines 90 45]
                                       [--previous] [--gc-freeze] [--stages] [--evict-mb MB]
                                       [--deadline-ms MS] [--adapt-latency] [--no-retime-backoff]
-                                      [--realistic] [--save FILE] [--compare FILE]
+                                      [--realistic] [--backend avp|rotorpy] [--save FILE] [--compare FILE]
 
 Runs ``avp.sim.run.simulate`` in ``Mode.AVP`` for every seed, distance and incline, with the
 ``Replanner`` the loop builds replaced by a subclass that times each :meth:`step` call with
@@ -23,6 +23,10 @@ MB before each bare call, so the replay meets data caches as cold as the loop le
 much of the step's overhead that explains. ``--stages`` splits both by stage, so the cost the
 loop adds shows where it falls.
 
+``--backend rotorpy`` flies rotorpy's vehicle instead of avp's model; the planner then knows its
+rotor drag (``VehicleLimits.rotor_drag``), a configuration whose replans the default runs do not
+cover.
+
 ``--save FILE`` writes what the replanner decided (every step's action, fraction and solves, and
 a digest of every committed plan's coefficients); ``--compare FILE`` checks the run against such
 a file, to show a speed change leaves the policy and its plans unchanged. ``--previous`` runs
@@ -35,6 +39,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import dataclasses
 import gc
 import hashlib
 import json
@@ -214,6 +219,9 @@ def main() -> None:
     ap.add_argument("--realistic", action="store_true",
                     help="the realistic simulator of the success sweeps (SimConfig().scenario: motor lag, "
                          "odometry drift, biased detections) instead of SimScenario's defaults")
+    ap.add_argument("--backend", choices=["avp", "rotorpy"], default="avp",
+                    help="the simulator that integrates the vehicle (rotorpy: its rotor drag model, which the "
+                         "planner then knows, VehicleLimits.rotor_drag; needs avp[rotorpy])")
     ap.add_argument("--save", help="write the decisions and committed-plan digests to this JSON file")
     ap.add_argument("--compare", help="compare the decisions and plans with this JSON file")
     args = ap.parse_args()
@@ -228,7 +236,8 @@ def main() -> None:
     if args.stages:
         instrument_stages()
     if args.gc_freeze:
-        simulate(SimScenario(distance=args.distances[0]), Mode.AVP, seed=10**6, replan=replan_cfg)  # not counted
+        simulate(SimScenario(distance=args.distances[0], backend=args.backend), Mode.AVP, seed=10**6,
+                 replan=replan_cfg)  # not counted
         gc.collect()
         gc.freeze()
         _STAGE_CPU.clear()  # the set-up run's stages are not counted
@@ -242,6 +251,7 @@ def main() -> None:
                 TimedReplanner.records, TimedReplanner.calls = [], []
                 before = _factor_cache()
                 sc = SimConfig().scenario(inc, d) if args.realistic else SimScenario(distance=d, incline=math.radians(inc))
+                sc = dataclasses.replace(sc, backend=args.backend)
                 r = simulate(sc, Mode.AVP, seed=seed, replan=replan_cfg)
                 recs, calls = TimedReplanner.records, TimedReplanner.calls
                 after = _factor_cache()
