@@ -42,7 +42,7 @@ def terminal_rows(
 ) -> tuple[Array, Array, list[str]]:
     """Equalities at ``t_f``: position, acceleration (12), requested velocity components in S,
     yaw (13). With a rotor drag ``d`` (12) is on ``a + d v``; when the whole contact velocity is
-    given, as ``a = c0 - d v_W`` (the same condition). Returns rows, right-hand side and a name
+    given and ``alpha_range`` is not, as ``a = c0 - d v_W`` (the same condition). Returns rows, right-hand side and a name
     per row. ``T_last``: the last segment's
     duration (default from the knots; pass the duration itself to keep its exact bits)."""
     rows, rhs, names = [], [], []
