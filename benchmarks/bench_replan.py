@@ -236,8 +236,10 @@ def main() -> None:
     if args.stages:
         instrument_stages()
     if args.gc_freeze:
-        simulate(SimScenario(distance=args.distances[0], backend=args.backend), Mode.AVP, seed=10**6,
-                 replan=replan_cfg)  # not counted
+        first = SimConfig().scenario(args.inclines[0], args.distances[0]) if args.realistic else \
+            SimScenario(distance=args.distances[0])
+        simulate(dataclasses.replace(first, backend=args.backend), Mode.AVP, seed=10**6,
+                 replan=replan_cfg)  # not counted: the set-up run, on the runs' simulator
         gc.collect()
         gc.freeze()
         _STAGE_CPU.clear()  # the set-up run's stages are not counted
