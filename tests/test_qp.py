@@ -256,3 +256,77 @@ def test_the_shared_terminal_rows_meet_the_contact_conditions(drag, incline, hea
     np.testing.assert_allclose(d[2, :3] + drag * d[1, :3], alpha * a.s3 - config.g * np.array([0.0, 0.0, 1.0]), atol=1e-8)
     v_S = list(config.contact_velocity.components(a.incline))
     np.testing.assert_allclose(a.R_WS.T @ d[1, :3], v_S, atol=1e-9)
+
+
+@settings(max_examples=30, deadline=None)
+@given(kind=st.sampled_from(["alpha_range", "slope free", "normal free"]), drag=st.sampled_from([0.0, 0.3]),
+       incline=st.floats(10.0, 170.0), heading=st.floats(-math.pi, math.pi), total=st.floats(0.8, 6.0),
+       tilt=st.floats(0.01, 0.3))
+def test_rows_in_the_pads_frame_are_eliminated_inside_the_cached_null_space(kind, drag, incline, heading, total,
+                                                                            tilt) -> None:
+    """With ``alpha_range`` or a partly free contact velocity some terminal rows lie along the
+    pad's frame, which every replan re-estimates. The other equalities keep one cached
+    factorisation for every pad; the pad's rows are eliminated inside its null space. Judged by
+    an independent solve: the equality-constrained minimiser of the cost from the KKT system of
+    the whole ``A``, and the contact conditions on the spline itself."""
+    base = avp.PlannerConfig(fov=avp.FovConfig(enabled=False), limits=avp.VehicleLimits(rotor_drag=drag))
+    if kind == "alpha_range":
+        config = dataclasses.replace(base, alpha_range=(6.0, 14.0))
+    else:
+        free = {"slope": None} if kind == "slope free" else {"normal": None}
+        config = dataclasses.replace(base, contact_velocity=dataclasses.replace(base.contact_velocity, **free))
+    state = avp.State.hover(np.array([-2.5, 0.3, 2.2]))
+    inc = math.radians(incline)
+    a = avp.PerchTarget.from_incline(np.array([0.1, -0.2, 1.5]), inc, heading)
+    n = a.s3 + tilt * np.array([0.3, -0.5, 0.2])
+    b = avp.PerchTarget.from_normal(np.array([0.0, 0.1, 1.4]), n)
+    T = np.full(3, total / 3)
+    qa, qb = build_perching_qp(state, a, config, T), build_perching_qp(state, b, config, T)
+    assert [blk.name for blk in qa.equalities][-1] == "terminal, in the pad's frame"
+    assert qa.equalities[2].matrix is qb.equalities[2].matrix  # the fixed terminal rows
+    assemble._FACTORS.clear()
+    assemble._WITHIN.clear()
+    Za, _, _, _ = qa.elimination
+    Z, c_p, H, g = qb.elimination
+    assert assemble._cached_factors() == 1  # the fixed rows: one factorisation for both pads
+    A, rhs = qb.stacked_equalities()
+    scale = max(1.0, float(np.max(np.abs(rhs))))
+    assert np.max(np.abs(A @ c_p - rhs)) < 1e-9 * scale
+    assert np.max(np.abs(Z.T @ Z - np.eye(Z.shape[1]))) < 1e-12
+    assert np.max(np.abs(A @ Z)) < 1e-10 * max(1.0, float(np.max(np.abs(A))))
+    assert Z.shape == Za.shape  # the same number of free directions for any pad
+    # the minimiser of the cost on the equalities alone: from the reduced QP; from the KKT system
+    # of the whole A solved directly (no elimination, no cache: ill-conditioned, up to 1e10, so
+    # compared by its cost, which the unique minimiser cannot exceed); and from one QR of the
+    # whole A (the elimination without the pad's rows split off)
+    def cost(c: np.ndarray) -> float:
+        return 0.5 * float(c @ qb.P @ c)
+
+    c_red = c_p + Z @ np.linalg.solve(H, -g)
+    m, nv = A.shape
+    K = np.block([[qb.P, A.T], [A, np.zeros((m, m))]])
+    c_kkt = np.linalg.lstsq(K, np.concatenate([np.zeros(nv), rhs]), rcond=None)[0][:nv]
+    assert np.max(np.abs(A @ c_kkt - rhs)) < 1e-8 * scale
+    assert cost(c_red) <= cost(c_kkt) + 1e-12 * max(1.0, abs(cost(c_kkt)))
+    f = assemble._factor(np.array(A), qb.P)
+    c_one = assemble._particular(f, rhs)
+    c_one = c_one + f.Z @ np.linalg.solve(f.H, -f.scale * (f.PZ.T @ c_one))
+    np.testing.assert_allclose(c_red, c_one, rtol=0, atol=1e-8 * max(1.0, float(np.max(np.abs(c_one)))))
+    # the contact conditions on the spline of the particular solution
+    end = qb.trajectory(c_p, config.g).derivatives(float(qb.knots_rel[-1]))
+    np.testing.assert_allclose(end[0, :3], b.point + config.workspace.body_offset * b.s3, atol=1e-9)
+    thrust = end[2, :3] + drag * end[1, :3] + config.g * np.array([0.0, 0.0, 1.0])
+    if kind == "alpha_range":  # (12) with alpha free: along s3
+        assert abs(float(thrust @ b.s1)) < 1e-8 and abs(float(thrust @ b.s2)) < 1e-8
+    else:
+        np.testing.assert_allclose(thrust, config.contact_alpha(b.incline) * b.s3, atol=1e-8)
+    given = config.contact_velocity.components(b.incline)
+    v_S = b.R_WS.T @ end[1, :3]
+    for got, want in zip(v_S, given, strict=True):
+        if want is not None:
+            assert abs(got - want) < 1e-9 * max(1.0, abs(want))
+    # the cached second stage is the fresh one, bit for bit
+    assemble._WITHIN.clear()
+    again = build_perching_qp(state, b, config, T).elimination
+    for x, y in zip(again, (Z, c_p, H, g), strict=True):
+        assert x.tobytes() == y.tobytes()

@@ -20,6 +20,12 @@ durations scaled by one factor in the time search) ``A`` and ``P`` change by rou
 cached factorisation whose ``A`` and ``P`` are within :data:`REUSE_TOL` (relative, entrywise)
 of the new ones is reused. Its null space then satisfies the new equalities to the same rounding
 level, and the particular solution ``c_p`` is checked against the new ``A`` as always.
+
+Rows that change with every pad (``alpha_range``'s "no ``s1``, ``s2`` thrust" and a partly free
+contact velocity's ``s_i . v``, both along the pad's frame; a line perch's terminal rows) are
+eliminated in a second stage inside the null space of the cached rows
+(:func:`eliminate_within`, also the moving pad's elimination), so a replan whose pad estimate
+moved reuses the cached factorisation and adds a QR of a few columns.
 """
 
 from __future__ import annotations
@@ -42,7 +48,7 @@ from ..types import PerchTarget, State
 from .boundary import continuity_rows, initial_state_rows
 from .cost import cost_matrix
 from .layout import DecisionLayout, layout_for
-from .perching import flip_rows, pre_impact_rows, terminal_rows, terminal_thrust_rows
+from .perching import flip_rows, pre_impact_rows, terminal_parts, terminal_thrust_rows
 
 RANK_TOL = 1e-10
 """Relative tolerance on the QR diagonal below which equality rows count as dependent."""
@@ -69,6 +75,7 @@ class _Factor:
     PZ: Array  # P @ Z
     H: Array  # scaled, symmetrised Z^T P Z
     scale: float
+    G: Array  # Z^T P Z, not scaled (a further elimination inside Z starts from it)
 
 
 _FACTORS: OrderedDict[tuple[object, ...], list[_Factor]] = OrderedDict()
@@ -177,15 +184,15 @@ def _factor(A: Array, P: Array) -> _Factor:
     rank = int(np.sum(diag > RANK_TOL * max(diag[0] if diag.size else 0.0, 1.0)))
     Z = Q[:, rank:]
     PZ = P @ Z
-    H = Z.T @ PZ
+    G = Z.T @ PZ
     # Scale the objective to unit Hessian diagonal: the minimiser is unchanged and the
     # back-ends' absolute dual tolerances become meaningful (raw entries reach 1e7).
-    scale = 1.0 / max(float(np.max(np.abs(np.diag(H)))) if H.size else 1.0, 1e-300)
-    H = (0.5 * scale) * (H + H.T)
+    scale = 1.0 / max(float(np.max(np.abs(np.diag(G)))) if G.size else 1.0, 1e-300)
+    H = (0.5 * scale) * (G + G.T)
     A_kept = A if _owned(A) else A.copy()  # stacked equality matrices are read-only, cached ones shared
     P_kept = P if not P.flags.writeable else P.copy()  # the cached cost matrices are read-only
-    f = _Factor(A_kept, P_kept, Q[:, :rank], R[:rank, :rank], piv[:rank], Z, PZ, H, scale)
-    for arr in (f.A, f.P, f.Q1, f.R1, f.piv, f.Z, f.PZ, f.H):
+    f = _Factor(A_kept, P_kept, Q[:, :rank], R[:rank, :rank], piv[:rank], Z, PZ, H, scale, G)
+    for arr in (f.A, f.P, f.Q1, f.R1, f.piv, f.Z, f.PZ, f.H, f.G):
         arr.setflags(write=False)
     with _FACTORS_LOCK:
         _FACTORS.setdefault(key, []).append(f)
@@ -196,6 +203,113 @@ def _factor(A: Array, P: Array) -> _Factor:
             if not _FACTORS[oldest]:
                 del _FACTORS[oldest]
     return f
+
+
+def _particular(f: _Factor, b: Array) -> Array:
+    """A solution of ``A c = b`` on the rank-revealing basis of ``f`` (dependent rows are checked
+    by the caller): ``R1^T y = b[piv]`` by LAPACK trtrs directly (what solve_triangular calls,
+    minus its overhead), ``c = Q1 y``."""
+    y, info = scipy.linalg.lapack.dtrtrs(f.R1, b[f.piv], lower=0, trans=1)
+    if info != 0:
+        raise InfeasibleError(f"the equality elimination failed (LAPACK trtrs info {info})")
+    return np.asarray(f.Q1 @ y)
+
+
+@dataclass(frozen=True)
+class _Within:
+    """What :func:`eliminate_within` needs from ``(Z0, G0, A_t)`` alone (not the right-hand sides)."""
+
+    Z0: Array  # the arrays this entry belongs to (kept alive: their identities are in the key)
+    G0: Array
+    A_t: Array
+    B: Array  # A_t Z0
+    Q1: Array  # (n0, rank): orthonormal basis of the row space of B
+    R1: Array  # (rank, rank)
+    piv: npt.NDArray[np.intp]
+    Z1: Array  # null space of B
+    Z: Array  # Z0 Z1
+    G: Array  # Z1^T G0 Z1, not scaled
+
+
+_WITHIN: OrderedDict[tuple[object, ...], _Within] = OrderedDict()
+"""Second-stage factorisations by ``(id(Z0), id(G0), A_t's shape and bytes)``, least recently
+used first out (:data:`ELIMINATION_CACHE_SIZE` entries)."""
+
+
+def _pivoted_qr(M: Array) -> tuple[Array, Array, npt.NDArray[np.intp]]:
+    """``scipy.linalg.qr(M, pivoting=True)`` (full ``Q``) by its LAPACK routines (geqp3, orgqr)
+    called directly: the same values, without the wrapper's overhead."""
+    rows, cols = M.shape
+    qr, jpvt, tau, _, info = scipy.linalg.lapack.dgeqp3(np.asfortranarray(M))
+    if info != 0:  # pragma: no cover - LAPACK argument errors only
+        raise InfeasibleError(f"the equality elimination failed (LAPACK geqp3 info {info})")
+    a = np.zeros((rows, rows), order="F")
+    a[:, :cols] = qr[:, :rows] if cols > rows else qr
+    Q, _, info = scipy.linalg.lapack.dorgqr(a, tau)
+    if info != 0:  # pragma: no cover
+        raise InfeasibleError(f"the equality elimination failed (LAPACK orgqr info {info})")
+    return Q, np.triu(qr[:min(rows, cols), :]), jpvt - 1
+
+
+def _within(Z0: Array, G0: Array, A_t: Array) -> _Within:
+    """The second-stage factorisation of :func:`eliminate_within`, cached per ``(Z0, G0, A_t)``
+    (``Z0`` and ``G0`` by identity: the callers' cached arrays; ``A_t`` by its bytes)."""
+    key = (id(Z0), id(G0), A_t.shape, A_t.tobytes())
+    with _FACTORS_LOCK:
+        hit = _WITHIN.get(key)
+        if hit is not None and hit.Z0 is Z0 and hit.G0 is G0:
+            _WITHIN.move_to_end(key)
+            return hit
+    B = A_t @ Z0
+    Q, R, piv = _pivoted_qr(B.T)
+    diag = np.abs(np.diag(R))
+    rank = int(np.sum(diag > RANK_TOL * max(float(diag[0]) if diag.size else 0.0, 1.0)))
+    Z1 = Q[:, rank:]
+    w = _Within(Z0, G0, A_t.copy(), B, Q[:, :rank], R[:rank, :rank], piv[:rank], Z1, Z0 @ Z1, Z1.T @ G0 @ Z1)
+    for arr in (w.A_t, w.B, w.Q1, w.R1, w.piv, w.Z1, w.Z, w.G):
+        arr.setflags(write=False)
+    with _FACTORS_LOCK:
+        _WITHIN[key] = w
+        while len(_WITHIN) > ELIMINATION_CACHE_SIZE:
+            _WITHIN.popitem(last=False)
+    return w
+
+
+_TERMINAL_INCONSISTENT = "the terminal equalities are inconsistent (residual {:.2e}); raise config.n_segments or config.degree"
+_INCONSISTENT = ("the equality constraints are inconsistent (residual {:.2e}): the spline has too few degrees of "
+                 "freedom; raise config.n_segments or config.degree")
+
+
+def eliminate_within(Z0: Array, c0: Array, G0: Array, P: Array, A_t: Array, b_t: Array,
+                     M: Array | None = None, inconsistent: str = _TERMINAL_INCONSISTENT,
+                     ) -> tuple[Array, Array, Array, Array]:
+    """The second stage of a two-stage elimination: ``c = c0 + Z0 w`` spans the solutions of
+    some equalities (``G0 = Z0^T P Z0``); the rows ``A_t c = b_t`` are eliminated inside that
+    null space (a QR of ``(A_t Z0)^T``, a few columns, instead of the whole ``A``; cached per
+    ``(Z0, G0, A_t)``, :func:`_within`). Returns :attr:`PerchingQp.elimination`'s
+    ``(Z, c_p, H, g)`` for the cost ``P + M^T M`` (``M``: :mod:`avp.qp.moving`'s slip cost),
+    scaled to a unit largest Hessian diagonal.
+
+    Raises :class:`InfeasibleError` (``inconsistent``, formatted with the residual) when the rows
+    ``A_t`` cannot be met inside the null space.
+    """
+    w = _within(Z0, G0, A_t)
+    rhs = b_t - A_t @ c0
+    y = scipy.linalg.solve_triangular(w.R1, rhs[w.piv], trans="T", check_finite=False)  # R1^T y = rhs[piv]
+    w_p = w.Q1 @ y
+    residual = float(np.max(np.abs(w.B @ w_p - rhs)))
+    if residual > 1e-8 * max(1.0, float(np.max(np.abs(b_t)))):
+        raise InfeasibleError(inconsistent.format(residual))
+    Z = w.Z
+    c_p = c0 + Z0 @ w_p
+    H = w.G
+    Pc = P @ c_p
+    if M is not None:
+        MZ = M @ Z
+        H = H + MZ.T @ MZ
+        Pc = Pc + M.T @ (M @ c_p)
+    scale = 1.0 / max(float(np.max(np.abs(np.diag(H)))) if H.size else 1.0, 1e-300)
+    return Z, c_p, (0.5 * scale) * (H + H.T), scale * (Z.T @ Pc)
 
 
 @dataclass(frozen=True)
@@ -350,26 +464,36 @@ class PerchingQp:
         cost in ``z``, scaled to a unit largest Hessian diagonal. Shared by copies made with
         :meth:`with_inequalities` / :meth:`without` (same cost and equalities).
 
+        When some equality blocks are cached (read-only, own their data) and others are not
+        (the terminal rows in the pad's frame: ``alpha_range``, a partly free contact
+        velocity), the cached ones are eliminated first, from their cached factorisation, and
+        the others inside its null space (:func:`eliminate_within`): a re-estimated pad then
+        costs a QR of a few columns, not of the whole ``A``.
+
         Raises :class:`InfeasibleError` when the equalities are inconsistent (more independent
         conditions than the spline can meet).
         """
         A, b = self.stacked_equalities()
         m = A.shape[0]
-        f = _factor(A, self.P)
-        # Particular solution on the rank-revealing basis; dependent rows must then agree.
-        # R1^T y = b[piv] (LAPACK trtrs directly: what solve_triangular calls, minus its overhead)
-        y, info = scipy.linalg.lapack.dtrtrs(f.R1, b[f.piv], lower=0, trans=1)
-        if info != 0:
-            raise InfeasibleError(f"the equality elimination failed (LAPACK trtrs info {info})")
-        c_p = f.Q1 @ y
+        blocks = tuple(blk for blk in self.equalities if blk.n_rows)
+        fixed = tuple(blk for blk in blocks if _owned(blk.matrix))
+        if fixed and len(fixed) < len(blocks):
+            # Some rows change from QP to QP (the pad's frame): eliminate the cached rows first,
+            # from their cached factorisation, then the others inside its null space.
+            A1 = _stacked_matrix(tuple(blk.matrix for blk in fixed))
+            f = _factor(A1, self.P)
+            c0 = _particular(f, np.concatenate([blk.lower for blk in fixed]))
+            rest = tuple(blk for blk in blocks if not _owned(blk.matrix))
+            Z, c_p, H, g = eliminate_within(f.Z, c0, f.G, self.P, np.concatenate([blk.matrix for blk in rest]),
+                                            np.concatenate([blk.lower for blk in rest]), inconsistent=_INCONSISTENT)
+        else:
+            f = _factor(A, self.P)
+            c_p = _particular(f, b)
+            Z, H, g = f.Z, f.H, f.scale * (f.PZ.T @ c_p)
         residual = float(np.abs(A @ c_p - b).max()) if m else 0.0
         if residual > 1e-8 * max(1.0, float(np.abs(b).max()) if m else 0.0):
-            raise InfeasibleError(
-                f"the equality constraints are inconsistent (residual {residual:.2e}): the spline has "
-                f"too few degrees of freedom; raise config.n_segments or config.degree"
-            )
-        g = f.scale * (f.PZ.T @ c_p)
-        return f.Z, c_p, f.H, g
+            raise InfeasibleError(_INCONSISTENT.format(residual))
+        return Z, c_p, H, g
 
     def reduce(self) -> ReducedQp:
         """The QP in ``z`` (see :attr:`elimination`): only inequalities, positive-definite Hessian.
@@ -413,12 +537,14 @@ def build_perching_qp(
     P = cost_matrix(layout, T, config.position_cost_order, config.yaw_cost_order)
     A0, b0 = initial_state_rows(layout, T, state, t_scale)
     Ac = continuity_rows(layout, T, config.continuity_order, t_scale)
-    At, bt, _names = terminal_rows(layout, knots_rel, target, config, state.yaw, t_scale, T_last=float(T[-1]))
-    eq = (
+    (At, bt, _), (Ap, bp, _) = terminal_parts(layout, knots_rel, target, config, state.yaw, t_scale, T_last=float(T[-1]))
+    eq: tuple[ConstraintBlock, ...] = (
         ConstraintBlock("initial state", A0, b0, b0),
         ConstraintBlock("continuity", Ac, np.zeros(Ac.shape[0]), np.zeros(Ac.shape[0])),
         ConstraintBlock("terminal", At, bt, bt),
     )
+    if Ap.shape[0]:  # rows along the pad's frame (alpha_range, a partly free contact velocity)
+        eq += (ConstraintBlock("terminal, in the pad's frame", Ap, bp, bp),)
     G, lo, hi = pre_impact_rows(layout, knots_rel, target, config)
     ineq: tuple[ConstraintBlock, ...] = (ConstraintBlock("pre-impact band (14)", G, lo, hi),) if G.shape[0] else ()
     Ga, la, ha = terminal_thrust_rows(layout, knots_rel, target, config)

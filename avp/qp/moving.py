@@ -33,11 +33,11 @@ import scipy.linalg
 
 from .._typing import Array
 from ..config import PlannerConfig
-from ..errors import ConfigError, InfeasibleError
+from ..errors import ConfigError
 from ..platform import MovingTarget
 from ..safety import workspace_blocks
 from ..types import PerchTarget, State
-from .assemble import RANK_TOL, ConstraintBlock, PerchingQp
+from .assemble import RANK_TOL, ConstraintBlock, PerchingQp, eliminate_within
 from .boundary import continuity_rows, initial_state_rows
 from .cost import cost_matrix, gram
 from .layout import YAW, layout_for
@@ -238,31 +238,9 @@ class MovingQpBuilder:
         """:attr:`PerchingQp.elimination` (same contract: ``c = c_p + Z z`` spans the solutions of
         every equality, and the cost in ``z`` scaled to a unit largest Hessian diagonal) in two
         stages: the precomputed null space ``Z0`` of the T-invariant rows, then the terminal rows
-        inside it (a QR of a matrix of about 13 x 42 instead of 64 x 96). ``P = P0 + M^T M``."""
-        c0 = self.L0 @ b0
-        B = A_t @ self.Z0
-        Q, R, piv = scipy.linalg.qr(B.T, pivoting=True, check_finite=False)
-        diag = np.abs(np.diag(R))
-        rank = int(np.sum(diag > RANK_TOL * max(float(diag[0]) if diag.size else 0.0, 1.0)))
-        rhs = b_t - A_t @ c0
-        y = scipy.linalg.solve_triangular(R[:rank, :rank], rhs[piv[:rank]], trans="T", check_finite=False)
-        w_p = Q[:, :rank] @ y
-        residual = float(np.max(np.abs(B @ w_p - rhs)))
-        if residual > 1e-8 * max(1.0, float(np.max(np.abs(b_t)))):
-            raise InfeasibleError(f"the terminal equalities are inconsistent (residual {residual:.2e}); "
-                                  "raise config.n_segments or config.degree")
-        Z1 = Q[:, rank:]
-        Z = self.Z0 @ Z1
-        c_p = c0 + self.Z0 @ w_p
-        H = Z1.T @ self.G0 @ Z1
-        Pc = self.P @ c_p
-        if M is not None:
-            MZ = M @ Z
-            H = H + MZ.T @ MZ
-            Pc = Pc + M.T @ (M @ c_p)
-        scale = 1.0 / max(float(np.max(np.abs(np.diag(H)))) if H.size else 1.0, 1e-300)
-        return Z, c_p, (0.5 * scale) * (H + H.T), scale * (Z.T @ Pc)
-
+        inside it (:func:`~avp.qp.assemble.eliminate_within`: a QR of a matrix of about 13 x 42
+        instead of 64 x 96). ``P = P0 + M^T M``."""
+        return eliminate_within(self.Z0, self.L0 @ b0, self.G0, self.P, A_t, b_t, M)
 
 def moving_perching_qp(
     state: State,

@@ -31,6 +31,10 @@ def terminal_yaw(target: PerchTarget, near: float) -> float:
     return psi + 2.0 * math.pi * round((near - psi) / (2.0 * math.pi))
 
 
+TerminalRows = tuple[Array, Array, list[str]]
+"""Rows, right-hand side and a name per row."""
+
+
 def terminal_rows(
     layout: DecisionLayout,
     knots_rel: Array,
@@ -39,82 +43,109 @@ def terminal_rows(
     yaw_start: float,
     t_scale: float,
     T_last: float | None = None,
-) -> tuple[Array, Array, list[str]]:
+) -> TerminalRows:
+    """Equalities at ``t_f`` (:func:`terminal_parts`) as one block: the fixed rows, then the
+    pad's."""
+    (A1, b1, n1), (A2, b2, n2) = terminal_parts(layout, knots_rel, target, config, yaw_start, t_scale, T_last)
+    if not n2:
+        return A1, b1, n1
+    return np.concatenate([A1, A2]), np.concatenate([b1, b2]), n1 + n2
+
+
+def terminal_parts(
+    layout: DecisionLayout,
+    knots_rel: Array,
+    target: PerchTarget,
+    config: PlannerConfig,
+    yaw_start: float,
+    t_scale: float,
+    T_last: float | None = None,
+) -> tuple[TerminalRows, TerminalRows]:
     """Equalities at ``t_f``: position, acceleration (12), requested velocity components in S,
-    yaw (13). With a rotor drag ``d`` (12) is on ``a + d v``; when the whole contact velocity is
-    given and ``alpha_range`` is not, as ``a = c0 - d v_W`` (the same condition). Returns rows, right-hand side and a name
-    per row. ``T_last``: the last segment's
-    duration (default from the knots; pass the duration itself to keep its exact bits)."""
-    rows, rhs, names = [], [], []
+    yaw (13), in two parts.
+
+    The **fixed** rows (position, yaw, the acceleration (12) when ``alpha_range`` is not set,
+    the whole contact velocity as world rows ``v(t_f) = R_WS v_S`` when every component is
+    given) form a read-only matrix that depends on ``T_last / t_scale`` alone (cached): every pad
+    and every time left of the replans share it, and with it the equality elimination of the
+    QP's fixed rows (:mod:`avp.qp.assemble`). The **pad's** rows are the others: (12) with
+    ``alpha_range`` (no ``s1``, ``s2`` component of the thrust), the given components ``s_i . v``
+    of a partly free contact velocity, and (12) on ``a + d v`` with a rotor drag ``d`` and such
+    a velocity (its row depends on ``t_scale``); empty with the default settings.
+
+    With a rotor drag ``d`` (12) is on ``a + d v``; when the whole contact velocity is given and
+    ``alpha_range`` is not, it is written ``a = c0 - d v_W`` (the same condition, fixed rows).
+    ``T_last``: the last segment's duration (default from the knots; pass the duration itself to
+    keep its exact bits).
+    """
     # position, t_scale * velocity, t_scale^2 * acceleration and yaw rows at t_f: they depend on
     # T_last / t_scale alone (cached)
     if T_last is None:
         T_last = float(knots_rel[-1] - knots_rel[-2])
-    P, V, A, Y = _end_rows(layout.n_segments, layout.degree, float(T_last) / t_scale)
+    ratio = float(T_last) / t_scale
+    _, V, A, _ = _end_rows(layout.n_segments, layout.degree, ratio)
     drag = config.limits.rotor_drag
     v_S = config.contact_velocity.components(target.incline)
-    world_velocity = all(value is not None for value in v_S)
-    v_W = target._velocity_W(v_S) if world_velocity else None  # type: ignore[arg-type]
-    # The thrust direction is a + g e3 + d v (VehicleLimits.rotor_drag): rows on a + d v. When
-    # the whole contact velocity is given, v(t_f) = v_W is an equality of its own, so (12) is
-    # a(t_f) = c0 - d v_W: the same condition with rows free of d and of t_scale, which keep the
-    # cached equality elimination when the time left changes (every replan).
-    shift_by_velocity = bool(drag) and config.alpha_range is None and world_velocity
-    if drag and not shift_by_velocity:
-        A = A + (drag * t_scale) * V
+    v_W = target._velocity_W(v_S) if all(value is not None for value in v_S) else None  # type: ignore[arg-type]
+    fixed_accel = config.alpha_range is None and (not drag or v_W is not None)
+    rhs: list[float] = []
+    names: list[str] = []
+    pad_rows: list[Array] = []
+    pad_rhs: list[float] = []
+    pad_names: list[str] = []
     p_contact = target.point + config.workspace.body_offset * target.s3  # centre of mass at contact
-    for axis in range(3):
-        rows.append(P[axis])
-        rhs.append(p_contact[axis])
-        names.append(f"terminal position {'xyz'[axis]}")
+    rhs.extend(float(x) for x in p_contact)
+    names.extend(f"terminal position {'xyz'[axis]}" for axis in range(3))
     if config.alpha_range is None:
         c0 = terminal_acceleration(target, config.contact_alpha(target.incline), config.g)
-        if shift_by_velocity:
-            assert v_W is not None
-            c0 = c0 - drag * v_W
-        for axis in range(3):
-            rows.append(A[axis])
-            rhs.append(c0[axis] * t_scale**2)
-            names.append(f"terminal acceleration (12) {'xyz'[axis]}")
-    else:  # (12) with alpha free: a(tf) + g e3 has no component along s1, s2
+        if fixed_accel:
+            # The thrust direction is a + g e3 + d v (VehicleLimits.rotor_drag). With the whole
+            # contact velocity given, v(t_f) = v_W is an equality of its own, so (12) is
+            # a(t_f) = c0 - d v_W: the same condition with rows free of d and of t_scale.
+            if drag:
+                assert v_W is not None
+                c0 = c0 - drag * v_W
+            rhs.extend(float(c) * t_scale**2 for c in c0)
+            names.extend(f"terminal acceleration (12) {'xyz'[axis]}" for axis in range(3))
+        else:  # drag, and a partly free velocity: rows on a + (d t_scale) v
+            pad_rows.extend(A + (drag * t_scale) * V)
+            pad_rhs.extend(float(c) * t_scale**2 for c in c0)
+            pad_names.extend(f"terminal acceleration (12) {'xyz'[axis]}" for axis in range(3))
+    else:  # (12) with alpha free: a(tf) + d v(tf) + g e3 has no component along s1, s2
+        F = A + (drag * t_scale) * V if drag else A
         for label, direction in (("s1", target.s1), ("s2", target.s2)):
-            rows.append(direction @ A)
-            rhs.append(-config.g * direction[2] * t_scale**2)
-            names.append(f"terminal thrust along s3 (12): no {label} component")
+            pad_rows.append(direction @ F)
+            pad_rhs.append(-config.g * direction[2] * t_scale**2)
+            pad_names.append(f"terminal thrust along s3 (12): no {label} component")
     if v_W is not None:
         # the whole velocity is given: the same condition as world rows, v(t_f) = R_WS v_S, whose
-        # matrix does not depend on the pad's frame, so a re-estimated frame keeps the cached
-        # equality elimination (qp.assemble._factor)
-        for axis in range(3):
-            rows.append(V[axis])
-            rhs.append(v_W[axis] * t_scale)
-            names.append(f"contact velocity {'xyz'[axis]} (R_WS v_S)")
+        # matrix does not depend on the pad's frame
+        rhs.extend(float(v) * t_scale for v in v_W)
+        names.extend(f"contact velocity {'xyz'[axis]} (R_WS v_S)" for axis in range(3))
     else:
         for label, direction, value in zip(("s1", "s2", "s3"), target.R_WS.T, v_S, strict=True):
             if value is None:
                 continue
-            rows.append(direction @ V)
-            rhs.append(value * t_scale)
-            names.append(f"contact velocity v.{label}")
-    rows.append(Y)
+            pad_rows.append(direction @ V)
+            pad_rhs.append(value * t_scale)
+            pad_names.append(f"contact velocity v.{label}")
     rhs.append(terminal_yaw(target, yaw_start))
     names.append("terminal yaw (13)")
-    if config.alpha_range is None and world_velocity:  # no row depends on the pad's frame
-        matrix = _world_terminal_matrix(layout.n_segments, layout.degree, float(T_last) / t_scale)
-    else:
-        matrix = np.array(rows)
-    return matrix, np.array(rhs), names
+    fixed = _terminal_matrix(layout.n_segments, layout.degree, ratio, fixed_accel, v_W is not None)
+    n = layout.n_variables
+    pad = np.array(pad_rows) if pad_rows else np.zeros((0, n))
+    return (fixed, np.array(rhs), names), (pad, np.array(pad_rhs), pad_names)
 
 
 @lru_cache(maxsize=256)
-def _world_terminal_matrix(n_segments: int, degree: int, T_last_over_scale: float) -> Array:
-    """:func:`terminal_rows`' matrix when none of its rows depends on the pad's frame (the
-    acceleration (12), the rotor drag moved to its right-hand side, and the whole contact
-    velocity as world rows): position, acceleration, velocity, yaw; read-only. Shared by every
-    QP with these durations, so the equality elimination finds it by identity
+def _terminal_matrix(n_segments: int, degree: int, T_last_over_scale: float, acceleration: bool,
+                     world_velocity: bool) -> Array:
+    """:func:`terminal_parts`' fixed rows: position, acceleration (when ``acceleration``),
+    velocity as world rows (when ``world_velocity``), yaw; read-only. Shared by every QP with
+    these durations and settings, so the equality elimination finds it by identity
     (``qp.assemble``)."""
     P, V, A, Y = _end_rows(n_segments, degree, T_last_over_scale)
-    matrix = np.array([*P, *A, *V, Y])
+    matrix = np.array([*P, *(A if acceleration else ()), *(V if world_velocity else ()), Y])
     matrix.setflags(write=False)
     return matrix
 
