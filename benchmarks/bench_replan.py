@@ -3,7 +3,8 @@
     python benchmarks/bench_replan.py [--seeds 40] [--distances 1.5 4.5 7.5] [--inclines 90 45]
                                       [--previous] [--gc-freeze] [--stages] [--evict-mb MB]
                                       [--deadline-ms MS] [--adapt-latency] [--no-retime-backoff]
-                                      [--realistic] [--backend avp|rotorpy] [--save FILE] [--compare FILE]
+                                      [--realistic] [--backend avp|rotorpy] [--alpha-range LO HI]
+                                      [--free-velocity slope|normal|lateral] [--save FILE] [--compare FILE]
 
 Runs ``avp.sim.run.simulate`` in ``Mode.AVP`` for every seed, distance and incline, with the
 ``Replanner`` the loop builds replaced by a subclass that times each :meth:`step` call with
@@ -26,6 +27,10 @@ loop adds shows where it falls.
 ``--backend rotorpy`` flies rotorpy's vehicle instead of avp's model; the planner then knows its
 rotor drag (``VehicleLimits.rotor_drag``), a configuration whose replans the default runs do not
 cover.
+
+``--alpha-range LO HI`` (m/s^2) and ``--free-velocity COMPONENT`` plan with terminal rows along
+the pad's frame, which every re-estimate of the pad changes (``PlannerConfig.alpha_range``, a
+``ContactVelocity`` component left free).
 
 ``--save FILE`` writes what the replanner decided (every step's action, fraction and solves, and
 a digest of every committed plan's coefficients); ``--compare FILE`` checks the run against such
@@ -56,6 +61,7 @@ from _grid import add_timing_options, replan_config
 import avp.sim.run as sim_run
 from avp import _avp_rust, replan, trackability
 from avp._blas import serial_blas
+from avp.config import PlannerConfig
 from avp.planner import plan_detailed
 from avp.qp import assemble
 from avp.replan import ReplanConfig, Replanner
@@ -222,6 +228,10 @@ def main() -> None:
     ap.add_argument("--backend", choices=["avp", "rotorpy"], default="avp",
                     help="the simulator that integrates the vehicle (rotorpy: its rotor drag model, which the "
                          "planner then knows, VehicleLimits.rotor_drag; needs avp[rotorpy])")
+    ap.add_argument("--alpha-range", type=float, nargs=2, metavar=("LO", "HI"),
+                    help="PlannerConfig.alpha_range (m/s^2): the contact thrust free in a range")
+    ap.add_argument("--free-velocity", choices=["slope", "normal", "lateral"],
+                    help="leave this contact velocity component free (ContactVelocity)")
     ap.add_argument("--save", help="write the decisions and committed-plan digests to this JSON file")
     ap.add_argument("--compare", help="compare the decisions and plans with this JSON file")
     args = ap.parse_args()
@@ -231,6 +241,18 @@ def main() -> None:
     gc.callbacks.append(_count_gc)
     sim_run.Replanner = TimedReplanner  # type: ignore[misc]  # the loop builds this class
     replan_cfg = replan_config(args)
+    def planner_cfg(sc: SimScenario) -> PlannerConfig | None:
+        """The planner configuration of ``sc`` (``None``: the simulation's own, as the default
+        runs use it) with the options' terminal rows along the pad's frame."""
+        if not (args.alpha_range or args.free_velocity):
+            return None
+        cfg = sim_run._shared(sc, None)[1]  # what simulate() would plan with
+        if args.alpha_range:
+            cfg = dataclasses.replace(cfg, alpha_range=tuple(args.alpha_range))
+        if args.free_velocity:
+            cfg = dataclasses.replace(cfg, contact_velocity=dataclasses.replace(
+                cfg.contact_velocity, **{args.free_velocity: None}))
+        return cfg
     if args.previous:
         use_previous_paths()
     if args.stages:
@@ -238,8 +260,9 @@ def main() -> None:
     if args.gc_freeze:
         first = SimConfig().scenario(args.inclines[0], args.distances[0]) if args.realistic else \
             SimScenario(distance=args.distances[0])
-        simulate(dataclasses.replace(first, backend=args.backend), Mode.AVP, seed=10**6,
-                 replan=replan_cfg)  # not counted: the set-up run, on the runs' simulator
+        first = dataclasses.replace(first, backend=args.backend)
+        # not counted: the set-up run, on the runs' simulator
+        simulate(first, Mode.AVP, seed=10**6, config=planner_cfg(first), replan=replan_cfg)
         gc.collect()
         gc.freeze()
         _STAGE_CPU.clear()  # the set-up run's stages are not counted
@@ -254,7 +277,7 @@ def main() -> None:
                 before = _factor_cache()
                 sc = SimConfig().scenario(inc, d) if args.realistic else SimScenario(distance=d, incline=math.radians(inc))
                 sc = dataclasses.replace(sc, backend=args.backend)
-                r = simulate(sc, Mode.AVP, seed=seed, replan=replan_cfg)
+                r = simulate(sc, Mode.AVP, seed=seed, config=planner_cfg(sc), replan=replan_cfg)
                 recs, calls = TimedReplanner.records, TimedReplanner.calls
                 after = _factor_cache()
                 _set_factor_cache(before)  # the replay meets the elimination cache the loop met
