@@ -114,6 +114,7 @@ STAGES = (  # (module, function, label): CPU inside Replanner.step, per planning
     ("avp.qp.fov", "fov_rows", "  FoV rows built (when a QP needs them)"),
     ("avp.attempt", "solve_perching_qp", "  reduce and solve the QPs"),
     ("avp.qp.assemble", "_factor", "    of which: elimination QR (cache lookups and misses)"),
+    ("avp.qp.assemble", "eliminate_within", "    of which: the pad's rows inside its null space"),
     ("avp.solve", "_solve_two_sided", "    of which: DAQP"),
     ("avp.planner", "_certify", "  bound certificate (Algorithm 1)"),
     ("avp.attempt", "certify_workspace", "  workspace certificate"),
@@ -131,7 +132,9 @@ def instrument_stages() -> None:
 
     for mod_name, fn_name, label in STAGES:
         mod = importlib.import_module(mod_name)
-        fn = getattr(mod, fn_name)
+        fn = getattr(mod, fn_name, None)
+        if fn is None:  # a stage an older version does not have
+            continue
 
         def timed(*a: Any, _fn: Any = fn, _label: str = label, **kw: Any) -> Any:
             into = _STAGE_ON[0]
@@ -161,13 +164,19 @@ def use_previous_paths() -> None:
     globals()["serial_blas"] = contextlib.nullcontext
 
 
-def _factor_cache() -> OrderedDict[Any, list[Any]]:
-    return OrderedDict((k, list(v)) for k, v in assemble._FACTORS.items())
+_WITHIN: OrderedDict[Any, Any] = getattr(assemble, "_WITHIN", OrderedDict())  # absent before the two-stage elimination
 
 
-def _set_factor_cache(state: OrderedDict[Any, list[Any]]) -> None:
+def _factor_cache() -> tuple[OrderedDict[Any, list[Any]], OrderedDict[Any, Any]]:
+    return OrderedDict((k, list(v)) for k, v in assemble._FACTORS.items()), OrderedDict(_WITHIN)
+
+
+def _set_factor_cache(state: tuple[OrderedDict[Any, list[Any]], OrderedDict[Any, Any]]) -> None:
+    factors, within = state
     assemble._FACTORS.clear()
-    assemble._FACTORS.update((k, list(v)) for k, v in state.items())
+    assemble._FACTORS.update((k, list(v)) for k, v in factors.items())
+    _WITHIN.clear()
+    _WITHIN.update(within)
 
 
 _EVICT: list[np.ndarray] = []  # the --evict-mb buffer, when asked for

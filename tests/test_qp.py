@@ -259,7 +259,8 @@ def test_the_shared_terminal_rows_meet_the_contact_conditions(drag, incline, hea
 
 
 @settings(max_examples=30, deadline=None)
-@given(kind=st.sampled_from(["alpha_range", "slope free", "normal free"]), drag=st.sampled_from([0.0, 0.3]),
+@given(kind=st.sampled_from(["alpha_range", "slope free", "normal free", "lateral free", "alpha_range, slope free"]),
+       drag=st.sampled_from([0.0, 0.3]),
        incline=st.floats(10.0, 170.0), heading=st.floats(-math.pi, math.pi), total=st.floats(0.8, 6.0),
        tilt=st.floats(0.01, 0.3))
 def test_rows_in_the_pads_frame_are_eliminated_inside_the_cached_null_space(kind, drag, incline, heading, total,
@@ -270,11 +271,13 @@ def test_rows_in_the_pads_frame_are_eliminated_inside_the_cached_null_space(kind
     an independent solve: the equality-constrained minimiser of the cost from the KKT system of
     the whole ``A``, and the contact conditions on the spline itself."""
     base = avp.PlannerConfig(fov=avp.FovConfig(enabled=False), limits=avp.VehicleLimits(rotor_drag=drag))
-    if kind == "alpha_range":
-        config = dataclasses.replace(base, alpha_range=(6.0, 14.0))
-    else:
-        free = {"slope": None} if kind == "slope free" else {"normal": None}
-        config = dataclasses.replace(base, contact_velocity=dataclasses.replace(base.contact_velocity, **free))
+    config = base
+    if kind.startswith("alpha_range"):
+        config = dataclasses.replace(config, alpha_range=(6.0, 14.0))
+    for component in ("slope", "normal", "lateral"):
+        if f"{component} free" in kind:
+            config = dataclasses.replace(config, contact_velocity=dataclasses.replace(
+                config.contact_velocity, **{component: None}))
     state = avp.State.hover(np.array([-2.5, 0.3, 2.2]))
     inc = math.radians(incline)
     a = avp.PerchTarget.from_incline(np.array([0.1, -0.2, 1.5]), inc, heading)
@@ -316,7 +319,7 @@ def test_rows_in_the_pads_frame_are_eliminated_inside_the_cached_null_space(kind
     end = qb.trajectory(c_p, config.g).derivatives(float(qb.knots_rel[-1]))
     np.testing.assert_allclose(end[0, :3], b.point + config.workspace.body_offset * b.s3, atol=1e-9)
     thrust = end[2, :3] + drag * end[1, :3] + config.g * np.array([0.0, 0.0, 1.0])
-    if kind == "alpha_range":  # (12) with alpha free: along s3
+    if kind.startswith("alpha_range"):  # (12) with alpha free: along s3
         assert abs(float(thrust @ b.s1)) < 1e-8 and abs(float(thrust @ b.s2)) < 1e-8
     else:
         np.testing.assert_allclose(thrust, config.contact_alpha(b.incline) * b.s3, atol=1e-8)
@@ -325,8 +328,11 @@ def test_rows_in_the_pads_frame_are_eliminated_inside_the_cached_null_space(kind
     for got, want in zip(v_S, given, strict=True):
         if want is not None:
             assert abs(got - want) < 1e-9 * max(1.0, abs(want))
-    # the cached second stage is the fresh one, bit for bit
+    # the same pad again: its second stage is a cache hit, and both equal a fresh one bit for bit
+    entries = len(assemble._WITHIN)
+    hit = build_perching_qp(state, b, config, T).elimination
+    assert len(assemble._WITHIN) == entries and hit[0] is Z
     assemble._WITHIN.clear()
-    again = build_perching_qp(state, b, config, T).elimination
-    for x, y in zip(again, (Z, c_p, H, g), strict=True):
-        assert x.tobytes() == y.tobytes()
+    fresh = build_perching_qp(state, b, config, T).elimination
+    for x, y, z in zip(hit, fresh, (Z, c_p, H, g), strict=True):
+        assert x.tobytes() == y.tobytes() == z.tobytes()

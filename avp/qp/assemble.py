@@ -237,9 +237,12 @@ used first out (:data:`ELIMINATION_CACHE_SIZE` entries)."""
 
 
 def _pivoted_qr(M: Array) -> tuple[Array, Array, npt.NDArray[np.intp]]:
-    """``scipy.linalg.qr(M, pivoting=True)`` (full ``Q``) by its LAPACK routines (geqp3, orgqr)
-    called directly: the same values, without the wrapper's overhead."""
+    """``Q`` (full), the first ``min(rows, cols)`` rows of ``R`` and the pivots of
+    ``scipy.linalg.qr(M, pivoting=True)``, by its LAPACK routines (geqp3, orgqr) called directly,
+    without the wrapper's overhead (the same values at this module's sizes)."""
     rows, cols = M.shape
+    if rows == 0 or cols == 0:  # LAPACK rejects empty matrices
+        return np.eye(rows), np.zeros((0, cols)), np.arange(cols)
     qr, jpvt, tau, _, info = scipy.linalg.lapack.dgeqp3(np.asfortranarray(M))
     if info != 0:  # pragma: no cover - LAPACK argument errors only
         raise InfeasibleError(f"the equality elimination failed (LAPACK geqp3 info {info})")
@@ -251,15 +254,32 @@ def _pivoted_qr(M: Array) -> tuple[Array, Array, npt.NDArray[np.intp]]:
     return Q, np.triu(qr[:min(rows, cols), :]), jpvt - 1
 
 
-def _within(Z0: Array, G0: Array, A_t: Array) -> _Within:
+def _solve_transposed_upper(R: Array, b: Array) -> Array:
+    """``y`` with ``R^T y = b`` for an upper triangular ``R``: LAPACK trtrs called as
+    ``scipy.linalg.solve_triangular(R, b, trans="T")`` calls it (a C-ordered ``R`` as the lower
+    triangular ``R^T`` in Fortran order), so the same values, without the wrapper's overhead."""
+    if R.size == 0:
+        return np.zeros(0)
+    if R.flags.f_contiguous:
+        y, info = scipy.linalg.lapack.dtrtrs(R, b, lower=0, trans=1)
+    else:
+        y, info = scipy.linalg.lapack.dtrtrs(R.T, b, lower=1, trans=0)
+    if info != 0:
+        raise InfeasibleError(f"the equality elimination failed (LAPACK trtrs info {info})")
+    return np.asarray(y)
+
+
+def _within(Z0: Array, G0: Array, A_t: Array, cache: bool) -> _Within:
     """The second-stage factorisation of :func:`eliminate_within`, cached per ``(Z0, G0, A_t)``
-    (``Z0`` and ``G0`` by identity: the callers' cached arrays; ``A_t`` by its bytes)."""
-    key = (id(Z0), id(G0), A_t.shape, A_t.tobytes())
-    with _FACTORS_LOCK:
-        hit = _WITHIN.get(key)
-        if hit is not None and hit.Z0 is Z0 and hit.G0 is G0:
-            _WITHIN.move_to_end(key)
-            return hit
+    when ``cache`` (``Z0`` and ``G0`` by identity: the callers' cached arrays; ``A_t`` by its
+    bytes)."""
+    key = (id(Z0), id(G0), A_t.shape, A_t.tobytes()) if cache else None
+    if key is not None:
+        with _FACTORS_LOCK:
+            hit = _WITHIN.get(key)
+            if hit is not None and hit.Z0 is Z0 and hit.G0 is G0:
+                _WITHIN.move_to_end(key)
+                return hit
     B = A_t @ Z0
     Q, R, piv = _pivoted_qr(B.T)
     diag = np.abs(np.diag(R))
@@ -268,10 +288,12 @@ def _within(Z0: Array, G0: Array, A_t: Array) -> _Within:
     w = _Within(Z0, G0, A_t.copy(), B, Q[:, :rank], R[:rank, :rank], piv[:rank], Z1, Z0 @ Z1, Z1.T @ G0 @ Z1)
     for arr in (w.A_t, w.B, w.Q1, w.R1, w.piv, w.Z1, w.Z, w.G):
         arr.setflags(write=False)
-    with _FACTORS_LOCK:
-        _WITHIN[key] = w
-        while len(_WITHIN) > ELIMINATION_CACHE_SIZE:
-            _WITHIN.popitem(last=False)
+    if key is not None:
+        with _FACTORS_LOCK:
+            _WITHIN[key] = w
+            _WITHIN.move_to_end(key)
+            while len(_WITHIN) > ELIMINATION_CACHE_SIZE:
+                _WITHIN.popitem(last=False)
     return w
 
 
@@ -281,22 +303,22 @@ _INCONSISTENT = ("the equality constraints are inconsistent (residual {:.2e}): t
 
 
 def eliminate_within(Z0: Array, c0: Array, G0: Array, P: Array, A_t: Array, b_t: Array,
-                     M: Array | None = None, inconsistent: str = _TERMINAL_INCONSISTENT,
+                     M: Array | None = None, inconsistent: str = _TERMINAL_INCONSISTENT, cache: bool = True,
                      ) -> tuple[Array, Array, Array, Array]:
     """The second stage of a two-stage elimination: ``c = c0 + Z0 w`` spans the solutions of
     some equalities (``G0 = Z0^T P Z0``); the rows ``A_t c = b_t`` are eliminated inside that
     null space (a QR of ``(A_t Z0)^T``, a few columns, instead of the whole ``A``; cached per
-    ``(Z0, G0, A_t)``, :func:`_within`). Returns :attr:`PerchingQp.elimination`'s
+    ``(Z0, G0, A_t)`` unless ``cache`` is false, :func:`_within`: rows that change at every
+    call, a moving pad's, would only push out the others). Returns :attr:`PerchingQp.elimination`'s
     ``(Z, c_p, H, g)`` for the cost ``P + M^T M`` (``M``: :mod:`avp.qp.moving`'s slip cost),
     scaled to a unit largest Hessian diagonal.
 
     Raises :class:`InfeasibleError` (``inconsistent``, formatted with the residual) when the rows
     ``A_t`` cannot be met inside the null space.
     """
-    w = _within(Z0, G0, A_t)
+    w = _within(Z0, G0, A_t, cache)
     rhs = b_t - A_t @ c0
-    y = scipy.linalg.solve_triangular(w.R1, rhs[w.piv], trans="T", check_finite=False)  # R1^T y = rhs[piv]
-    w_p = w.Q1 @ y
+    w_p = w.Q1 @ _solve_transposed_upper(w.R1, rhs[w.piv])
     residual = float(np.max(np.abs(w.B @ w_p - rhs)))
     if residual > 1e-8 * max(1.0, float(np.max(np.abs(b_t)))):
         raise InfeasibleError(inconsistent.format(residual))

@@ -239,8 +239,8 @@ class MovingQpBuilder:
         every equality, and the cost in ``z`` scaled to a unit largest Hessian diagonal) in two
         stages: the precomputed null space ``Z0`` of the T-invariant rows, then the terminal rows
         inside it (:func:`~avp.qp.assemble.eliminate_within`: a QR of a matrix of about 13 x 42
-        instead of 64 x 96). ``P = P0 + M^T M``."""
-        return eliminate_within(self.Z0, self.L0 @ b0, self.G0, self.P, A_t, b_t, M)
+        instead of 64 x 96; not cached, the pad moves). ``P = P0 + M^T M``."""
+        return eliminate_within(self.Z0, self.L0 @ b0, self.G0, self.P, A_t, b_t, M, cache=False)
 
 def moving_perching_qp(
     state: State,
