@@ -8,6 +8,7 @@ import dataclasses
 import math
 
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from scenarios import standard
@@ -336,3 +337,18 @@ def test_rows_in_the_pads_frame_are_eliminated_inside_the_cached_null_space(kind
     fresh = build_perching_qp(state, b, config, T).elimination
     for x, y, z in zip(hit, fresh, (Z, c_p, H, g), strict=True):
         assert x.tobytes() == y.tobytes() == z.tobytes()
+
+
+def test_a_second_stage_without_free_directions_checks_the_rows_it_cannot_move() -> None:
+    """The cached rows leave no free direction (``Z0`` has no column): the pad's rows either hold
+    at the particular solution already (an empty null space is returned) or are a typed
+    infeasibility, not a LAPACK error."""
+    rng = np.random.default_rng(3)
+    n = 6
+    Z0, c0, G0, P = np.zeros((n, 0)), rng.normal(size=n), np.zeros((0, 0)), np.eye(n)
+    A_t = rng.normal(size=(2, n))
+    Z, c_p, H, g = assemble.eliminate_within(Z0, c0, G0, P, A_t, A_t @ c0)
+    assert Z.shape == (n, 0) and H.shape == (0, 0) and g.shape == (0,)
+    assert c_p.tobytes() == c0.tobytes()
+    with pytest.raises(avp.InfeasibleError, match="inconsistent"):
+        assemble.eliminate_within(Z0, c0, G0, P, A_t, A_t @ c0 + 1.0)
