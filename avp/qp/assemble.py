@@ -207,8 +207,9 @@ def _factor(A: Array, P: Array) -> _Factor:
 
 def _particular(f: _Factor, b: Array) -> Array:
     """A solution of ``A c = b`` on the rank-revealing basis of ``f`` (dependent rows are checked
-    by the caller): ``R1^T y = b[piv]`` by LAPACK trtrs directly (what solve_triangular calls,
-    minus its overhead), ``c = Q1 y``."""
+    by the caller): ``R1^T y = b[piv]`` by LAPACK trtrs on ``R1`` as stored, ``c = Q1 y``. Not
+    :func:`_solve_transposed_upper`: for the C-ordered ``R1`` that solves the transposed system,
+    other arithmetic, and every one-stage plan keeps the values it had."""
     y, info = scipy.linalg.lapack.dtrtrs(f.R1, b[f.piv], lower=0, trans=1)
     if info != 0:
         raise InfeasibleError(f"the equality elimination failed (LAPACK trtrs info {info})")

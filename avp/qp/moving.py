@@ -242,6 +242,7 @@ class MovingQpBuilder:
         instead of 64 x 96; not cached, the pad moves). ``P = P0 + M^T M``."""
         return eliminate_within(self.Z0, self.L0 @ b0, self.G0, self.P, A_t, b_t, M, cache=False)
 
+
 def moving_perching_qp(
     state: State,
     pad: MovingTarget,
