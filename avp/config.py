@@ -80,7 +80,9 @@ class VehicleLimits:
     thrust 8 deg off the normal). The FoV rows (8)-(9) and the visibility score that accepts an
     SQP step take the camera's attitude from the same thrust (:func:`avp.qp.fov.fov_blocks`; on
     rotorpy's wall the drag turned the camera by 4-8 deg, which put the pad up to 3 deg outside
-    the 35 deg cone for a second of the approach). The bound certificates and
+    the 35 deg cone for a second of the approach). A line perch (:func:`avp.plan_line`) takes
+    its contact thrust, its rest at contact (``j + d a = 0``) and its flip rows on the same
+    thrust (:func:`avp.qp.line.line_terminal_blocks`). The bound certificates and
     :class:`~avp.trajectory.Trajectory`'s attitude keep the drag-free flatness map (11): along
     the path the true attitude differs by up to ``atan(d |v| / |a + g e3|)``.
     """

@@ -5,7 +5,9 @@ with the line's terminal conditions (:mod:`avp.qp.line`), certifies the vehicle 
 :func:`avp.bounds.certify_spline`, the workspace limits of ``config.workspace`` (ground, extra
 half-spaces, spheres, speed) with :func:`avp.safety.certify_workspace`, and the line clearance
 and wedge corridor with :mod:`avp.line_certify`, searching the total duration (``config.bounds`` factors) until every
-certificate holds. It then plans the **recovery**: a second spline that starts at the perch's
+certificate holds. With ``config.limits.rotor_drag = d`` the contact thrust, its rest rates and
+the flip rows are on the thrust ``a + g e3 + d v`` (:func:`avp.qp.line.line_terminal_blocks`);
+the bound certificates keep the drag-free map (11), as for a pad. It then plans the **recovery**: a second spline that starts at the perch's
 final state (continuous up to snap on all four flat outputs) and ends at rest at a safe hover
 point, with the same certificates, as Paneque et al., "Perception-Aware Perching on Powerlines
 with Multirotors", append a recovery to every perch. ``docs/lines.md`` has the derivations.
@@ -236,7 +238,8 @@ def _perch_qp(state: State, line: LineTarget, contact: LineContact, cfg: Planner
     t_scale = float(T.mean())
     A0, b0 = initial_state_rows(layout, T, state, t_scale)
     P, eq = _base_qp(layout, T, cfg, state.time, A0, b0)
-    teq, tineq = line_terminal_blocks(layout, knots_rel, line, contact, _thrust_range(contact, cfg, opts), cfg.g, t_scale)
+    teq, tineq = line_terminal_blocks(layout, knots_rel, line, contact, _thrust_range(contact, cfg, opts), cfg.g, t_scale,
+                                      rotor_drag=cfg.limits.rotor_drag)
     eq += teq
     ineq = list(tineq)
     tf = float(knots_rel[-1])
@@ -253,7 +256,7 @@ def _perch_qp(state: State, line: LineTarget, contact: LineContact, cfg: Planner
     if contact.n[2] < 0.0:
         tflip = _guide_times(tf, opts.guide_dt / 2.0, include_end=True)
         ineq += flip_blocks(layout, knots_rel, tflip, (tf - opts.flip_window[0], tf - opts.flip_window[1]), np.array([0.0, 0.0, 1.0]), contact.w, contact.n,
-                            opts.flip_thrust, opts.flip_thrust, cfg.g, t_scale)
+                            opts.flip_thrust, opts.flip_thrust, cfg.g, t_scale, cfg.limits.rotor_drag)
     if opts.wedge_angle is not None:
         tw = _guide_times(tf, opts.guide_dt / 2.0, include_end=True)
         tw = tw[tw >= tf - opts.wedge_window]
@@ -302,7 +305,8 @@ def _recovery_qp(perch: Trajectory, target_point: Array, contact: LineContact, l
     ineq += workspace_blocks(layout, knots_rel, start, pseudo, replace(cfg, workspace=replace(ws, ground_z=None)))
     if contact.n[2] < 0.0:
         ineq += flip_blocks(layout, knots_rel, _guide_times(tf, opts.guide_dt / 2.0, include_end=True), opts.flip_window[::-1],
-                            contact.n, contact.w, np.array([0.0, 0.0, 1.0]), opts.flip_thrust, opts.flip_thrust, cfg.g, t_scale)
+                            contact.n, contact.w, np.array([0.0, 0.0, 1.0]), opts.flip_thrust, opts.flip_thrust, cfg.g, t_scale,
+                            cfg.limits.rotor_drag)
     return PerchingQp(layout=layout, durations=T, t0=perch.tf, P=P, equalities=tuple(eq), inequalities=tuple(ineq))
 
 
@@ -552,7 +556,11 @@ def plan_line(
         if contact.n[2] >= 0.0 or line.contact_speed != 0.0:
             recovery, rec_ok, rec_report, rcerts, _rf = _search(build, certify_recovery, (1.0,), rT0, cfg, log, "recovery")
         at_rest = not (np.any(state.velocity) or np.any(state.acceleration) or np.any(state.jerk))
-        if not rec_ok and line.contact_speed == 0.0 and at_rest:
+        if not rec_ok and line.contact_speed == 0.0 and at_rest and cfg.limits.rotor_drag:
+            # with drag the perch ends with j = -d a (no rotation), which its reverse does not continue
+            log.append("recovery = perch backwards: not with rotor drag (the perch ends with jerk -d a, "
+                       "which the reverse does not continue)")
+        elif not rec_ok and line.contact_speed == 0.0 and at_rest:
             # Upside down (or when the QP recovery fails): fly the perch backwards to its start
             # (a hover only when the perch started at rest).
             back = reversed_trajectory(perch, perch.tf)

@@ -213,3 +213,78 @@ def test_a_bool_is_not_a_drag():
     tr = avp.plan(avp.State.hover([0.0, 0.0, 1.5]), target, avp.PlannerConfig(fov=avp.FovConfig(enabled=False)))
     with pytest.raises(ConfigError, match="limits.rotor_drag"):
         visibility(tr, target, rotor_drag=True)
+
+
+# -- the line perch (avp.plan_line) with drag ----------------------------------------------------
+
+
+def _line(pitch_deg: float, speed: float = 0.0) -> avp.LineTarget:
+    c, half = np.array([3.0, 0.0, 3.0]), np.array([0.0, 1.5, 0.0])
+    return avp.LineTarget.segment(c - half, c + half, pitch=math.radians(pitch_deg), contact_speed=speed)
+
+
+def _line_config(drag: float) -> avp.PlannerConfig:
+    limits = avp.VehicleLimits(mass=0.8, thrust_min=0.5, thrust_max=4 * 0.8 * 9.81, rotor_drag=drag)
+    return avp.PlannerConfig(limits=limits, workspace=avp.Workspace(ground_z=0.5))
+
+
+@settings(max_examples=10, deadline=None)
+@given(st.sampled_from([0.0, 30.0, 60.0, 80.0, 120.0]), st.sampled_from([0.0, 0.4]), st.floats(0.1, 0.6),
+       st.floats(-0.4, 0.4))
+def test_line_contact_thrust_and_rest_rates_with_drag(pitch_deg, speed, drag, dz):
+    """With drag d the thrust f = a + g e3 + d v of a line perch is along n at contact, within
+    the contact thrust range, and at rest: f' = j + d a = 0 (no body rotation, no thrust rate),
+    so the jerk itself is -d a (it was 0 before drag was modelled: the vehicle arrived turning at
+    0.2-0.6 rad/s with d = 0.3). Read off the spline, not the QP rows."""
+    from avp.line_planner import LineOptions, _thrust_range
+
+    line, cfg = _line(pitch_deg, speed), _line_config(drag)
+    start = np.array([1.0, 0.3, 3.0 + dz - (1.2 if pitch_deg > 90.0 else 0.0)])
+    res = avp.plan_line(avp.State.hover(start), line, cfg, LineOptions(recovery=False))
+    tr = res.perch
+    assert tr is not None, res.log
+    n = res.contact.n
+    a, v, j = tr(tr.tf, 2), tr(tr.tf, 1), tr(tr.tf, 3)
+    f = a + np.array([0.0, 0.0, cfg.g]) + drag * v
+    assert _angle(f, n) < 1e-6
+    lo, hi = _thrust_range(res.contact, cfg, LineOptions())
+    assert lo - 1e-6 <= float(f @ n) <= hi + 1e-6
+    assert np.linalg.norm(j + drag * a) < 1e-6 * max(1.0, float(np.linalg.norm(a)))
+    # the unit thrust axis does not turn at contact: a one-sided difference of f/|f| is O(h)
+    h = 1e-4
+    f_before = tr(tr.tf - h, 2) + np.array([0.0, 0.0, cfg.g]) + drag * tr(tr.tf - h, 1)
+    turn = np.linalg.norm(f / np.linalg.norm(f) - f_before / np.linalg.norm(f_before)) / h
+    assert turn < 1e-2
+
+
+def test_line_flip_rows_bound_the_drag_aware_thrust():
+    """Upside down (pitch 120 deg) the flip rows hold on f = a + g e3 + d v at their samples:
+    up before the window, across inside it (at least flip_thrust), along n after it."""
+    from avp.line_planner import LineOptions, _guide_times
+
+    drag, opts = 0.4, LineOptions(recovery=False)
+    cfg = _line_config(drag)
+    res = avp.plan_line(avp.State.hover([1.0, 0.3, 1.8]), _line(120.0), cfg, opts)
+    tr = res.perch
+    assert tr is not None, res.log
+    tf = tr.duration
+    t = _guide_times(tf, opts.guide_dt / 2.0, include_end=True)
+    t1, t2 = tf - opts.flip_window[0], tf - opts.flip_window[1]
+    f = tr(tr.t0 + t, 2) + np.array([0.0, 0.0, cfg.g]) + drag * tr(tr.t0 + t, 1)
+    c = res.contact
+    for sel, direction in ((t <= t1, np.array([0.0, 0.0, 1.0])), ((t >= t1) & (t <= t2), c.w), (t >= t2, c.n)):
+        assert sel.any()
+        assert np.all(f[sel] @ direction >= opts.flip_thrust - 1e-6)
+
+
+def test_line_recovery_with_drag_continues_the_perch():
+    """The perch run backwards is no recovery with drag (it ends with jerk -d a, which the
+    reverse flips): the QP recovery, continuous up to snap with the perch, is used instead."""
+    drag = 0.3
+    res = avp.plan_line(avp.State.hover([1.0, 0.3, 1.8]), _line(120.0), _line_config(drag))
+    assert res.ok, res.log
+    assert any("not with rotor drag" in line for line in res.log)
+    p, r = res.perch, res.recovery
+    end, begin = p.derivatives(p.tf), r.derivatives(r.t0)
+    assert np.all(np.abs(end - begin) / np.maximum(1.0, np.abs(end)) < 1e-6)
+    assert np.linalg.norm(end[3, :3] + drag * end[2, :3]) < 1e-6 * max(1.0, float(np.linalg.norm(end[2, :3])))

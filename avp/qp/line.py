@@ -39,16 +39,22 @@ def line_terminal_blocks(
     g: float,
     t_scale: float,
     rest_rates: bool = True,
+    rotor_drag: float = 0.0,
 ) -> tuple[list[ConstraintBlock], list[ConstraintBlock]]:
     """Equality and inequality blocks at ``t_f``.
 
-    Thrust (the analogue of (12) for a line): ``a(t_f) + g e3`` has no component along ``d``
-    nor ``n x d``, so ``b3 = n``; its magnitude ``n . (a + g e3)`` lies in ``thrust_range``.
-    With ``rest_rates`` the jerk, yaw rate and yaw jerk vanish at contact: the body rates and
-    thrust rate are zero there, so the vehicle arrives in the perch attitude instead of rotating
-    through it; with a zero contact velocity every odd derivative then vanishes at ``t_f``, so
-    the perch run backwards continues it up to snap (the fallback recovery of
-    :mod:`avp.line_planner`).
+    Thrust (the analogue of (12) for a line): the thrust ``f = a(t_f) + g e3 + d v(t_f)`` has no
+    component along ``d`` nor ``n x d``, so ``b3 = n``; its magnitude ``n . f`` lies in
+    ``thrust_range``. ``d = rotor_drag`` (1/s, :class:`~avp.config.VehicleLimits`; Faessler et
+    al.: ``b3 || a + g e3 + d v``). The contact velocity ``v(t_f) = -contact_speed n`` is itself
+    an equality, so these rows are written on ``a(t_f)`` with ``d v(t_f)`` moved to the
+    right-hand side (the same conditions; ``v`` along ``n`` leaves the tangential rows as
+    without drag). With ``rest_rates`` the thrust's rate ``j + d a``, the yaw rate and the yaw
+    jerk vanish at contact: the body rates and thrust rate are zero there, so the vehicle
+    arrives in the perch attitude instead of rotating through it. Without drag that is a zero
+    jerk, so with a zero contact velocity every odd derivative vanishes at ``t_f`` and the perch
+    run backwards continues it up to snap (the fallback recovery of :mod:`avp.line_planner`,
+    which with drag it does not: ``j(t_f) = -d a(t_f)``).
     """
     tf = float(knots_rel[-1])
     P = vector_rows(layout, knots_rel, 0, tf)[0]
@@ -72,17 +78,24 @@ def line_terminal_blocks(
         ineq.append(ConstraintBlock("line: grasp point on the piece", row[None, :], np.array([lo + off]), np.array([hi + off])))
     s2 = t_scale**2
     tangents = np.stack([d, np.cross(n, d)])
-    eq.append(ConstraintBlock("line: thrust axis along n", (tangents @ Acc) * s2, -g * tangents[:, 2] * s2, -g * tangents[:, 2] * s2))
+    vel = -line.contact_speed * n
+    drag_tf = rotor_drag * vel  # d v(t_f), fixed by the contact velocity row below
+    rhs_t = -(g * tangents[:, 2] + tangents @ drag_tf) * s2
+    eq.append(ConstraintBlock("line: thrust axis along n", (tangents @ Acc) * s2, rhs_t, rhs_t))
     lo_a, hi_a = thrust_range
+    off = g * n[2] + float(n @ drag_tf)
     ineq.append(ConstraintBlock(
         "line: contact thrust range", (n @ Acc)[None, :] * s2,
-        np.array([(lo_a - g * n[2]) * s2]), np.array([(hi_a - g * n[2]) * s2]),
+        np.array([(lo_a - off) * s2]), np.array([(hi_a - off) * s2]),
     ))
-    vel = -line.contact_speed * n
     eq.append(ConstraintBlock("line: contact velocity", V * t_scale, vel * t_scale, vel * t_scale))
     if rest_rates:
         J = vector_rows(layout, knots_rel, 3, tf)[0] * t_scale**3
-        eq.append(ConstraintBlock("line: no rotation at contact (jerk 0)", J, np.zeros(3), np.zeros(3)))
+        if rotor_drag:  # the thrust's rate j + d a
+            J = J + rotor_drag * t_scale * (Acc * s2)
+            eq.append(ConstraintBlock("line: no rotation at contact (j + d a = 0)", J, np.zeros(3), np.zeros(3)))
+        else:
+            eq.append(ConstraintBlock("line: no rotation at contact (jerk 0)", J, np.zeros(3), np.zeros(3)))
         Y = np.stack([derivative_rows(layout, knots_rel, YAW, r, tf)[0] * t_scale**r for r in (1, 3)])
         eq.append(ConstraintBlock("line: yaw rate and yaw jerk 0 at contact", Y, np.zeros(2), np.zeros(2)))
     if contact.yaw is not None:
@@ -117,10 +130,14 @@ def snap_away_row(layout: DecisionLayout, knots_rel: Array, normal: Array, minim
 
 
 def thrust_direction_rows(
-    layout: DecisionLayout, knots_rel: Array, times: Array, direction: Array, minimum: float, g: float, t_scale: float, name: str
+    layout: DecisionLayout, knots_rel: Array, times: Array, direction: Array, minimum: float, g: float, t_scale: float, name: str,
+    rotor_drag: float = 0.0,
 ) -> ConstraintBlock:
-    """``direction . (a(t_j) + g e3) >= minimum`` at the sample ``times`` (linear in ``a``)."""
+    """``direction . (a(t_j) + g e3 + d v(t_j)) >= minimum`` at the sample ``times`` (linear in
+    the coefficients; ``d = rotor_drag``, the thrust of :func:`line_terminal_blocks`)."""
     Acc = vector_rows(layout, knots_rel, 2, times)  # (m, 3, n)
+    if rotor_drag:
+        Acc = Acc + rotor_drag * vector_rows(layout, knots_rel, 1, times)
     G = np.einsum("i,min->mn", direction, Acc) * t_scale**2
     lo = np.full(times.size, (minimum - g * float(direction[2])) * t_scale**2)
     return ConstraintBlock(name, G, lo, np.full(times.size, np.inf))
@@ -129,11 +146,13 @@ def thrust_direction_rows(
 def flip_blocks(
     layout: DecisionLayout, knots_rel: Array, times: Array, phases: tuple[float, float],
     before: Array, across: Array, after: Array, minimum: float, flip_thrust: float, g: float, t_scale: float,
+    rotor_drag: float = 0.0,
 ) -> list[ConstraintBlock]:
     """A flip through the horizontal with the thrust bounded away from zero (pitch > 90 deg).
 
-    The thrust ``f = a + g e3`` points along ``before`` (``f . before >= minimum``) until
-    ``phases[0]`` (s, from the plan start), along ``after`` from ``phases[1]`` on, and in between
+    The thrust ``f = a + g e3 + d v`` (``d = rotor_drag``) points along ``before``
+    (``f . before >= minimum``) until ``phases[0]`` (s, from the plan start), along ``after``
+    from ``phases[1]`` on, and in between
     ``f . across >= flip_thrust`` with ``across`` horizontal: ``f`` turns through the horizontal
     inside the middle window with ``|f| >= flip_thrust``, which keeps the tilt rate
     ``|j_perp| / |f|`` (22) finite. The certificate (thrust_min, tilt rate) is still the
@@ -147,5 +166,5 @@ def flip_blocks(
         (times >= t2, after, minimum, "flip: thrust after"),
     ):
         if np.any(sel):
-            out.append(thrust_direction_rows(layout, knots_rel, times[sel], direction, lo, g, t_scale, name))
+            out.append(thrust_direction_rows(layout, knots_rel, times[sel], direction, lo, g, t_scale, name, rotor_drag))
     return out
