@@ -790,12 +790,16 @@ class ReplanConfig:
         Change (m) of the estimated pad centre (and ``target_tolerance`` rad of its normal)
         below which, when anchored, the step holds the committed plan without solving. 5 mm:
         a sixth of the 3 cm plane tolerance of a perch (chosen, not tuned; with a perfect
-        estimate every step holds, which is what makes AVP equal one-shot there).
+        estimate every step holds, which is what makes AVP equal one-shot there). A static pad
+        only: a moving pad's estimate moves it at every step (:class:`~avp.moving.MovingReplanner`
+        never holds), a line has its own tolerances (:class:`~avp.line_replan.LineReplanner`).
     reach_acceleration:
         Budget (m/s^2) on moving the contact point: at most ``0.5 reach_acceleration T^2`` with
         ``T`` the time left. 6 m/s^2: chosen (not tuned), about 60 % of the 9.8 m/s^2 thrust
         margin above hover; in the measured runs the trackability certificate, not this budget,
         was what stopped late corrections (the budget binds early, on far, noisy estimates).
+        A static pad only, as ``partial_fractions``: a moving pad's or a line's correction is
+        full or none.
     partial_fractions:
         Fractions of the (budgeted) correction, strictly decreasing. Tried in the order: the
         first, the last, and only if the last certifies the ones between, in order; the first
@@ -811,7 +815,8 @@ class ReplanConfig:
     reach_tolerance:
         Distance (m) between the committed contact point and the latest estimate above which a
         step without a full correction reports ``CANNOT_REACH``. 0.05 m: half the in-plane
-        success radius.
+        success radius. For a moving pad, the distance to the pad the estimate predicts at the
+        committed contact time; not for a line (:mod:`avp.line_replan`).
     snap_max, snap_thrust_max:
         Trackability limits certified on every committed replan (:mod:`avp.trackability`;
         ``inf`` skips one): ``|s| < snap_max`` (m/s^4) and ``|s| < snap_thrust_max |a + g e3|``

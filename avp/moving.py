@@ -51,7 +51,7 @@ from .moving_clearance import ClearanceReport, certify_moving_clearance
 from .planner import PlanStatus, planning_error
 from .platform import MovingTarget
 from .qp.moving import MovingQpBuilder, TerminalYaw, contact_point, objective
-from .replan import ReplanConfig, Replanner, ReplanStep
+from .replan import ReplanConfig, Replanner, ReplanStep, _target_change
 from .safety import RESIDUAL_TOL, SafetyReport, certify_workspace, refinement_blocks
 from .solve import solve_perching_qp
 from .trajectory import Trajectory
@@ -492,6 +492,15 @@ class MovingReplanner(Replanner):
     the motion model predicts to the contact time. The first plan searches the arrival time; a
     replan anticipates the start state (6) exactly as for a static pad and keeps the committed
     contact time (``duration = t_f - t_ex``), so only the predicted pad changes.
+
+    A step compares estimates where they put the pad at the committed contact time. When a
+    step commits nothing (or is frozen near contact) and that predicted pad is farther than
+    ``reach_tolerance`` from the committed contact point, it says ``CANNOT_REACH``, the cue to
+    abort, as for a static pad. The pad policy's other steps do not apply here: every estimate
+    moves the pad, so a step never holds (``target_tolerance``), and a correction is full or
+    none (no ``reach_acceleration`` budget, ``partial_fractions`` or retimed retries), because
+    partial corrections blend two pad frames. A full correction is committed only when its plan
+    is certified.
     """
 
     def __init__(
@@ -511,6 +520,16 @@ class MovingReplanner(Replanner):
         if target_estimate is not None and not isinstance(target_estimate, MovingTarget):
             raise ConfigError("target_estimate", f"expected avp.platform.MovingTarget, got {type(target_estimate).__name__}")
         return super().step(t, odometry, target_estimate)
+
+    def _change(self, a: Any, b: Any) -> tuple[float, float]:
+        """Distance (m) and angle (rad) between the pads that ``a`` and ``b`` predict at the
+        committed contact time (the plan's end, which replans keep)."""
+        t_c = self.trajectory.tf if self.trajectory is not None else float(b.time)
+        return _target_change(a.at(t_c), b.at(t_c))
+
+    @property
+    def _reach_cue(self) -> bool:
+        return True
 
     def _solve(  # type: ignore[override]  # returns the duck-compatible MovingPlanResult
         self, state: State, durations: Array | None, previous: Trajectory | None, config: PlannerConfig,

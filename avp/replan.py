@@ -135,8 +135,9 @@ class ReplanStep:
     ``t_ex`` keep tracking the previous one, or call :meth:`Replanner.reference`).
 
     ``target_error`` (m) is the distance from the committed plan's contact point to the latest
-    estimate after the step; ``reach_budget`` (m) how far the contact point could move in the
-    time left; ``fraction`` the share of the requested correction committed (0 when nothing
+    estimate after the step (for a moving pad, to the pad the estimate predicts at the contact
+    time); ``reach_budget`` (m) how far the contact point could move in the time left (``inf``
+    where no budget applies: a moving pad, a line); ``fraction`` the share of the requested correction committed (0 when nothing
     was); ``anchored`` whether the plan started from the committed reference (True) or from
     odometry; ``snap`` the trackability certificate of the committed plan, when one was checked;
     ``time_factor`` the committed plan's time left over the nominal one (``retime_retries``:
@@ -383,12 +384,13 @@ class Replanner:
         def record(action: ReplanAction, reason: str, **kw: object) -> ReplanStep:
             err = shift if self.committed_target is committed_target else self._change(self.committed_target, self.target)[0]
             if action in (ReplanAction.KEPT_PREVIOUS, ReplanAction.FROZEN_NEAR_CONTACT, ReplanAction.PARTIAL) \
-                    and err > rc.reach_tolerance and self._static_pad:
+                    and err > rc.reach_tolerance and self._reach_cue:
+                limit = (f"budget {budget:.3f} m in {max(remaining, 0.0):.2f} s" if self._static_pad
+                         else f"{max(remaining, 0.0):.2f} s left")
                 reason = (f"{action.name.lower()}: committed contact point {err:.3f} m from the estimate "
-                          f"(tolerance {rc.reach_tolerance:.3f} m, budget {budget:.3f} m in "
-                          f"{max(remaining, 0.0):.2f} s); {reason}")
+                          f"(tolerance {rc.reach_tolerance:.3f} m, {limit}); {reason}")
                 action = ReplanAction.CANNOT_REACH
-            return ReplanStep(t=t, action=action, trajectory=self.trajectory, reason=reason, t_ex=t_ex, target_error=err, reach_budget=budget, **kw)  # type: ignore[arg-type]
+            return ReplanStep(t=t, action=action, trajectory=self.trajectory, reason=reason, t_ex=t_ex, target_error=err, reach_budget=budget if self._static_pad else math.inf, **kw)  # type: ignore[arg-type]
 
         if remaining < max(rc.freeze_horizon, self.config.t_k):
             return record(ReplanAction.FROZEN_NEAR_CONTACT, f"{max(remaining, 0.0):.3f} s to contact")
@@ -636,6 +638,13 @@ class Replanner:
         """Distance (m) and angle (rad) between two target estimates (the hold and reach tests).
         A function of its two arguments only: a step computes it once for an unchanged pair."""
         return _target_change(a, b)
+
+    @property
+    def _reach_cue(self) -> bool:
+        """Whether a step that leaves the committed contact point farther than
+        ``reach_tolerance`` from the estimate (:meth:`_change`) says ``CANNOT_REACH`` (a static
+        or moving pad; not a line, :mod:`avp.line_replan`)."""
+        return self._static_pad
 
     @property
     def _can_hold(self) -> bool:

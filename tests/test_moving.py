@@ -319,6 +319,54 @@ def test_replanner_follows_platform_estimates():
     assert np.linalg.norm(final(final.tf) - first.at(final.tf).point) > 0.1  # it did follow the change
 
 
+def _on_plan(traj, t: float) -> avp.State:
+    d = traj.derivatives(t)
+    return avp.State(position=d[0, :3], velocity=d[1, :3], acceleration=d[2, :3], jerk=d[3, :3],
+                     yaw=float(d[0, 3]), yaw_rate=float(d[1, 3]), time=t)
+
+
+@pytest.mark.parametrize("left", [0.6, 0.1])
+def test_moving_replanner_says_cannot_reach_when_the_predicted_pad_is_out_of_reach(left):
+    """An estimate that puts the pad 25+ m away at the committed contact time, 0.6 s before it
+    (no certified plan closes that) or inside the freeze horizon: the step says CANNOT_REACH,
+    the cue to abort, with the distance between the committed contact point and the pad the
+    estimate predicts at contact (read off the platform model's vectorised prediction and the
+    plan's end), and no budget (none applies to a moving pad)."""
+    from avp.moving import MovingReplanner
+
+    pad = platform(0.5, 2.5, 0.2)
+    rc = avp.ReplanConfig(freeze_horizon=0.25)
+    rp = MovingReplanner(pad, CONFIG, rc)
+    assert rp.step(0.0, behind(pad)).action is avp.ReplanAction.INITIAL_PLAN
+    plan = rp.trajectory
+    t = plan.tf - left
+    far = MovingTarget.on_platform([30.0, 10.0, 1.0], incline=0.5, speed=2.5, turn_rate=0.2, time=t)
+    step = rp.step(t, _on_plan(plan, t), far)
+    assert step.action is avp.ReplanAction.CANNOT_REACH and rp.cannot_reach, step.reason
+    assert rp.trajectory is plan  # nothing committed
+    predicted = far.predict([plan.tf])[0][0]
+    committed = pad.predict([plan.tf])[0][0]
+    assert step.target_error == pytest.approx(float(np.linalg.norm(predicted - committed)), rel=1e-9)
+    assert step.target_error > 25.0 and math.isinf(step.reach_budget)
+    assert np.linalg.norm(plan(plan.tf) - committed) < 0.5  # the plan ends at the committed pad
+
+
+def test_moving_replanner_consistent_estimate_is_not_cannot_reach():
+    """The same platform, estimated again mid-flight (its own prediction): the predicted pad at
+    contact has not moved, so no step says CANNOT_REACH and the replans commit."""
+    from avp.moving import MovingReplanner
+
+    pad = platform(0.5, 2.5, 0.2)
+    rp = MovingReplanner(pad, CONFIG, avp.ReplanConfig(freeze_horizon=0.25))
+    rp.step(0.0, behind(pad))
+    plan = rp.trajectory
+    for t in np.arange(1, 8) / 30.0:
+        step = rp.step(float(t), _on_plan(rp.trajectory, float(t)), pad.at(float(t)))
+        assert step.action is avp.ReplanAction.REPLANNED, step.reason
+        assert step.target_error < 1e-9
+    assert rp.trajectory.tf == pytest.approx(plan.tf)
+
+
 def test_static_workspace_regions_are_certified_on_moving_plans():
     """Without a ground the 1.5 rad perch swings metres below the pad. A ground 0.5 m below the
     pad gets QP rows and refinement around proven violations, as on a static pad: the plan is
