@@ -19,6 +19,7 @@ import math
 import time
 from dataclasses import dataclass, field, replace
 from enum import Enum
+from functools import lru_cache
 from typing import Any
 
 import numpy as np
@@ -50,7 +51,7 @@ from .qp.line import (
     snap_away_row,
     wedge_normals,
 )
-from .safety import certify_workspace, workspace_blocks
+from .safety import certify_workspace, refinement_blocks, workspace_blocks
 from .solve import solve_perching_qp
 from .trajectory import Trajectory
 from .types import PerchTarget, State
@@ -60,6 +61,33 @@ __all__ = ["LineOptions", "LinePlanResult", "LineStatus", "perch_equivalent", "p
 
 ON_LINE_TOL = 1e-6
 """A start whose CoM is within this (m) of the clearance radius counts as perched on the line."""
+
+NOT_USED = ("alpha", "alpha_nominal", "alpha_range", "q", "t_k", "dt", "pre_impact", "band_min_width",
+            "cone_half_angle", "cone_facets", "contact_velocity", "fov", "flip",
+            "workspace.perch_clearance", "workspace.body_offset")
+"""The :class:`~avp.config.PlannerConfig` settings of a pad perch that a line perch does not use
+(``docs/lines.md``): its contact thrust and velocity are the line's own (:class:`LineOptions`,
+:class:`~avp.line.LineTarget`), it has no pre-impact band (14) and no FoV rows (8)-(9), its flip
+is :class:`LineOptions`'s, and the gripper offset replaces the body offset and the pad-plane
+clearance. :func:`plan_line` logs the ones set away from their defaults."""
+
+
+@lru_cache(maxsize=1)
+def _default_config() -> PlannerConfig:
+    return PlannerConfig()
+
+
+def unused_settings(cfg: PlannerConfig) -> list[str]:
+    """The names in :data:`NOT_USED` whose value in ``cfg`` differs from the default (compared by
+    ``repr``: the camera holds arrays)."""
+    default = _default_config()
+
+    def value(c: Any, name: str) -> str:
+        for part in name.split("."):
+            c = getattr(c, part)
+        return repr(c)
+
+    return [name for name in NOT_USED if value(cfg, name) != value(default, name)]
 
 
 @dataclass(frozen=True)
@@ -389,6 +417,21 @@ def workspace_certificates(traj: Trajectory, name: str, com_end: Array, normal: 
     return out
 
 
+def workspace_refinement(traj: Trajectory, com_end: Array, normal: Array, offset: float, cfg: PlannerConfig,
+                         round_index: int) -> tuple[ConstraintBlock, ...]:
+    """Rows around the proven violations of ``traj``'s workspace certificates (those of
+    :func:`workspace_certificates`), tightened for refinement round ``round_index``:
+    :func:`avp.safety.refinement_blocks`, as a pad's plan refines (``workspace.refinement_rounds``,
+    ``refinement_margin``). Empty when the workspace is certified."""
+    target, ws = _workspace_view(com_end, normal, offset, cfg.workspace)
+    report = certify_workspace(traj, target, ws)
+    if report.certified:
+        return ()
+    layout = layout_for(cfg.n_segments, cfg.degree)
+    knots_rel = traj.knots - traj.knots[0]
+    return refinement_blocks(layout, knots_rel, traj, report, round_index, replace(cfg, workspace=ws))
+
+
 def _bounds(traj: Trajectory, cfg: PlannerConfig) -> BoundReport:
     lim = cfg.limits
     return certify_spline(traj.coefficients, traj.knots, thrust_min=lim.accel_min, thrust_max=lim.accel_max,
@@ -436,30 +479,62 @@ def _start_on_line(state: State, line: LineTarget) -> tuple[int, Array] | None:
     return None
 
 
-def _search(build: Any, certify: Any, factors: tuple[float, ...], T0: Array, cfg: PlannerConfig, log: list[str], label: str) -> tuple[Trajectory | None, bool, BoundReport | None, list[LineCertificate], float]:
-    """Solve and certify for each duration factor; first fully certified wins."""
+def _trajectory(qp: PerchingQp, cfg: PlannerConfig) -> Trajectory | str:
+    """The solution of ``qp`` as a trajectory, or why there is none."""
+    try:
+        outcome = solve_perching_qp(qp, cfg)
+    except InfeasibleError as exc:
+        return str(exc)
+    if not outcome.ok or outcome.c_hat is None:
+        return f"QP {outcome.status.value}"
+    return qp.trajectory(outcome.c_hat, cfg.g)
+
+
+def _search(build: Any, certify: Any, factors: tuple[float, ...], T0: Array, cfg: PlannerConfig, log: list[str], label: str,
+            refine: Any = None) -> tuple[Trajectory | None, bool, BoundReport | None, list[LineCertificate], float]:
+    """Solve and certify for each duration factor; first fully certified wins. ``refine(traj,
+    round)``: rows around the proven workspace violations of ``traj``; while a workspace
+    certificate fails, up to ``workspace.refinement_rounds`` re-solves at the same durations
+    add them (:func:`workspace_refinement`)."""
     best: tuple[Trajectory | None, bool, BoundReport | None, list[LineCertificate], float] = (None, False, None, [], math.nan)
+    def verdicts(report: BoundReport, certs: list[LineCertificate], bad: list[LineCertificate]) -> str:
+        return (f"bounds {'certified' if report.certified else 'NOT certified'}, "
+                f"{len(certs) - len(bad)}/{len(certs)} line certificates" + (f" ({bad[0]})" if bad else ""))
+
     for factor in factors:
         T = T0 * factor
         try:
             qp = build(T)
-            outcome = solve_perching_qp(qp, cfg)
         except InfeasibleError as exc:
             log.append(f"{label} x{factor:g}: {exc}")
             continue
-        if not outcome.ok or outcome.c_hat is None:
-            log.append(f"{label} x{factor:g} (T = {T.sum():.3f} s): QP {outcome.status.value}")
+        traj = _trajectory(qp, cfg)
+        if isinstance(traj, str):
+            log.append(f"{label} x{factor:g} (T = {T.sum():.3f} s): {traj}")
             continue
-        traj = qp.trajectory(outcome.c_hat, cfg.g)
         report = _bounds(traj, cfg)
         if not report.certified and best[0] is not None:  # the line checks cannot rescue it
             log.append(f"{label} x{factor:g} (T = {T.sum():.3f} s): bounds NOT certified")
             continue
         certs = certify(traj)
         bad = [c for c in certs if not c.ok]
+        log.append(f"{label} x{factor:g} (T = {T.sum():.3f} s): {verdicts(report, certs, bad)}")
+        for round_index in range(1, cfg.workspace.refinement_rounds + 1 if refine is not None else 1):
+            if not any(c.name.startswith("workspace") for c in bad):
+                break
+            extra = refine(traj, round_index)
+            if not extra:
+                break
+            qp = qp.with_inequalities(*extra)
+            refined = _trajectory(qp, cfg)
+            if isinstance(refined, str):
+                log.append(f"{label} x{factor:g} workspace refinement round {round_index}: {refined}")
+                break
+            traj, report = refined, _bounds(refined, cfg)
+            certs = certify(traj)
+            bad = [c for c in certs if not c.ok]
+            log.append(f"{label} x{factor:g} workspace refinement round {round_index}: {verdicts(report, certs, bad)}")
         ok = report.certified and not bad
-        log.append(f"{label} x{factor:g} (T = {T.sum():.3f} s): bounds {'certified' if report.certified else 'NOT certified'}, "
-                   f"{len(certs) - len(bad)}/{len(certs)} line certificates" + (f" ({bad[0]})" if bad else ""))
         if ok:
             return traj, True, report, certs, factor
         if best[0] is None:
@@ -518,6 +593,10 @@ def plan_line(
     T0 = np.full(cfg.n_segments, total / cfg.n_segments)
     factors = (1.0,) + (cfg.bounds.schedule() if cfg.bounds.certify else ())
     log: list[str] = []
+    unused = unused_settings(cfg)
+    if unused:
+        log.append("config: a line perch does not use " + ", ".join(unused) + " (set away from the defaults; "
+                   "docs/lines.md)")
     start_root = (on_line[0], 4) if on_line is not None else None
     on_normal = on_line[1] if on_line is not None else None
 
@@ -525,9 +604,12 @@ def plan_line(
         certs = line_certificates(traj, "perch", line, contact, opts, contact_at_end=True, start_root=start_root)
         return certs + workspace_certificates(traj, "perch", traj(traj.tf), contact.n, r, cfg.workspace)
 
+    def refine_perch(traj: Trajectory, round_index: int) -> tuple[ConstraintBlock, ...]:
+        return workspace_refinement(traj, traj(traj.tf), contact.n, r, cfg, round_index)
+
     perch, ok, report, certs, _f = _search(
         lambda T: _perch_qp(state, line, contact, cfg, opts, T, on_normal), certify_perch,
-        factors if perch_search else (1.0,), T0, cfg, log, "perch")
+        factors if perch_search else (1.0,), T0, cfg, log, "perch", refine_perch)
     t_perch = time.perf_counter() - t_start
     if perch is None:
         return LinePlanResult(status=LineStatus.INFEASIBLE, perch=None, recovery=None, contact=contact, grasp=math.nan, log=tuple(log), timings={"perch": t_perch, "recovery": 0.0, "total": t_perch})
@@ -550,11 +632,15 @@ def plan_line(
             return certs + workspace_certificates(
                 traj, "recovery", traj(traj.tf), np.array([0.0, 0.0, 1.0]), 0.0, cfg.workspace)
 
+        def refine_recovery(traj: Trajectory, round_index: int) -> tuple[ConstraintBlock, ...]:
+            return workspace_refinement(traj, traj(traj.tf), np.array([0.0, 0.0, 1.0]), 0.0, cfg, round_index)
+
         build = lambda T: _recovery_qp(perch, point, contact, line, cfg, opts, T)
         rcerts: list[LineCertificate] = []
         recovery, rec_ok, rec_report = None, False, None
         if contact.n[2] >= 0.0 or line.contact_speed != 0.0:
-            recovery, rec_ok, rec_report, rcerts, _rf = _search(build, certify_recovery, (1.0,), rT0, cfg, log, "recovery")
+            recovery, rec_ok, rec_report, rcerts, _rf = _search(build, certify_recovery, (1.0,), rT0, cfg, log, "recovery",
+                                                                      refine_recovery)
         at_rest = not (np.any(state.velocity) or np.any(state.acceleration) or np.any(state.jerk))
         if not rec_ok and line.contact_speed == 0.0 and at_rest and cfg.limits.rotor_drag:
             # with drag the perch ends with j = -d a (no rotation), which its reverse does not continue
@@ -572,7 +658,7 @@ def plan_line(
             if back_ok or recovery is None:
                 recovery, rec_ok, rec_report, rcerts = back, back_ok, back_report, back_certs
         if not rec_ok and len(factors) > 1:
-            again = _search(build, certify_recovery, factors[1:], rT0, cfg, log, "recovery")
+            again = _search(build, certify_recovery, factors[1:], rT0, cfg, log, "recovery", refine_recovery)
             if again[1] or recovery is None:
                 recovery, rec_ok, rec_report, rcerts, _rf = again
         certs = certs + rcerts

@@ -8,6 +8,7 @@ oracle built from the same f64 inputs.
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 from fractions import Fraction
 
 import numpy as np
@@ -405,3 +406,43 @@ def test_hanging_below_a_catenary_is_certified() -> None:
     assert res.ok, res.log
     for traj in (res.perch, res.recovery):
         assert sampled_distance(traj, line).min() >= 0.15 - 1e-6
+
+
+def test_workspace_refinement_certifies_a_line_perch_past_a_sphere() -> None:
+    """A sphere on the way to a line: without refinement rounds no duration is certified (the
+    initial sampled rows let the plan clip it); with them, rows around the proven violation
+    certify a plan, and a dense grid (not the certificate) keeps perch and recovery outside the
+    sphere and off the line."""
+    limits = VehicleLimits(mass=0.8, thrust_min=0.5, thrust_max=4 * 0.8 * 9.81)
+    line = LineTarget.segment([2.0, -1.5, 3.7], [2.0, 1.5, 3.7], pitch=0.0, gripper_offset=0.15)
+    start = avp.State.hover([0.0, 0.0, 2.5])
+    sphere = avp.Sphere(center=(1.0, 0.0, 3.25), radius=0.3)
+    ws = Workspace(ground_z=0.8, spheres=(sphere,))
+    none = plan_line(start, line, PlannerConfig(limits=limits, workspace=replace(ws, refinement_rounds=0)))
+    assert none.status is LineStatus.NOT_CERTIFIED
+    assert any(c.name.startswith("workspace: sphere") for c in none.violations)
+    res = plan_line(start, line, PlannerConfig(limits=limits, workspace=ws))
+    assert res.status is LineStatus.SOLVED, res.log
+    assert any("workspace refinement round" in entry for entry in res.log)
+    for traj in (res.perch, res.recovery):
+        p = traj(np.linspace(traj.t0, traj.tf, 20001))
+        assert np.linalg.norm(p - np.asarray(sphere.center), axis=1).min() > sphere.radius
+    assert sampled_distance(res.perch, line).min() >= line.gripper_offset - 1e-9
+
+
+def test_a_line_perch_logs_the_pad_settings_it_does_not_use() -> None:
+    """A configuration shared with pad perches: the settings a line perch does not use are named
+    in its log when they differ from the defaults, and only then; they do not change the plan."""
+    start = avp.State.hover([1.0, 0.0, 2.6])
+    line = horizontal_line(pitch=math.radians(45))
+    plain = plan_line(start, line, CFG, LineOptions(recovery=False))
+    assert not any(entry.startswith("config:") for entry in plain.log)
+    pad_cfg = replace(CFG, alpha_range=(5.0, 9.0), fov=avp.FovConfig(enabled=False), t_k=0.4,
+                      workspace=Workspace(body_offset=0.1))
+    res = plan_line(start, line, pad_cfg, LineOptions(recovery=False))
+    notes = [entry for entry in res.log if entry.startswith("config:")]
+    assert len(notes) == 1
+    for name in ("alpha_range", "fov", "t_k", "workspace.body_offset"):
+        assert name in notes[0]
+    assert "contact_velocity" not in notes[0]
+    assert np.array_equal(res.perch.coefficients, plain.perch.coefficients)
