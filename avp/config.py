@@ -11,7 +11,7 @@ import itertools
 import math
 from dataclasses import dataclass, field
 from enum import Enum
-from functools import cached_property
+from functools import cached_property, lru_cache
 from typing import Any
 
 import numpy as np
@@ -725,6 +725,25 @@ class PlannerConfig:
     def band_samples(self) -> int:
         """Number of band (14) samples, ``round(t_k/dt)`` (``int`` would give 14 for 0.15/0.01)."""
         return int(round(self.t_k / self.dt))
+
+    def changed(self, names: tuple[str, ...]) -> list[str]:
+        """The settings among ``names`` (dotted: ``"workspace.body_offset"``) that differ from
+        a default ``PlannerConfig()``'s, compared by ``repr`` (the camera holds arrays). A planner
+        that does not use some settings logs these (:data:`avp.line_planner.NOT_USED`,
+        :data:`avp.moving.NOT_USED`)."""
+        default = _default_planner_config()
+
+        def value(c: Any, name: str) -> str:
+            for part in name.split("."):
+                c = getattr(c, part)
+            return repr(c)
+
+        return [name for name in names if value(self, name) != value(default, name)]
+
+
+@lru_cache(maxsize=1)
+def _default_planner_config() -> PlannerConfig:
+    return PlannerConfig()
 
 
 @dataclass(frozen=True)

@@ -19,7 +19,6 @@ import math
 import time
 from dataclasses import dataclass, field, replace
 from enum import Enum
-from functools import lru_cache
 from typing import Any
 
 import numpy as np
@@ -69,25 +68,8 @@ NOT_USED = ("alpha", "alpha_nominal", "alpha_range", "q", "t_k", "dt", "pre_impa
 (``docs/lines.md``): its contact thrust and velocity are the line's own (:class:`LineOptions`,
 :class:`~avp.line.LineTarget`), it has no pre-impact band (14) and no FoV rows (8)-(9), its flip
 is :class:`LineOptions`'s, and the gripper offset replaces the body offset and the pad-plane
-clearance. :func:`plan_line` logs the ones set away from their defaults."""
-
-
-@lru_cache(maxsize=1)
-def _default_config() -> PlannerConfig:
-    return PlannerConfig()
-
-
-def unused_settings(cfg: PlannerConfig) -> list[str]:
-    """The names in :data:`NOT_USED` whose value in ``cfg`` differs from the default (compared by
-    ``repr``: the camera holds arrays)."""
-    default = _default_config()
-
-    def value(c: Any, name: str) -> str:
-        for part in name.split("."):
-            c = getattr(c, part)
-        return repr(c)
-
-    return [name for name in NOT_USED if value(cfg, name) != value(default, name)]
+clearance. :func:`plan_line` logs the ones set away from their defaults
+(:meth:`~avp.config.PlannerConfig.changed`)."""
 
 
 @dataclass(frozen=True)
@@ -593,7 +575,7 @@ def plan_line(
     T0 = np.full(cfg.n_segments, total / cfg.n_segments)
     factors = (1.0,) + (cfg.bounds.schedule() if cfg.bounds.certify else ())
     log: list[str] = []
-    unused = unused_settings(cfg)
+    unused = cfg.changed(NOT_USED)
     if unused:
         log.append("config: a line perch does not use " + ", ".join(unused) + " (set away from the defaults; "
                    "docs/lines.md)")

@@ -48,7 +48,7 @@ from .errors import (
     InfeasibleError,
 )
 from .moving_clearance import ClearanceReport, certify_moving_clearance
-from .planner import PlanStatus, planning_error
+from .planner import STILL_SPEED, PlanStatus, planning_error
 from .platform import MovingTarget
 from .qp.moving import MovingQpBuilder, TerminalYaw, contact_point, objective
 from .replan import ReplanConfig, Replanner, ReplanStep, _target_change
@@ -220,6 +220,16 @@ def contact_errors(
     )
 
 
+NOT_USED = ("contact_velocity", "fov", "flip.thrust", "flip.turn_rate", "bounds.certify", "bounds.time_search",
+            "bounds.factors", "bounds.growth", "bounds.max_steps", "bounds.relaxations")
+"""The :class:`~avp.config.PlannerConfig` settings of a static perch that the moving planner does
+not use (``docs/moving.md``): the contact velocity is :class:`MovingConfig`'s (``normal_speed``,
+``slip_max``), the FoV rows are not formulated for a moving pad, the overhang's horizontal-thrust
+waypoint is not built (``flip.enabled``, ``min_incline`` and ``cone_band`` act through the band),
+and the arrival-time search with its certified bounds replaces ``bounds`` (never off, never
+relaxed). :func:`plan_moving_detailed` logs the ones set away from their defaults."""
+
+
 def _planner_config(config: PlannerConfig | None, moving: MovingConfig) -> PlannerConfig:
     cfg = config if config is not None else PlannerConfig()
     if not isinstance(cfg, PlannerConfig):
@@ -306,6 +316,14 @@ def plan_moving_detailed(
     cfg = _planner_config(config, mcfg)
     lim = cfg.limits
     log: list[str] = []
+    unused = (config if config is not None else cfg).changed(NOT_USED)
+    if unused:
+        log.append("config: the moving planner does not use " + ", ".join(unused) + " (set away from the defaults; "
+                   "docs/moving.md)")
+    gap = float(np.linalg.norm(target.point - state.position))
+    if gap < cfg.min_distance and float(np.linalg.norm(state.velocity - target.velocity)) < STILL_SPEED:
+        raise ConfigError("target.point", f"is {gap:.3f} m from a start at rest relative to the pad (config.min_distance "
+                          f"= {cfg.min_distance} m); a perch needs a pad away from the vehicle")
     evals: list[_Eval] = []
     solve_time = 0.0
     builder = MovingQpBuilder(state, cfg, mcfg.normal_speed, mcfg.slip_max, mcfg.slip_weight, mcfg.zero_jerk,

@@ -367,6 +367,38 @@ def test_moving_replanner_consistent_estimate_is_not_cannot_reach():
     assert rp.trajectory.tf == pytest.approx(plan.tf)
 
 
+def test_moving_start_at_rest_on_a_stopped_pad_is_a_typed_error():
+    """config.min_distance as for a static pad: a start 2 cm from a pad that does not move, at
+    rest relative to it, is a ConfigError naming target.point; the same start moving with a
+    2 m/s platform, 2 cm behind its pad, too (relative rest); a start 2 m away is planned."""
+    from avp.errors import ConfigError
+
+    for pad in (platform(0.5, 0.0), platform(0.5, 2.0)):
+        near = avp.State(position=pad.point - [0.02, 0.0, 0.0], velocity=pad.velocity)
+        with pytest.raises(ConfigError, match="target.point"):
+            plan_moving_detailed(near, pad, CONFIG)
+    pad = platform(0.5, 0.0)
+    res = plan_moving_detailed(avp.State(position=pad.point - [2.0, 0.0, 0.0]), pad, CONFIG)
+    assert res.trajectory is not None
+
+
+def test_moving_planner_logs_the_settings_it_does_not_use():
+    """Settings of a static perch the moving planner does not use (NOT_USED) are named in its
+    log when they differ from the defaults, and leave the plan as it is."""
+    from dataclasses import replace
+
+    pad = platform(0.5, 1.0)
+    start = behind(pad)
+    plain = plan_moving_detailed(start, pad, CONFIG)
+    assert not any(entry.startswith("config:") for entry in plain.log)
+    changed = replace(CONFIG, flip=replace(CONFIG.flip, turn_rate=0.5),
+                      bounds=replace(CONFIG.bounds, relaxations=()))
+    res = plan_moving_detailed(start, pad, changed)
+    notes = [entry for entry in res.log if entry.startswith("config:")]
+    assert len(notes) == 1 and "flip.turn_rate" in notes[0] and "bounds.relaxations" in notes[0]
+    assert np.array_equal(res.trajectory.coefficients, plain.trajectory.coefficients)
+
+
 def test_static_workspace_regions_are_certified_on_moving_plans():
     """Without a ground the 1.5 rad perch swings metres below the pad. A ground 0.5 m below the
     pad gets QP rows and refinement around proven violations, as on a static pad: the plan is
