@@ -791,7 +791,8 @@ class ReplanConfig:
         When re-anchoring: derivative orders taken from odometry (2: position and velocity, yaw
         and yaw rate); higher orders come from the committed plan, so commands stay continuous (6).
     warm_start:
-        Pass the committed plan as initial guess to back-ends that accept one.
+        Pass the committed plan as initial guess to back-ends that accept one (ProxQP, OSQP;
+        DAQP takes none). A static pad only: the moving and line planners take no guess.
     search_on_replan:
         Let replans run the duration search and relaxations of ``config.bounds``. Off: a replan
         keeps the committed contact time (in closed loop the search made the contact time drift
@@ -854,7 +855,8 @@ class ReplanConfig:
         1.5-4 cm were otherwise uncertifiable and the 2 m/s slide turned each cm of normal error into
         about 7 cm along the pad. Off by default: measured worse (0/6 vs 1/6 at 4.5 m and 0/6 vs
         4/6 at 7.5 m on a wall), since early corrections from far, noisy estimates moved the
-        contact time by tenths of a second.
+        contact time by tenths of a second. A static pad only: the moving and line replanners
+        keep the committed contact time.
     retime_fraction:
         Cap on the retiming, as a fraction of the time left.
     retime_retries:
