@@ -7,6 +7,7 @@ variant with :func:`dataclasses.replace`.
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 import math
 from dataclasses import dataclass, field
@@ -728,22 +729,40 @@ class PlannerConfig:
 
     def changed(self, names: tuple[str, ...]) -> list[str]:
         """The settings among ``names`` (dotted: ``"workspace.body_offset"``) that differ from
-        a default ``PlannerConfig()``'s, compared by ``repr`` (the camera holds arrays). A planner
-        that does not use some settings logs these (:data:`avp.line_planner.NOT_USED`,
-        :data:`avp.moving.NOT_USED`)."""
+        a default ``PlannerConfig()``'s (:func:`_same`). A planner that does not use some
+        settings logs these (:data:`avp.line_planner.NOT_USED`, :data:`avp.moving.NOT_USED`).
+        Kept per configuration (it is frozen): a replanner asks at every step."""
+        cache: dict[tuple[str, ...], list[str]] = self.__dict__.setdefault("_changed", {})
+        if names in cache:
+            return list(cache[names])
         default = _default_planner_config()
 
-        def value(c: Any, name: str) -> str:
+        def value(c: Any, name: str) -> Any:
             for part in name.split("."):
                 c = getattr(c, part)
-            return repr(c)
+            return c
 
-        return [name for name in names if value(self, name) != value(default, name)]
+        cache[names] = [name for name in names if not _same(value(self, name), value(default, name))]
+        return list(cache[names])
 
 
 @lru_cache(maxsize=1)
 def _default_planner_config() -> PlannerConfig:
     return PlannerConfig()
+
+
+def _same(a: Any, b: Any) -> bool:
+    """``a == b`` for settings: dataclasses field by field, arrays element by element (the
+    camera's ``R_BC``), the rest by ``==``."""
+    if a is b:
+        return True
+    if isinstance(a, np.ndarray) or isinstance(b, np.ndarray):
+        return isinstance(a, np.ndarray) and isinstance(b, np.ndarray) and a.shape == b.shape and bool(np.array_equal(a, b))
+    if dataclasses.is_dataclass(a) and not isinstance(a, type):
+        return type(a) is type(b) and all(_same(getattr(a, f.name), getattr(b, f.name)) for f in dataclasses.fields(a))
+    if isinstance(a, tuple) and isinstance(b, tuple):
+        return len(a) == len(b) and all(_same(x, y) for x, y in zip(a, b, strict=True))
+    return bool(a == b)
 
 
 @dataclass(frozen=True)
@@ -791,8 +810,9 @@ class ReplanConfig:
         When re-anchoring: derivative orders taken from odometry (2: position and velocity, yaw
         and yaw rate); higher orders come from the committed plan, so commands stay continuous (6).
     warm_start:
-        Pass the committed plan as initial guess to back-ends that accept one (ProxQP, OSQP;
-        DAQP takes none). A static pad only: the moving and line planners take no guess.
+        Pass the committed plan as initial guess to back-ends that accept one (``warm_start``
+        in :data:`avp.solve.BACKENDS`; DAQP takes none). A static pad only: the moving and line
+        planners take no guess.
     search_on_replan:
         Let replans run the duration search and relaxations of ``config.bounds``. Off: a replan
         keeps the committed contact time (in closed loop the search made the contact time drift

@@ -61,7 +61,7 @@ __all__ = ["LineOptions", "LinePlanResult", "LineStatus", "perch_equivalent", "p
 ON_LINE_TOL = 1e-6
 """A start whose CoM is within this (m) of the clearance radius counts as perched on the line."""
 
-NOT_USED = ("alpha", "alpha_nominal", "alpha_range", "q", "t_k", "dt", "pre_impact", "band_min_width",
+NOT_USED = ("alpha", "alpha_nominal", "alpha_range", "q", "dt", "pre_impact", "band_min_width",
             "cone_half_angle", "cone_facets", "contact_velocity", "fov", "flip",
             "workspace.perch_clearance", "workspace.body_offset")
 """The :class:`~avp.config.PlannerConfig` settings of a pad perch that a line perch does not use
@@ -81,7 +81,8 @@ class LineOptions:
     approach_deceleration:
         Minimum of ``n . a(t_f)`` (m/s^2): at zero contact speed the CoM must decelerate towards
         the line (otherwise it was closer to it just before contact). Sets the lower end of the
-        contact thrust range ``n . (a + g e3) >= g n_z + this``.
+        contact thrust range ``n . f >= g n_z + this`` on the thrust ``f = a + g e3 + d v``
+        (``d = limits.rotor_drag``; with a contact speed ``c`` that is ``n . a >= this + d c``).
     thrust_fraction:
         The contact thrust stays below this fraction of the maximum.
     guide_dt:
@@ -620,7 +621,7 @@ def plan_line(
         build = lambda T: _recovery_qp(perch, point, contact, line, cfg, opts, T)
         rcerts: list[LineCertificate] = []
         recovery, rec_ok, rec_report = None, False, None
-        if contact.n[2] >= 0.0 or line.contact_speed != 0.0:
+        if contact.n[2] >= 0.0 or line.contact_speed != 0.0 or cfg.limits.rotor_drag:  # else the reverse first
             recovery, rec_ok, rec_report, rcerts, _rf = _search(build, certify_recovery, (1.0,), rT0, cfg, log, "recovery",
                                                                       refine_recovery)
         at_rest = not (np.any(state.velocity) or np.any(state.acceleration) or np.any(state.jerk))

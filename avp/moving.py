@@ -320,8 +320,9 @@ def plan_moving_detailed(
     if unused:
         log.append("config: the moving planner does not use " + ", ".join(unused) + " (set away from the defaults; "
                    "docs/moving.md)")
-    gap = float(np.linalg.norm(target.point - state.position))
-    if gap < cfg.min_distance and float(np.linalg.norm(state.velocity - target.velocity)) < STILL_SPEED:
+    pad_now = target.at(state.time)  # the pad where it is at the start
+    gap = float(np.linalg.norm(pad_now.point - state.position))
+    if gap < cfg.min_distance and float(np.linalg.norm(state.velocity - pad_now.velocity)) < STILL_SPEED:
         raise ConfigError("target.point", f"is {gap:.3f} m from a start at rest relative to the pad (config.min_distance "
                           f"= {cfg.min_distance} m); a perch needs a pad away from the vehicle")
     evals: list[_Eval] = []
@@ -533,6 +534,9 @@ class MovingReplanner(Replanner):
             raise ConfigError("target", f"expected avp.platform.MovingTarget, got {type(target).__name__}")
         super().__init__(target, config, replan, trajectory)
         self.moving = moving if moving is not None else MovingConfig()
+        # replans keep the committed contact time through ``duration`` (_solve); the moving
+        # planner has no duration schedule or relaxations for ``search_on_replan`` to turn off
+        self._replan_config = self.config
 
     def step(self, t: float, odometry: State, target_estimate: PerchTarget | None = None) -> ReplanStep:
         if target_estimate is not None and not isinstance(target_estimate, MovingTarget):

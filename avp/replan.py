@@ -625,7 +625,8 @@ class Replanner:
         """One planning call to ``target`` (default: the latest estimate) within ``deadline`` (s,
         :func:`avp.plan_detailed`); the hook a subclass for another target model overrides (it
         then plans to its own ``self.target``, and the policy uses full corrections only: no
-        blending, reach budget or ``CANNOT_REACH``; its planner may ignore the deadline)."""
+        blending or reach budget, and ``CANNOT_REACH`` only where it sets :attr:`_reach_cue`; its
+        planner may ignore the deadline)."""
         return plan_detailed(
             state, target if target is not None else self.target, config, durations=durations,
             previous=previous, warm_start=previous if self.replan.warm_start else None, deadline=deadline,

@@ -7,8 +7,9 @@ order, interleaved so both see the same machine load:
 
 * ``avp.plan`` with the defaults (FoV rows and SQP step, bound certificates), timed as it is;
   then, in a second pass over the same plans, its wall time split into stages by wrapping the
-  functions that do the work (the wrappers cost a little in every call, so that pass's total,
-  printed above the stages, is longer than the latency): **build** (QP assembly), **elimination**
+  functions that do the work (the wrappers cost a little in every call, so that pass's total is
+  printed above the stages, apart from the latency; with ``--fresh`` the second pass plans the
+  first pass's starts again, so its caches are warm): **build** (QP assembly), **elimination**
   (``PerchingQp.reduce``: equality elimination and the reduced matrices), **FoV** (linearising the
   rows (8)-(9) and scoring visibility), **solve** (the back-end call: ``daqp.solve`` on the
   two-sided rows for DAQP, ``qpsolvers.solve_problem`` for the others),

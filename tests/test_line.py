@@ -437,12 +437,12 @@ def test_a_line_perch_logs_the_pad_settings_it_does_not_use() -> None:
     line = horizontal_line(pitch=math.radians(45))
     plain = plan_line(start, line, CFG, LineOptions(recovery=False))
     assert not any(entry.startswith("config:") for entry in plain.log)
-    pad_cfg = replace(CFG, alpha_range=(5.0, 9.0), fov=avp.FovConfig(enabled=False), t_k=0.4,
+    pad_cfg = replace(CFG, alpha_range=(5.0, 9.0), fov=avp.FovConfig(enabled=False), q=0.3,
                       workspace=Workspace(body_offset=0.1))
     res = plan_line(start, line, pad_cfg, LineOptions(recovery=False))
     notes = [entry for entry in res.log if entry.startswith("config:")]
     assert len(notes) == 1
-    for name in ("alpha_range", "fov", "t_k", "workspace.body_offset"):
+    for name in ("alpha_range", "fov", "q", "workspace.body_offset"):
         assert name in notes[0]
     assert "contact_velocity" not in notes[0]
     assert np.array_equal(res.perch.coefficients, plain.perch.coefficients)

@@ -365,6 +365,11 @@ def test_moving_replanner_consistent_estimate_is_not_cannot_reach():
         assert step.action is avp.ReplanAction.REPLANNED, step.reason
         assert step.target_error < 1e-9
     assert rp.trajectory.tf == pytest.approx(plan.tf)
+    # frozen near contact, the pad a few metres on from where it was at the start: compared at
+    # the contact time, the estimate agrees with the committed contact point
+    t = rp.trajectory.tf - 0.1
+    step = rp.step(t, _on_plan(rp.trajectory, t), pad.at(t))
+    assert step.action is avp.ReplanAction.FROZEN_NEAR_CONTACT and step.target_error < 1e-9, step.reason
 
 
 def test_moving_start_at_rest_on_a_stopped_pad_is_a_typed_error():
@@ -377,6 +382,17 @@ def test_moving_start_at_rest_on_a_stopped_pad_is_a_typed_error():
         near = avp.State(position=pad.point - [0.02, 0.0, 0.0], velocity=pad.velocity)
         with pytest.raises(ConfigError, match="target.point"):
             plan_moving_detailed(near, pad, CONFIG)
+    # a start one second after the estimate: the pad where it is then, 2 cm ahead (an error) or
+    # 2 m ahead (planned), not where the estimate saw it
+    pad = platform(0.5, 2.0)
+    later = pad.at(1.0)
+    for gap, fails in ((0.02, True), (2.0, False)):
+        start = avp.State(position=later.point - [gap, 0.0, 0.0], velocity=later.velocity, time=1.0)
+        if fails:
+            with pytest.raises(ConfigError, match="target.point"):
+                plan_moving_detailed(start, pad, CONFIG)
+        else:
+            assert plan_moving_detailed(start, pad, CONFIG).trajectory is not None
     pad = platform(0.5, 0.0)
     res = plan_moving_detailed(avp.State(position=pad.point - [2.0, 0.0, 0.0]), pad, CONFIG)
     assert res.trajectory is not None

@@ -277,13 +277,25 @@ def test_line_flip_rows_bound_the_drag_aware_thrust():
         assert np.all(f[sel] @ direction >= opts.flip_thrust - 1e-6)
 
 
-def test_line_recovery_with_drag_continues_the_perch():
+@pytest.mark.parametrize("search", [True, False])
+def test_line_recovery_with_drag_continues_the_perch(search):
     """The perch run backwards is no recovery with drag (it ends with jerk -d a, which the
-    reverse flips): the QP recovery, continuous up to snap with the perch, is used instead."""
+    reverse flips): the QP recovery, continuous up to snap with the perch, is used instead, at
+    its allocated time first. Without a duration search (bounds.certify off) that one recovery
+    is all there is: here its bounds fail, and the result says so (it has a recovery, and it is
+    not SOLVED)."""
     drag = 0.3
-    res = avp.plan_line(avp.State.hover([1.0, 0.3, 1.8]), _line(120.0), _line_config(drag))
-    assert res.ok, res.log
+    cfg = _line_config(drag)
+    if not search:
+        cfg = dataclasses.replace(cfg, bounds=dataclasses.replace(cfg.bounds, certify=False))
+    res = avp.plan_line(avp.State.hover([1.0, 0.3, 1.8]), _line(120.0), cfg)
     assert any("not with rotor drag" in line for line in res.log)
+    assert any(line.startswith("recovery x1 ") for line in res.log)  # the QP recovery at its allocated time
+    if not search:
+        assert res.recovery is not None and res.status is avp.LineStatus.NOT_CERTIFIED
+        assert res.recovery_bounds is not None and not res.recovery_bounds.certified
+        return
+    assert res.ok, res.log
     p, r = res.perch, res.recovery
     end, begin = p.derivatives(p.tf), r.derivatives(r.t0)
     assert np.all(np.abs(end - begin) / np.maximum(1.0, np.abs(end)) < 1e-6)
