@@ -60,6 +60,22 @@ def _is_bool_array(value: Any) -> bool:
     return isinstance(value, np.ndarray) and value.dtype.kind == "b"
 
 
+LIMITS = {"position": (1e6, "m"), "velocity": (1e3, "m/s"), "acceleration": (1e4, "m/s^2"),
+          "jerk": (1e6, "m/s^3"), "yaw": (1e6, "rad"), "yaw_rate": (1e3, "rad/s"), "time": (1e9, "s")}
+"""Magnitudes beyond which a state or a pad is not a flight (a 1000 km position, 1 km/s, or a
+time past 1e9 s, where float64 knots lose the millisecond): refused by :func:`within`, since
+past them the planner's arithmetic overflows or rounds instead of failing clearly."""
+
+
+def within(field: str, value: Any, kind: str) -> None:
+    """Raise :class:`ConfigError` when ``max |value|`` exceeds :data:`LIMITS` ``[kind]``."""
+    limit, unit = LIMITS[kind]
+    size = float(np.max(np.abs(value)))
+    if size > limit:
+        raise ConfigError(field, f"has magnitude {size:.3g} {unit}, beyond {limit:g} {unit}: not a physical "
+                          f"{kind.replace('_', ' ')} of a flight (check the units and the frame)")
+
+
 def finite_float(field: str, value: Any) -> float:
     """``value`` as a finite float (a bool or a string is refused, :data:`_NOT_QUANTITIES`)."""
     if isinstance(value, _NOT_QUANTITIES) or _is_bool_array(value):
@@ -124,6 +140,9 @@ def rotation(field: str, value: Any) -> npt.NDArray[np.float64]:
 def unit_vector(field: str, value: Any) -> npt.NDArray[np.float64]:
     """``value`` normalised to unit length; rejects (near) zero vectors."""
     v = np.array(frozen_array(field, value, (3,)))
+    scale = float(np.max(np.abs(v)))
+    if scale > 1e150:  # |v| would overflow: scaled first
+        v = v / scale
     n = float(np.linalg.norm(v))
     if n < 1e-9:
         raise ConfigError(field, "must be a nonzero vector")

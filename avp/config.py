@@ -57,6 +57,9 @@ class QpForm(Enum):
     FULL = "full: coefficients with A c = b passed to the solver as is"
 
 
+MAX_SEGMENTS = 32
+"""Most spline segments a plan may have (the QP grows with their square; 200 took minutes)."""
+
 ALPHA_NOMINAL = 4.0
 """Nominal mass-normalised contact thrust (m/s^2) on steep pads, as in the paper's experiments."""
 
@@ -416,10 +419,10 @@ class Workspace:
         for sph in self.spheres:
             if not isinstance(sph, Sphere):
                 raise ConfigError("workspace.spheres", f"expected avp.Sphere items, got {type(sph).__name__}")
-        for name, lo in (("samples_per_segment", 2), ("refinement_rounds", 0)):
+        for name, lo, hi in (("samples_per_segment", 2, 1000), ("refinement_rounds", 0, 100)):
             val = getattr(self, name)
-            if isinstance(val, bool) or not isinstance(val, (int, np.integer)) or val < lo:
-                raise ConfigError(f"workspace.{name}", f"must be an integer >= {lo}, got {val!r}")
+            if isinstance(val, bool) or not isinstance(val, (int, np.integer)) or not lo <= val <= hi:
+                raise ConfigError(f"workspace.{name}", f"must be an integer in [{lo}, {hi}], got {val!r}")
         if not (math.isfinite(self.refinement_margin) and self.refinement_margin >= 0.0):
             raise ConfigError("workspace.refinement_margin", "must be finite and >= 0")
 
@@ -646,6 +649,9 @@ class PlannerConfig:
                 raise ConfigError(f"config.{name}", f"must be an integer >= {lo}, got {val!r}")
         if self.degree > 20:
             raise ConfigError("config.degree", f"at most 20 is supported, got {self.degree}")
+        for name, hi in (("n_segments", MAX_SEGMENTS), ("cone_facets", 64)):
+            if getattr(self, name) > hi:
+                raise ConfigError(f"config.{name}", f"at most {hi} is supported, got {getattr(self, name)}")
         if self.continuity_order >= self.degree:
             raise ConfigError("config.continuity_order", f"must be below the degree ({self.degree})")
         if self.position_cost_order > self.degree or self.yaw_cost_order > self.degree:
@@ -659,6 +665,12 @@ class PlannerConfig:
             raise ConfigError("config.q", f"must be finite and >= 0, got {self.q}")
         v.positive_float("config.t_k", self.t_k)
         v.positive_float("config.dt", self.dt)
+        ratio = self.t_k / self.dt
+        if isinstance(self.pre_impact, PreImpactMode) and self.pre_impact is not PreImpactMode.OFF \
+                and not (math.isfinite(ratio) and 1 <= round(ratio) <= 1000):
+            raise ConfigError("config.dt", f"{self.dt:g} s gives t_k / dt = {ratio:.3g} samples of the band (14) over "
+                              f"t_k = {self.t_k:g} s; it needs 1 to 1000 (dt in [{self.t_k / 1000:.3g}, "
+                              f"{self.t_k:.3g}] s), or pre_impact OFF")
         if not (math.isfinite(self.band_min_width) and self.band_min_width >= 0):
             raise ConfigError("config.band_min_width", "must be finite and >= 0 m/s^2")
         if not (0.0 < self.cone_half_angle < math.pi / 2):
@@ -1021,3 +1033,7 @@ class ReplanConfig:
         object.__setattr__(self, "retime_retries", rr)
         object.__setattr__(self, "retime_min_time", v.nonnegative_float("replan.retime_min_time",
                                                                         self.retime_min_time))
+        fraction = v.nonnegative_float("replan.retime_fraction", self.retime_fraction)
+        if fraction >= 1.0:
+            raise ConfigError("replan.retime_fraction", f"must be in [0, 1) (a share of the time left), got {fraction}")
+        object.__setattr__(self, "retime_fraction", fraction)

@@ -61,6 +61,11 @@ mass-normalised thrust (m/s^2); attitude quaternion ``R_WB`` (scalar first); bod
 def _times(traj: Trajectory, rate: float) -> Array:
     if not (isinstance(rate, (int, float)) and math.isfinite(rate) and rate > 0):
         raise ConfigError("rate", f"must be a positive sample rate in Hz, got {rate!r}")
+    from .trajectory import MAX_SAMPLES
+
+    if traj.duration * rate >= MAX_SAMPLES:
+        raise ConfigError("rate", f"{rate:g} Hz gives {traj.duration * rate:.3g} samples over {traj.duration:.3g} s; "
+                          f"at most {MAX_SAMPLES:g}: lower the rate")
     return traj.sample(1.0 / float(rate))
 
 

@@ -148,6 +148,9 @@ class LineTarget:
         if self.side is not None:
             s = np.array(v.frozen_array("line.side", self.side, (3,)))
             s[2] = 0.0
+            scale = float(np.max(np.abs(s)))
+            if scale > 1e150:  # its norm would overflow: scaled first
+                s = s / scale
             if np.linalg.norm(s) < 1e-9:
                 raise ConfigError("line.side", "must have a horizontal component")
             s = s / np.linalg.norm(s)

@@ -135,7 +135,8 @@ class LineOptions:
         v.positive_float("options.approach_deceleration", self.approach_deceleration)
         if not 0.0 < self.thrust_fraction <= 1.0:
             raise ConfigError("options.thrust_fraction", f"must be in (0, 1], got {self.thrust_fraction}")
-        v.positive_float("options.guide_dt", self.guide_dt)
+        if v.positive_float("options.guide_dt", self.guide_dt) < 1e-3:
+            raise ConfigError("options.guide_dt", f"must be at least 1 ms (one guide row per sample), got {self.guide_dt}")
         if self.wedge_angle is not None:
             a = v.finite_float("options.wedge_angle", self.wedge_angle)
             if not 0.0 < a < math.pi:

@@ -41,6 +41,9 @@ from .types import PerchTarget, State
 __all__ = ["PlanResult", "PlanStatus", "PlanTimings", "plan", "plan_detailed"]
 
 
+MAX_GUESS = 1e9
+"""Largest normalised coefficient of a warm start's fit that is passed to a back-end."""
+
 STILL_SPEED = 0.1
 """A start closer than ``config.min_distance`` to the target is rejected only when slower than
 this (m/s): a vehicle at rest on the target has nothing to plan, while a replan from a moving
@@ -211,9 +214,10 @@ def _fit_initvals(warm: Trajectory, layout: DecisionLayout, knots: Array) -> Arr
     coefficients): an initial guess for back-ends that take one."""
     u = layout.fit_nodes
     out = np.empty((4, layout.n_segments, layout.n_coeffs))
-    for i in range(layout.n_segments):
-        t = np.clip(knots[i] + u * (knots[i + 1] - knots[i]), warm.t0, warm.tf)
-        out[:, i, :] = (layout.fit_pinv @ warm.evaluate(t)).T
+    with np.errstate(over="ignore", invalid="ignore"):
+        for i in range(layout.n_segments):
+            t = np.clip(knots[i] + u * (knots[i + 1] - knots[i]), warm.t0, warm.tf)
+            out[:, i, :] = (layout.fit_pinv @ warm.evaluate(t)).T
     return out.reshape(-1)
 
 
@@ -265,6 +269,9 @@ def plan_detailed(
         deadline = v.positive_float("deadline", deadline)
     deadline_at = None if deadline is None else t_start + deadline
     cfg = _check_inputs(state, target, config)
+    for name, value in (("previous", previous), ("warm_start", warm_start)):
+        if value is not None and not isinstance(value, Trajectory):
+            raise ConfigError(name, f"expected avp.Trajectory or None, got {type(value).__name__}")
     T0 = check_durations(durations, cfg) if durations is not None else initial_durations(state, target, cfg)
     check_request(state, target, cfg, float(T0.sum()))  # physical sense of the request
     log: list[str] = [f"durations {np.round(T0, 4).tolist()} s ({'given' if durations is not None else 'allocated'})"]
@@ -360,6 +367,10 @@ def plan_detailed(
             if warm_start is not None and cfg.solver in WARM_START_SOLVERS:
                 knots = state.time + np.concatenate([[0.0], np.cumsum(T)])
                 initvals = _fit_initvals(warm_start, layout_for(cfg.n_segments, cfg.degree), knots)
+                if not (np.isfinite(initvals).all() and float(np.abs(initvals).max()) < MAX_GUESS):
+                    log.append("warm start not used: its fit to these knots is not finite or beyond "
+                               f"{MAX_GUESS:g} (a guess that large stalls iterative back-ends)")
+                    initvals = None
             # The search runs without the FoV rows after the first solve; the rows are added back
             # once a duration certifies (they change the plan little and cost 2-3 QPs each).
             first = stage is None and factor == 1.0
@@ -519,6 +530,8 @@ def plan(
         Only a relaxed plan exists and ``allow_relaxed`` is false (``exc.result.trajectory``
         holds it).
     """
+    if not isinstance(allow_relaxed, (bool, np.bool_)):
+        raise ConfigError("allow_relaxed", f"expected True or False, got {allow_relaxed!r}")
     result = plan_detailed(state, target, config, durations=durations)
     if result.ok and result.trajectory is not None:
         if result.status is PlanStatus.SOLVED_RELAXED and not allow_relaxed:

@@ -15,11 +15,16 @@ import numpy as np
 import numpy.typing as npt
 
 from . import _avp_rust, frames
+from . import _validate as v
 from ._typing import Array
 from .errors import ConfigError
 
 __all__ = ["Derivative", "FlatOutput", "Provenance", "RotorpyTrajectory", "Trajectory"]
 
+
+MAX_SAMPLES = 10**7
+"""Most samples :meth:`Trajectory.sample` returns (and the exports' rates give): 10 million
+rows of the 13 exported columns are about 1 GB."""
 
 TIME_TOL = 1e-9
 """Times this far outside ``[t0, tf]`` (s) are accepted and evaluated at the end points."""
@@ -101,8 +106,8 @@ class Trajectory:
     def __init__(self, coefficients: npt.ArrayLike, knots: npt.ArrayLike, g: float = frames.GRAVITY) -> None:
         c = np.ascontiguousarray(np.array(coefficients, dtype=float))
         k = np.ascontiguousarray(np.array(knots, dtype=float))
-        if c.ndim != 3 or c.shape[1] != 4:
-            raise ConfigError("coefficients", f"expected shape (segments, 4, degree + 1), got {c.shape}")
+        if c.ndim != 3 or c.shape[1] != 4 or c.shape[0] == 0 or c.shape[2] == 0:
+            raise ConfigError("coefficients", f"expected shape (segments >= 1, 4, degree + 1 >= 1), got {c.shape}")
         if k.shape != (c.shape[0] + 1,):
             raise ConfigError("knots", f"expected shape ({c.shape[0] + 1},), got {k.shape}")
         if not (np.all(np.isfinite(c)) and np.all(np.isfinite(k))):
@@ -111,9 +116,10 @@ class Trajectory:
             raise ConfigError("knots", "must be strictly increasing")
         c.setflags(write=False)
         k.setflags(write=False)
+        v.within("knots", k, "time")
         self._c = c
         self._k = k
-        self.g = float(g)
+        self.g = v.positive_float("g", g)
         self.provenance: Provenance | None = None
         """Set by the planner: status, relaxations, certificates (``None`` for a bare spline)."""
 
@@ -220,7 +226,7 @@ class Trajectory:
     def thrust(self, t: Any, mass: float | None = None) -> Array:
         """Thrust (10): mass-normalised (m/s^2), or in newtons when ``mass`` (kg) is given."""
         f = frames.thrust_magnitude(self(t, 2), self.g)
-        return f if mass is None else mass * f
+        return f if mass is None else v.positive_float("mass", mass) * f
 
     def body_rates(self, t: Any) -> Array:
         """Body angular velocity (rad/s, B frame), (22) and the yaw term of (13)."""
@@ -228,8 +234,13 @@ class Trajectory:
         return frames.body_rates(d[2, ..., :3], d[3, ..., :3], d[0, ..., 3], d[1, ..., 3], self.g)
 
     def sample(self, dt: float) -> Array:
-        """Times ``t0, t0 + dt, ...`` up to and including ``tf``."""
-        n = int(np.ceil(self.duration / dt - 1e-9))
+        """Times ``t0, t0 + dt, ...`` up to and including ``tf`` (at most :data:`MAX_SAMPLES`)."""
+        dt = v.positive_float("dt", dt)
+        steps = math.ceil(self.duration / dt - 1e-9)
+        if steps >= MAX_SAMPLES:
+            raise ConfigError("dt", f"{dt:g} s gives {steps + 1:.3g} samples over {self.duration:.3g} s; at most "
+                              f"{MAX_SAMPLES:g}: sample at dt >= {self.duration / (MAX_SAMPLES - 1):.3g} s")
+        n = int(steps)
         return np.minimum(self.t0 + dt * np.arange(n + 1), self.tf)
 
     # -- exports (avp.export) ---------------------------------------------------------------

@@ -36,6 +36,10 @@ class State:
         ``psi`` (rad) and its rate (rad/s), the fourth flat output.
     time:
         Absolute time of this state (s); a plan starts here.
+
+    Each must be finite and within a flight's magnitudes (``avp._validate.LIMITS``: 1000 km,
+    1 km/s, 1e4 m/s^2, 1e6 m/s^3, 1e6 rad, 1e3 rad/s, 1e9 s); beyond them the planner's
+    arithmetic overflows or loses the millisecond, so they are refused (``ConfigError``).
     """
 
     position: Array
@@ -52,8 +56,10 @@ class State:
     def __post_init__(self) -> None:
         for name in ("position", "velocity", "acceleration", "jerk"):
             object.__setattr__(self, name, v.frozen_array(f"state.{name}", getattr(self, name), (3,)))
+            v.within(f"state.{name}", getattr(self, name), name)
         for name in ("yaw", "yaw_rate", "time"):
             object.__setattr__(self, name, v.finite_float(f"state.{name}", getattr(self, name)))
+            v.within(f"state.{name}", getattr(self, name), name)
 
     @classmethod
     def hover(cls, position: Any, yaw: float = 0.0, time: float = 0.0) -> State:
@@ -94,6 +100,7 @@ class PerchTarget:
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "point", v.frozen_array("target.point", self.point, (3,)))
+        v.within("target.point", self.point, "position")
         object.__setattr__(self, "R_WS", v.rotation("target.R_WS", self.R_WS))
 
     # -- constructors ---------------------------------------------------------------------

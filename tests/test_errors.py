@@ -304,3 +304,67 @@ def test_value_types_compare_and_hash_by_value() -> None:
     assert line == avp.LineTarget(vertices=[[0.0, 0.0, 2.0], [4.0, 0.0, 2.0]])
     assert avp.State.hover([0.0, 0.0, -0.0]) == avp.State.hover([0.0, 0.0, 0.0])
     assert hash(avp.State.hover([0.0, 0.0, -0.0])) == hash(avp.State.hover([0.0, 0.0, 0.0]))
+
+
+# -- magnitudes and sizes that are not a flight: typed errors, fast, not overflows or hangs ---------
+
+_S = avp.State.hover([0.0, 0.0, 1.5])
+_T = avp.PerchTarget.from_incline([3.5, 0.0, 1.5], math.pi / 2)
+
+
+@pytest.mark.parametrize(
+    "make, field",
+    [
+        (lambda: avp.State.hover([0.0, 0.0, 1.5], time=1e14), "state.time"),  # float64 knots lose the ms
+        (lambda: avp.State(position=[0.0, 0.0, 1.0], velocity=[1e300, 0.0, 0.0]), "state.velocity"),
+        (lambda: avp.State(position=[2e6, 0.0, 1.0]), "state.position"),
+        (lambda: avp.PerchTarget.from_incline([1e300, 0.0, 1.5], math.pi / 2), "target.point"),
+        (lambda: avp.PlannerConfig(n_segments=200), "config.n_segments"),
+        (lambda: avp.PlannerConfig(cone_facets=10**7), "config.cone_facets"),
+        (lambda: avp.PlannerConfig(dt=1.0), "config.dt"),  # the band (14) would have no sample
+        (lambda: avp.PlannerConfig(dt=1e-7), "config.dt"),  # 1.5 million band samples
+        (lambda: avp.PlannerConfig(dt=1e-300), "config.dt"),
+        (lambda: avp.Workspace(samples_per_segment=10**8), "workspace.samples_per_segment"),
+        (lambda: avp.ReplanConfig(retime_fraction=math.nan), "replan.retime_fraction"),
+        (lambda: avp.ReplanConfig(retime_fraction=1.5), "replan.retime_fraction"),
+        (lambda: avp.LineOptions(guide_dt=1e-9), "options.guide_dt"),
+        (lambda: avp.plan(_S, _T).sample(1e-9), "dt"),
+        (lambda: avp.plan(_S, _T).sample(0.0), "dt"),
+        (lambda: avp.plan(_S, _T).to_json(rate=1e9), "rate"),
+        (lambda: avp.plan(_S, _T).thrust(0.5, mass=-1.0), "mass"),
+        (lambda: avp.Trajectory(np.zeros((3, 4, 8)), [0.0, 1.0, 2.0, 3.0], g=math.nan), "g"),
+        (lambda: avp.Trajectory(np.zeros((0, 4, 8)), [0.0]), "coefficients"),
+        (lambda: avp.plan(_S, _T, allow_relaxed="no"), "allow_relaxed"),
+        (lambda: avp.plan_detailed(_S, _T, warm_start="x"), "warm_start"),
+    ],
+)
+def test_unphysical_sizes_are_typed_errors(make, field) -> None:
+    with pytest.raises(avp.ConfigError) as exc:
+        make()
+    assert field_of(exc) == field
+
+
+def test_the_band_keeps_its_samples_while_dt_is_valid() -> None:
+    """dt up to t_k still gives the band (14) a sample: a plan with it differs from one without
+    the band (before, dt > 2 t_k silently dropped every sample and still said SOLVED)."""
+    cfg = avp.PlannerConfig(dt=0.15)
+    assert cfg.band_samples == 1
+    on = avp.plan_detailed(_S, _T, cfg)
+    off = avp.plan_detailed(_S, _T, avp.PlannerConfig(dt=0.15, pre_impact=avp.PreImpactMode.OFF))
+    assert on.ok and not np.array_equal(on.trajectory.coefficients, off.trajectory.coefficients)
+
+
+def test_huge_vectors_are_normalised_without_overflow() -> None:
+    assert np.allclose(avp.HalfSpace(point=(0, 0, 0), normal=[1e200, 1e200, 0]).normal, [0.5**0.5, 0.5**0.5, 0])
+    line = avp.LineTarget(vertices=[[3, -2, 1.5], [3, 2, 1.5]], side=[-1e200, 0, 0], pitch=1.0)
+    assert np.array_equal(line.side, [-1.0, 0.0, 0.0])
+
+
+def test_a_warm_start_too_large_to_fit_is_dropped_not_iterated() -> None:
+    """A finite but absurd warm start (coefficients 1e300): its fit overflows, so it is not
+    handed to the iterative back-end (it stalled proxqp for minutes); the log says so."""
+    if "proxqp" not in avp.solve.available_solvers():
+        pytest.skip("proxqp is not installed")
+    wild = avp.Trajectory(np.full((3, 4, 8), 1e300), [0.0, 1.0, 2.0, 3.0])
+    res = avp.plan_detailed(_S, _T, avp.PlannerConfig(solver="proxqp"), warm_start=wild)
+    assert res.ok and any(line.startswith("warm start not used") for line in res.log)
