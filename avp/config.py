@@ -175,9 +175,10 @@ class TimeAllocation:
 
     def __post_init__(self) -> None:
         v.positive_float("time_allocation.nominal_acceleration", self.nominal_acceleration)
-        if not (math.isfinite(self.attitude_time) and self.attitude_time >= 0):
-            raise ConfigError("time_allocation.attitude_time", "must be finite and >= 0 s")
-        v.positive_float("time_allocation.min_duration", self.min_duration)
+        for name in ("attitude_time", "min_duration"):
+            value = (v.nonnegative_float if name == "attitude_time" else v.positive_float)(f"time_allocation.{name}",
+                                                                                         getattr(self, name))
+            v.within(f"time_allocation.{name}", value, "duration")
 
     def total(self, distance: float, speed: float) -> float:
         a = self.nominal_acceleration
@@ -313,10 +314,15 @@ class BoundsPolicy:
         factors = v.sequence("bounds.factors", self.factors, "duration factors")
         object.__setattr__(self, "factors", tuple(v.positive_float(f"bounds.factors[{i}]", f)
                                                   for i, f in enumerate(factors)))
-        if not (math.isfinite(self.growth) and self.growth > 1.0):
-            raise ConfigError("bounds.growth", f"must be > 1, got {self.growth}")
-        if self.max_steps < 0:
-            raise ConfigError("bounds.max_steps", "must be >= 0")
+        for i, f in enumerate(self.factors):
+            if not 1e-3 <= f <= 1e3:
+                raise ConfigError(f"bounds.factors[{i}]", f"must be in [1e-3, 1e3] (a factor on the durations), got {f}")
+        growth = v.finite_float("bounds.growth", self.growth)
+        if not 1.0 < growth <= 10.0:
+            raise ConfigError("bounds.growth", f"must be in (1, 10], got {self.growth}")
+        if isinstance(self.max_steps, bool) or not isinstance(self.max_steps, (int, np.integer)) \
+                or not 0 <= self.max_steps <= 100:
+            raise ConfigError("bounds.max_steps", f"must be an integer in [0, 100], got {self.max_steps!r}")
 
     def schedule(self) -> tuple[float, ...]:
         """Duration factors to try after the first solve, in order (SCALING: its fallback list)."""
@@ -649,6 +655,8 @@ class PlannerConfig:
                 raise ConfigError(f"config.{name}", f"must be an integer >= {lo}, got {val!r}")
         if self.degree > 20:
             raise ConfigError("config.degree", f"at most 20 is supported, got {self.degree}")
+        if self.degree < 3:
+            raise ConfigError("config.degree", f"must be >= 3: the initial state fixes position to jerk, got {self.degree}")
         for name, hi in (("n_segments", MAX_SEGMENTS), ("cone_facets", 64)):
             if getattr(self, name) > hi:
                 raise ConfigError(f"config.{name}", f"at most {hi} is supported, got {getattr(self, name)}")

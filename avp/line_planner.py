@@ -145,7 +145,8 @@ class LineOptions:
         v.positive_float("options.takeoff_snap", self.takeoff_snap)
         if self.recovery_point is not None:
             object.__setattr__(self, "recovery_point", v.frozen_array("options.recovery_point", self.recovery_point, (3,)))
-        v.positive_float("options.recovery_distance", self.recovery_distance)
+        v.within("options.recovery_distance", v.positive_float("options.recovery_distance", self.recovery_distance),
+                 "distance")
         v.positive_float("options.recovery_height_margin", self.recovery_height_margin)
         if not (math.isfinite(self.ground_margin) and self.ground_margin >= 0.0):
             raise ConfigError("options.ground_margin", f"must be a finite distance >= 0 m, got {self.ground_margin}")
@@ -574,6 +575,7 @@ def plan_line(
     if duration is None:
         total += opts.flip_time * max(0.0, line.pitch - math.pi / 2) / (math.pi / 2)
     total = v.positive_float("duration", total)
+    v.within("duration", total, "duration")
     T0 = np.full(cfg.n_segments, total / cfg.n_segments)
     factors = (1.0,) + (cfg.bounds.schedule() if cfg.bounds.certify else ())
     log: list[str] = []

@@ -100,8 +100,10 @@ class MovingTarget(PerchTarget):
 
     def __post_init__(self) -> None:
         super().__post_init__()
-        for name in ("heading", "speed", "turn_rate", "vertical_speed", "time"):
+        for name, kind in (("heading", "yaw"), ("speed", "velocity"), ("turn_rate", "yaw_rate"),
+                           ("vertical_speed", "velocity"), ("time", "time")):
             object.__setattr__(self, name, v.finite_float(f"target.{name}", getattr(self, name)))
+            v.within(f"target.{name}", getattr(self, name), kind)
         if not isinstance(self.model, MotionModel):
             raise ConfigError("target.model", f"must be an avp.platform.MotionModel, got {self.model!r}")
 

@@ -7,6 +7,7 @@ from typing import Any
 
 import numpy as np
 
+from . import _validate as v
 from ._typing import Array
 from .config import PlannerConfig
 from .errors import ConfigError
@@ -31,4 +32,5 @@ def check_durations(durations: Any, config: PlannerConfig) -> Array:
         raise ConfigError("durations", f"expected {config.n_segments} values (config.n_segments), got {T.size}")
     if not np.isfinite(T).all() or (T <= 0.0).any():
         raise ConfigError("durations", f"every segment duration must be finite and > 0 s, got {T.tolist()}")
+    v.within("durations", T, "duration")
     return T

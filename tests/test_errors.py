@@ -336,6 +336,16 @@ _T = avp.PerchTarget.from_incline([3.5, 0.0, 1.5], math.pi / 2)
         (lambda: avp.Trajectory(np.zeros((0, 4, 8)), [0.0]), "coefficients"),
         (lambda: avp.plan(_S, _T, allow_relaxed="no"), "allow_relaxed"),
         (lambda: avp.plan_detailed(_S, _T, warm_start="x"), "warm_start"),
+        (lambda: avp.plan_detailed(_S, _T, durations=[1e300] * 3), "durations"),  # was OverflowError
+        (lambda: avp.TimeAllocation(min_duration=1e300), "time_allocation.min_duration"),
+        (lambda: avp.TimeAllocation(attitude_time="x"), "time_allocation.attitude_time"),  # was TypeError
+        (lambda: avp.BoundsPolicy(factors=(1e300,)), "bounds.factors[0]"),
+        (lambda: avp.BoundsPolicy(growth=1e300), "bounds.growth"),
+        (lambda: avp.BoundsPolicy(max_steps=1.5), "bounds.max_steps"),  # was TypeError when planning
+        (lambda: avp.MovingTarget.on_platform([0, 0, 1], incline=0.5, speed=1.0, turn_rate=1e300), "target.turn_rate"),
+        (lambda: avp.LineOptions(recovery_distance=1e300), "options.recovery_distance"),
+        (lambda: avp.PlannerConfig(degree=2, position_cost_order=1, yaw_cost_order=1, continuity_order=1),
+         "config.degree"),  # was IndexError when planning
     ],
 )
 def test_unphysical_sizes_are_typed_errors(make, field) -> None:
