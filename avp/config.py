@@ -231,7 +231,7 @@ class OverhangFlip:
 
     def __post_init__(self) -> None:
         v.flags("flip", self)
-        if not (math.isfinite(self.min_incline) and math.pi / 2 <= self.min_incline <= math.pi):
+        if not math.pi / 2 <= v.finite_float("flip.min_incline", self.min_incline) <= math.pi:
             raise ConfigError("flip.min_incline", f"must be in [pi/2, pi] rad, got {self.min_incline}")
         if self.thrust is not None:
             v.positive_float("flip.thrust", self.thrust)
@@ -411,8 +411,7 @@ class Workspace:
 
     def __post_init__(self) -> None:
         v.flags("workspace", self)
-        if not (math.isfinite(self.body_offset) and self.body_offset >= 0.0):
-            raise ConfigError("workspace.body_offset", f"must be finite and >= 0 m, got {self.body_offset}")
+        object.__setattr__(self, "body_offset", v.nonnegative_float("workspace.body_offset", self.body_offset))
         if self.ground_z is not None:
             object.__setattr__(self, "ground_z", v.finite_float("workspace.ground_z", self.ground_z))
         v.positive_float("workspace.max_speed", self.max_speed, allow_inf=True)
@@ -429,8 +428,8 @@ class Workspace:
             val = getattr(self, name)
             if isinstance(val, bool) or not isinstance(val, (int, np.integer)) or not lo <= val <= hi:
                 raise ConfigError(f"workspace.{name}", f"must be an integer in [{lo}, {hi}], got {val!r}")
-        if not (math.isfinite(self.refinement_margin) and self.refinement_margin >= 0.0):
-            raise ConfigError("workspace.refinement_margin", "must be finite and >= 0")
+        object.__setattr__(self, "refinement_margin",
+                           v.nonnegative_float("workspace.refinement_margin", self.refinement_margin))
 
     @property
     def active(self) -> bool:
@@ -523,10 +522,10 @@ class FovConfig:
 
     def __post_init__(self) -> None:
         v.flags("fov", self)
-        for name, lo in (("n_points", 1), ("sqp_iterations", 1)):
+        for name, lo, hi in (("n_points", 1, 1000), ("sqp_iterations", 1, 100)):
             val = getattr(self, name)
-            if isinstance(val, bool) or not isinstance(val, (int, np.integer)) or val < lo:
-                raise ConfigError(f"fov.{name}", f"must be an integer >= {lo}, got {val!r}")
+            if isinstance(val, bool) or not isinstance(val, (int, np.integer)) or not lo <= val <= hi:
+                raise ConfigError(f"fov.{name}", f"must be an integer in [{lo}, {hi}], got {val!r}")
         for name in ("trust_position", "trust_acceleration", "trust_yaw"):
             v.positive_float(f"fov.{name}", getattr(self, name), allow_inf=True)
         g = v.finite_float("fov.gate", self.gate)
@@ -669,8 +668,7 @@ class PlannerConfig:
         if self.alpha is not None:
             object.__setattr__(self, "alpha", v.positive_float("config.alpha", self.alpha))
         object.__setattr__(self, "alpha_nominal", v.positive_float("config.alpha_nominal", self.alpha_nominal))
-        if not (math.isfinite(self.q) and self.q >= 0):
-            raise ConfigError("config.q", f"must be finite and >= 0, got {self.q}")
+        object.__setattr__(self, "q", v.nonnegative_float("config.q", self.q))
         v.positive_float("config.t_k", self.t_k)
         v.positive_float("config.dt", self.dt)
         ratio = self.t_k / self.dt
@@ -679,9 +677,8 @@ class PlannerConfig:
             raise ConfigError("config.dt", f"{self.dt:g} s gives t_k / dt = {ratio:.3g} samples of the band (14) over "
                               f"t_k = {self.t_k:g} s; it needs 1 to 1000 (dt in [{self.t_k / 1000:.3g}, "
                               f"{self.t_k:.3g}] s), or pre_impact OFF")
-        if not (math.isfinite(self.band_min_width) and self.band_min_width >= 0):
-            raise ConfigError("config.band_min_width", "must be finite and >= 0 m/s^2")
-        if not (0.0 < self.cone_half_angle < math.pi / 2):
+        object.__setattr__(self, "band_min_width", v.nonnegative_float("config.band_min_width", self.band_min_width))
+        if not 0.0 < v.finite_float("config.cone_half_angle", self.cone_half_angle) < math.pi / 2:
             raise ConfigError("config.cone_half_angle", "must be in (0, pi/2) rad")
         v.positive_float("config.min_distance", self.min_distance)
         v.positive_float("config.g", self.g)
@@ -1006,7 +1003,8 @@ class ReplanConfig:
         v.positive_float("replan.freeze_horizon", self.freeze_horizon)
         if self.deadline is not None:
             v.positive_float("replan.deadline", self.deadline)
-        if not 0 <= self.measured_orders <= 5:
+        if isinstance(self.measured_orders, bool) or not isinstance(self.measured_orders, (int, np.integer)) \
+                or not 0 <= self.measured_orders <= 5:
             raise ConfigError("replan.measured_orders", "must be in 0..5 (0: all orders from the plan)")
         for name in ("anchor_position", "anchor_velocity", "target_tolerance"):
             val = v.finite_float(f"replan.{name}", getattr(self, name))
@@ -1021,7 +1019,8 @@ class ReplanConfig:
                               f"make the QP infeasible), got {kmin}")
         v.positive_float("replan.snap_max", self.snap_max, allow_inf=True)
         v.positive_float("replan.snap_thrust_max", self.snap_thrust_max, allow_inf=True)
-        fr = tuple(float(f) for f in self.partial_fractions)
+        fr = tuple(v.finite_float("replan.partial_fractions", f)
+                   for f in v.sequence("replan.partial_fractions", self.partial_fractions, "fractions in (0, 1]"))
         if not fr or any(not 0.0 < f <= 1.0 for f in fr):
             raise ConfigError("replan.partial_fractions", f"need fractions in (0, 1], got {self.partial_fractions!r}")
         if any(b >= a for a, b in itertools.pairwise(fr)):

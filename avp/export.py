@@ -141,11 +141,19 @@ def write_json(traj: Trajectory, path: str | Path | None = None, rate: float | N
 
 def read_json(source: str | Path) -> Trajectory:
     """From a path, or from JSON text (a string starting with ``{``)."""
-    text = source if isinstance(source, str) and source.lstrip().startswith("{") else Path(source).read_text()
+    if not isinstance(source, (str, Path)):
+        raise ConfigError("source", f"expected a path or JSON text, got {type(source).__name__}")
+    is_text = isinstance(source, str) and source.lstrip()[:1] in ("{", "[")
+    try:
+        text = str(source) if is_text else Path(source).read_text()
+    except OSError as exc:
+        raise ConfigError("source", f"cannot read {str(source)!r}: {exc.strerror or exc}") from exc
     try:
         data = json.loads(text)
     except json.JSONDecodeError as exc:
         raise ConfigError("json", f"not valid JSON: {exc}") from exc
+    if not isinstance(data, dict):
+        raise ConfigError("json", f"expected a JSON object (avp.export format), got {type(data).__name__}")
     return trajectory_from_dict(data)
 
 

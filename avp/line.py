@@ -130,7 +130,10 @@ class LineTarget:
             0 <= self.grasp_piece < verts.shape[0] - 1
         ):
             raise ConfigError("line.grasp_piece", f"must be a piece index in [0, {verts.shape[0] - 2}], got {self.grasp_piece!r}")
-        lo, hi = (v.finite_float("line.grasp_range", x) for x in self.grasp_range)
+        pair = v.sequence("line.grasp_range", self.grasp_range, "two fractions (lo, hi)")
+        if len(pair) != 2:
+            raise ConfigError("line.grasp_range", f"must be (lo, hi) with 0 <= lo < hi <= 1, got {self.grasp_range!r}")
+        lo, hi = (v.finite_float("line.grasp_range", x) for x in pair)
         if not 0.0 <= lo < hi <= 1.0:
             raise ConfigError("line.grasp_range", f"must be (lo, hi) with 0 <= lo < hi <= 1, got {self.grasp_range}")
         object.__setattr__(self, "grasp_range", (lo, hi))

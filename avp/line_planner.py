@@ -133,7 +133,7 @@ class LineOptions:
     def __post_init__(self) -> None:
         v.flags("options", self)
         v.positive_float("options.approach_deceleration", self.approach_deceleration)
-        if not 0.0 < self.thrust_fraction <= 1.0:
+        if not 0.0 < v.finite_float("options.thrust_fraction", self.thrust_fraction) <= 1.0:
             raise ConfigError("options.thrust_fraction", f"must be in (0, 1], got {self.thrust_fraction}")
         if v.positive_float("options.guide_dt", self.guide_dt) < 1e-3:
             raise ConfigError("options.guide_dt", f"must be at least 1 ms (one guide row per sample), got {self.guide_dt}")
@@ -148,15 +148,16 @@ class LineOptions:
         v.within("options.recovery_distance", v.positive_float("options.recovery_distance", self.recovery_distance),
                  "distance")
         v.positive_float("options.recovery_height_margin", self.recovery_height_margin)
-        if not (math.isfinite(self.ground_margin) and self.ground_margin >= 0.0):
-            raise ConfigError("options.ground_margin", f"must be a finite distance >= 0 m, got {self.ground_margin}")
-        w0, w1 = (v.finite_float("options.flip_window", x) for x in self.flip_window)
+        v.nonnegative_float("options.ground_margin", self.ground_margin)
+        window = v.sequence("options.flip_window", self.flip_window, "two times (start, end), s")
+        if len(window) != 2:
+            raise ConfigError("options.flip_window", f"must be (start, end) seconds before contact, got {self.flip_window!r}")
+        w0, w1 = (v.finite_float("options.flip_window", x) for x in window)
         if not w0 > w1 >= 0.0:
             raise ConfigError("options.flip_window", f"must be (start, end) seconds before contact with start > end >= 0, "
                               f"got {self.flip_window}")
         v.positive_float("options.flip_thrust", self.flip_thrust)
-        if not (math.isfinite(self.flip_time) and self.flip_time >= 0.0):
-            raise ConfigError("options.flip_time", f"must be a finite time >= 0 s, got {self.flip_time}")
+        v.nonnegative_float("options.flip_time", self.flip_time)
 
 
 class LineStatus(Enum):

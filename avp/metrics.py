@@ -11,6 +11,7 @@ import numpy as np
 from . import _avp_rust, frames
 from . import _validate as v
 from .camera import Camera
+from .errors import ConfigError
 from .trajectory import Trajectory
 from .types import PerchTarget
 
@@ -88,6 +89,14 @@ def visibility_many(
     their stacked coefficients and one vectorised camera test; the result equals calling
     :func:`visibility` on each. Plans on different knots are evaluated one after the other.
     """
+    if camera is not None and not isinstance(camera, Camera):
+        raise ConfigError("camera", f"expected avp.Camera or None, got {type(camera).__name__}")
+    if not isinstance(target, PerchTarget):
+        raise ConfigError("target", f"expected avp.PerchTarget (a pad; a line has no single point to see), got "
+                          f"{type(target).__name__}")
+    for i, tr in enumerate(trajectories):
+        if not isinstance(tr, Trajectory):
+            raise ConfigError(f"trajectories[{i}]", f"expected avp.Trajectory, got {type(tr).__name__}")
     cam = Camera() if camera is None else camera
     step = v.positive_float("dt", dt)
     drag = v.nonnegative_float("limits.rotor_drag", rotor_drag)

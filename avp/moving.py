@@ -132,7 +132,7 @@ class MovingConfig:
         if isinstance(self.max_solves, bool) or not isinstance(self.max_solves, int) or self.max_solves < 1:
             raise ConfigError("moving.max_solves", f"must be an integer >= 1, got {self.max_solves!r}")
         v.positive_float("moving.max_duration", self.max_duration)
-        if any(not (math.isfinite(f) and f > 0.0) for f in self.retime):
+        if any(v.finite_float("moving.retime", f) <= 0.0 for f in v.sequence("moving.retime", self.retime, "factors")):
             raise ConfigError("moving.retime", f"every factor must be finite and > 0, got {self.retime}")
         if not isinstance(self.yaw, TerminalYaw):
             raise ConfigError("moving.yaw", f"must be an avp.qp.moving.TerminalYaw, got {self.yaw!r}")

@@ -22,6 +22,9 @@ from .errors import ConfigError
 __all__ = ["Derivative", "FlatOutput", "Provenance", "RotorpyTrajectory", "Trajectory"]
 
 
+MAX_ORDER = 64
+"""Highest derivative order evaluated (the kernel's own limit)."""
+
 MAX_SAMPLES = 10**7
 """Most samples :meth:`Trajectory.sample` returns (and the exports' rates give): 10 million
 rows of the 13 exported columns are about 1 GB."""
@@ -177,7 +180,10 @@ class Trajectory:
     def _times(self, t: Any) -> tuple[Array, tuple[int, ...]]:
         if isinstance(t, float) and self.t0 - TIME_TOL <= t <= self.tf + TIME_TOL:  # one time, in range
             return np.array([min(max(t, self.t0), self.tf)]), ()
-        arr = np.asarray(t, dtype=float)
+        try:
+            arr = np.asarray(t, dtype=float)
+        except (TypeError, ValueError) as exc:
+            raise ConfigError("t", f"expected times in s, got {t!r}") from exc
         if arr.size:
             lo, hi = float(arr.min()), float(arr.max())  # NaN propagates to both
             if not (math.isfinite(lo) and math.isfinite(hi)):
@@ -190,9 +196,12 @@ class Trajectory:
     def derivatives(self, t: Any, orders: Any = (0, 1, 2, 3, 4)) -> Array:
         """All four flat outputs for each order: shape ``(len(orders), *shape(t), 4)``."""
         flat, shape = self._times(t)
-        orders_list = [int(o) for o in orders]
-        if any(o < 0 for o in orders_list):
-            raise ConfigError("order", "derivative orders must be >= 0")
+        items = list(orders) if hasattr(orders, "__iter__") and not isinstance(orders, (str, bytes)) else [orders]
+        if any(isinstance(o, (bool, np.bool_)) or not isinstance(o, (int, np.integer)) for o in items):
+            raise ConfigError("order", f"derivative orders are integers, got {orders!r}")
+        orders_list = [int(o) for o in items]
+        if any(not 0 <= o <= MAX_ORDER for o in orders_list):
+            raise ConfigError("order", f"derivative orders must be in [0, {MAX_ORDER}], got {orders_list}")
         out = _avp_rust.eval_spline(self._c, self._k, flat, orders_list)
         return out.reshape((len(orders_list), *shape, 4))
 
@@ -236,7 +245,7 @@ class Trajectory:
     def sample(self, dt: float) -> Array:
         """Times ``t0, t0 + dt, ...`` up to and including ``tf`` (at most :data:`MAX_SAMPLES`)."""
         dt = v.positive_float("dt", dt)
-        steps = math.ceil(self.duration / dt - 1e-9)
+        steps = max(1, math.ceil(self.duration / dt - 1e-9))  # t0 and tf at least
         if steps >= MAX_SAMPLES:
             raise ConfigError("dt", f"{dt:g} s gives {steps + 1:.3g} samples over {self.duration:.3g} s; at most "
                               f"{MAX_SAMPLES:g}: sample at dt >= {self.duration / (MAX_SAMPLES - 1):.3g} s")

@@ -346,6 +346,21 @@ _T = avp.PerchTarget.from_incline([3.5, 0.0, 1.5], math.pi / 2)
         (lambda: avp.LineOptions(recovery_distance=1e300), "options.recovery_distance"),
         (lambda: avp.PlannerConfig(degree=2, position_cost_order=1, yaw_cost_order=1, continuity_order=1),
          "config.degree"),  # was IndexError when planning
+        # wrong types and sizes that raised raw TypeError / AttributeError / KernelError / OSError
+        (lambda: avp.metrics.visibility(avp.plan(_S, _T), avp.LineTarget.segment([0, 0, 1], [1, 0, 1])), "target"),
+        (lambda: avp.metrics.visibility(avp.plan(_S, _T), _T, camera="x"), "camera"),
+        (lambda: avp.metrics.visibility("x", _T), "trajectories[0]"),
+        (lambda: avp.FovConfig(n_points=100000), "fov.n_points"),
+        (lambda: avp.plan(_S, _T)(0.5, 100), "order"),
+        (lambda: avp.plan(_S, _T)("x"), "t"),
+        (lambda: avp.Trajectory.from_json(None), "source"),
+        (lambda: avp.Trajectory.from_json("[]"), "json"),
+        (lambda: avp.OverhangFlip(min_incline="x"), "flip.min_incline"),
+        (lambda: avp.Workspace(body_offset="x"), "workspace.body_offset"),
+        (lambda: avp.PlannerConfig(q="x"), "config.q"),
+        (lambda: avp.ReplanConfig(partial_fractions=None), "replan.partial_fractions"),
+        (lambda: avp.LineOptions(flip_window=None), "options.flip_window"),
+        (lambda: avp.LineTarget.segment([0, 0, 1], [1, 0, 1], grasp_range=None), "line.grasp_range"),
     ],
 )
 def test_unphysical_sizes_are_typed_errors(make, field) -> None:
@@ -362,6 +377,14 @@ def test_the_band_keeps_its_samples_while_dt_is_valid() -> None:
     on = avp.plan_detailed(_S, _T, cfg)
     off = avp.plan_detailed(_S, _T, avp.PlannerConfig(dt=0.15, pre_impact=avp.PreImpactMode.OFF))
     assert on.ok and not np.array_equal(on.trajectory.coefficients, off.trajectory.coefficients)
+
+
+def test_a_coarse_visibility_grid_still_samples_both_ends() -> None:
+    """dt far beyond the plan: the grid is its two ends (it was empty: argmax of nothing)."""
+    traj = avp.plan(_S, _T)
+    assert np.array_equal(traj.sample(1e300), [traj.t0, traj.tf])
+    vis = avp.metrics.visibility(traj, _T, dt=1e300)
+    assert 0.0 <= vis.time_fraction <= 1.0 and 0.0 <= vis.path_fraction <= 1.0
 
 
 def test_huge_vectors_are_normalised_without_overflow() -> None:
