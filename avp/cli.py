@@ -510,6 +510,10 @@ def simulate(args: argparse.Namespace) -> int:
 
     if args.trials < 1:
         raise ConfigError("--trials", f"must be >= 1, got {args.trials}")
+    if args.seed < 0:
+        raise ConfigError("--seed", f"must be >= 0 (a random generator seed), got {args.seed}")
+    if args.gif and not str(args.gif).lower().endswith(".gif"):
+        raise ConfigError("--gif", f"the animation is a GIF: give a path ending in .gif, got {args.gif!r}")
     settings = load_settings(args.config, merge(_flag_overrides(args), _platform_overrides(args)),
                              _simulator_settings(args))
     if args.line_pitch_deg is not None:  # closed-loop line perches (avp/cli_line.py)
@@ -592,6 +596,8 @@ def run_campaign(args: argparse.Namespace) -> int:
 
     if args.seeds < 1:
         raise ConfigError("--seeds", f"must be >= 1, got {args.seeds}")
+    if args.seed < 0:
+        raise ConfigError("--seed", f"must be >= 0 (a random generator seed), got {args.seed}")
     settings = _settings(args, _simulator_settings(args))
     trials = campaign.grid(args.incline_deg, args.distance, args.lateral, _heights(args.height), args.modes,
                            range(args.seed, args.seed + args.seeds))

@@ -67,6 +67,8 @@ def read_toml(path: str | Path) -> dict[str, Any]:
         raise ConfigError("--config", f"file {str(p)!r} not found") from exc
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError("--config", f"{str(p)!r} is not valid TOML: {exc}") from exc
+    except OSError as exc:  # a directory, no permission...
+        raise ConfigError("--config", f"cannot read {str(p)!r}: {exc.strerror or exc}") from exc
 
 
 def merge(base: Mapping[str, Any], overlay: Mapping[str, Any]) -> dict[str, Any]:

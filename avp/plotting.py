@@ -23,6 +23,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from . import frames
+from .errors import ConfigError
 
 if TYPE_CHECKING:  # pragma: no cover
     from .trajectory import Trajectory
@@ -90,10 +91,13 @@ def _verdict(bounds: Any, name: str) -> str:
 
 
 def plot_plan(result: Any, target: PerchTarget, path: str | Path, *, dpi: int = 110, **kwargs: Any) -> Path:
-    """Write :func:`figure_plan` to ``path`` (PNG) and return the path."""
+    """Write :func:`figure_plan` to ``path`` (PNG; ``.png`` is added to a name without a
+    suffix, as matplotlib does) and return the path written."""
     plt = pyplot()
     fig = figure_plan(result, target, **kwargs)
     out = Path(path)
+    if not out.suffix:
+        out = out.with_suffix(".png")
     out.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(out, dpi=dpi)
     plt.close(fig)
@@ -357,8 +361,11 @@ def animate_run(run: Any, path: str | Path, *, fps: int = 20, speed: float = 0.5
                        f"({'pad in view' if run.visible[i] else 'pad out of view'}); {run.outcome}")
         return trail, body, axis, title
 
-    anim = FuncAnimation(fig, draw, frames=n_frames, blit=False)
     out = Path(path)
+    if out.suffix.lower() != ".gif":
+        plt.close(fig)
+        raise ConfigError("gif", f"the animation is a GIF: give a path ending in .gif, got {str(path)!r}")
+    anim = FuncAnimation(fig, draw, frames=n_frames, blit=False)
     out.parent.mkdir(parents=True, exist_ok=True)
     anim.save(out, writer=PillowWriter(fps=fps))
     plt.close(fig)

@@ -351,3 +351,21 @@ def test_simulate_rejects_a_nan_platform_speed(capsys) -> None:
     doc = json.loads(capsys.readouterr().out)
     assert code == EXIT_USAGE
     assert doc["field"] == "scenario.platform.speed"
+
+
+@pytest.mark.parametrize("argv, field", [
+    (["demo", "--config", "."], "--config"),  # a directory: was IsADirectoryError
+    (["simulate", "--seed", "-1", "--trials", "1"], "--seed"),  # was numpy's ValueError
+    (["campaign", "--seed", "-1"], "--seed"),
+    (["simulate", "--gif", "run.txt", "--trials", "1"], "--gif"),  # was PIL's ValueError after the runs
+])
+def test_bad_cli_arguments_are_clean_errors(argv, field, capsys) -> None:
+    assert main(argv) == EXIT_USAGE
+    assert f"{field}:" in capsys.readouterr().err
+
+
+def test_demo_output_without_suffix_reports_the_png_it_writes(tmp_path: Path, capsys) -> None:
+    assert main(["demo", "--output", str(tmp_path / "plot")]) == EXIT_SOLVED
+    assert (tmp_path / "plot.png").is_file()
+    captured = capsys.readouterr()
+    assert str(tmp_path / "plot.png") in captured.out + captured.err
