@@ -18,7 +18,11 @@ ORTHONORMAL_TOL = 1e-6
 
 
 def frozen_array(field: str, value: Any, shape: tuple[int, ...]) -> npt.NDArray[np.float64]:
-    """A finite float64 copy of ``value`` with exactly ``shape``, marked read-only."""
+    """A finite float64 copy of ``value`` with exactly ``shape``, marked read-only (booleans are
+    refused: ``True`` is no coordinate)."""
+    if _is_bool_array(value) or isinstance(value, (bool, np.bool_)) \
+            or (isinstance(value, (list, tuple)) and any(isinstance(x, (bool, np.bool_)) for x in value)):
+        raise ConfigError(field, f"expected numbers of shape {shape}, got booleans {value!r}")
     try:
         arr = np.array(value, dtype=float)
     except (TypeError, ValueError) as exc:

@@ -104,6 +104,7 @@ class VehicleLimits:
         for name in ("rotor_drag", "thrust_min"):  # 1/s, N
             object.__setattr__(self, name, v.nonnegative_float(f"limits.{name}", getattr(self, name)))
         object.__setattr__(self, "thrust_max", v.positive_float("limits.thrust_max", self.thrust_max))
+        v.within("limits.thrust_max", self.thrust_max / self.mass, "acceleration")  # mass-normalised
         if self.thrust_min >= self.thrust_max:
             raise ConfigError(
                 "limits.thrust_min",

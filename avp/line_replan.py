@@ -21,6 +21,7 @@ import numpy as np
 
 from ._typing import Array
 from .config import PlannerConfig, ReplanConfig
+from .errors import ConfigError
 from .line import LineTarget
 from .line_planner import LineOptions, LinePlanResult, plan_line
 from .replan import Replanner, ReplanStep
@@ -69,6 +70,8 @@ class LineReplanner(Replanner):
     ) -> None:
         super().__init__(target, config, replan, trajectory)  # type: ignore[arg-type]
         self.options = options if options is not None else LineOptions()
+        if not isinstance(self.options, LineOptions):
+            raise ConfigError("options", f"expected avp.LineOptions or None, got {type(self.options).__name__}")
         self.recovery: Trajectory | None = None
         """Recovery of the last committed plan (None before the first plan or without recovery)."""
         self.last_result: LinePlanResult | None = None

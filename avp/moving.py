@@ -41,6 +41,7 @@ import numpy as np
 
 from . import _validate as v
 from ._typing import Array
+from ._validate import LIMITS
 from .bounds import BoundReport, certify_spline
 from .config import FovConfig, PlannerConfig
 from .errors import (
@@ -131,7 +132,8 @@ class MovingConfig:
             raise ConfigError("moving.growth", f"must be > 1, got {g}")
         if isinstance(self.max_solves, bool) or not isinstance(self.max_solves, int) or self.max_solves < 1:
             raise ConfigError("moving.max_solves", f"must be an integer >= 1, got {self.max_solves!r}")
-        v.positive_float("moving.max_duration", self.max_duration)
+        if not 1e-2 <= v.positive_float("moving.max_duration", self.max_duration) <= LIMITS["duration"][0]:
+            raise ConfigError("moving.max_duration", f"must be in [0.01, {LIMITS['duration'][0]:g}] s, got {self.max_duration}")
         if any(v.finite_float("moving.retime", f) <= 0.0 for f in v.sequence("moving.retime", self.retime, "factors")):
             raise ConfigError("moving.retime", f"every factor must be finite and > 0, got {self.retime}")
         if not isinstance(self.yaw, TerminalYaw):
@@ -534,6 +536,8 @@ class MovingReplanner(Replanner):
             raise ConfigError("target", f"expected avp.platform.MovingTarget, got {type(target).__name__}")
         super().__init__(target, config, replan, trajectory)
         self.moving = moving if moving is not None else MovingConfig()
+        if not isinstance(self.moving, MovingConfig):
+            raise ConfigError("moving", f"expected avp.moving.MovingConfig or None, got {type(self.moving).__name__}")
         # replans keep the committed contact time through ``duration`` (_solve); the moving
         # planner has no duration schedule or relaxations for ``search_on_replan`` to turn off
         self._replan_config = self.config

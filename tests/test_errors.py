@@ -361,6 +361,14 @@ _T = avp.PerchTarget.from_incline([3.5, 0.0, 1.5], math.pi / 2)
         (lambda: avp.ReplanConfig(partial_fractions=None), "replan.partial_fractions"),
         (lambda: avp.LineOptions(flip_window=None), "options.flip_window"),
         (lambda: avp.LineTarget.segment([0, 0, 1], [1, 0, 1], grasp_range=None), "line.grasp_range"),
+        (lambda: avp.moving.MovingConfig(max_duration=1e-300), "moving.max_duration"),  # was "coefficients: NaN"
+        (lambda: avp.VehicleLimits(thrust_max=1e300), "limits.thrust_max"),  # was about an alpha_range never set
+        (lambda: avp.MovingReplanner(avp.MovingTarget.on_platform([0, 0, 1], incline=0.5, speed=1.0), moving="x"),
+         "moving"),  # was caught only at the first step
+        (lambda: avp.LineReplanner(avp.LineTarget.segment([0, -1, 1], [0, 1, 1]), options="x"), "options"),
+        (lambda: avp.plan_line(_S, avp.LineTarget.segment([3, -1.5, 2.5], [3, 1.5, 2.5]), perch_search="no"),
+         "perch_search"),
+        (lambda: avp.State(position=[True, 0.0, 1.0]), "state.position"),
     ],
 )
 def test_unphysical_sizes_are_typed_errors(make, field) -> None:
