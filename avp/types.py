@@ -38,7 +38,7 @@ class State:
         Absolute time of this state (s); a plan starts here.
 
     Each must be finite and within a flight's magnitudes (``avp._validate.LIMITS``: 1000 km,
-    1 km/s, 1e4 m/s^2, 1e6 m/s^3, 1e6 rad, 1e3 rad/s, 1e9 s); beyond them the planner's
+    1 km/s, 1e4 m/s^2, 1e6 m/s^3, 1e6 rad, 1e3 rad/s, 1e10 s, so UNIX time is fine); beyond them the planner's
     arithmetic overflows or loses the millisecond, so they are refused (``ConfigError``).
     """
 
