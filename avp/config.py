@@ -104,7 +104,9 @@ class VehicleLimits:
         for name in ("rotor_drag", "thrust_min"):  # 1/s, N
             object.__setattr__(self, name, v.nonnegative_float(f"limits.{name}", getattr(self, name)))
         object.__setattr__(self, "thrust_max", v.positive_float("limits.thrust_max", self.thrust_max))
-        v.within("limits.thrust_max", self.thrust_max / self.mass, "acceleration")  # mass-normalised
+        if self.thrust_max / self.mass > v.LIMITS["acceleration"][0]:
+            raise ConfigError("limits.thrust_max", f"thrust_max / mass = {self.thrust_max / self.mass:.3g} m/s^2 is beyond "
+                              f"{v.LIMITS['acceleration'][0]:g} m/s^2: check the units (N, kg) and limits.mass")
         if self.thrust_min >= self.thrust_max:
             raise ConfigError(
                 "limits.thrust_min",
@@ -672,12 +674,12 @@ class PlannerConfig:
         object.__setattr__(self, "q", v.nonnegative_float("config.q", self.q))
         v.positive_float("config.t_k", self.t_k)
         v.positive_float("config.dt", self.dt)
-        ratio = self.t_k / self.dt
-        if isinstance(self.pre_impact, PreImpactMode) and self.pre_impact is not PreImpactMode.OFF \
-                and not (math.isfinite(ratio) and 1 <= round(ratio) <= 1000):
-            raise ConfigError("config.dt", f"{self.dt:g} s gives t_k / dt = {ratio:.3g} samples of the band (14) over "
-                              f"t_k = {self.t_k:g} s; it needs 1 to 1000 (dt in [{self.t_k / 1000:.3g}, "
-                              f"{self.t_k:.3g}] s), or pre_impact OFF")
+        ratio = self.t_k / self.dt  # the band (14) takes round(ratio) samples (a relaxation may turn it on)
+        if not (math.isfinite(ratio) and 1 <= round(ratio) <= 1000):
+            count = f"{round(ratio)}" if math.isfinite(ratio) and ratio < 1e6 else "too many"
+            raise ConfigError("config.dt", f"{self.dt:g} s with t_k = {self.t_k:g} s gives t_k / dt = {ratio:.6g}, "
+                              f"{count} samples of the band (14); it needs 1 to 1000: dt in "
+                              f"({self.t_k / 1000.5:.4g}, {2 * self.t_k:.4g}) s for this t_k")
         object.__setattr__(self, "band_min_width", v.nonnegative_float("config.band_min_width", self.band_min_width))
         if not 0.0 < v.finite_float("config.cone_half_angle", self.cone_half_angle) < math.pi / 2:
             raise ConfigError("config.cone_half_angle", "must be in (0, pi/2) rad")

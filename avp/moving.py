@@ -318,7 +318,7 @@ def plan_moving_detailed(
     cfg = _planner_config(config, mcfg)
     lim = cfg.limits
     log: list[str] = []
-    unused = (config if config is not None else cfg).changed(NOT_USED)
+    unused = config.changed(NOT_USED) if config is not None else []  # the user's, not the FoV-free copy
     if unused:
         log.append("config: the moving planner does not use " + ", ".join(unused) + " (set away from the defaults; "
                    "docs/moving.md)")

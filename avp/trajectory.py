@@ -197,8 +197,9 @@ class Trajectory:
         """All four flat outputs for each order: shape ``(len(orders), *shape(t), 4)``."""
         flat, shape = self._times(t)
         items = list(orders) if hasattr(orders, "__iter__") and not isinstance(orders, (str, bytes)) else [orders]
-        if any(isinstance(o, (bool, np.bool_)) or not isinstance(o, (int, np.integer)) for o in items):
-            raise ConfigError("order", f"derivative orders are integers, got {orders!r}")
+        if any(isinstance(o, (bool, np.bool_, str, bytes)) or not isinstance(o, (int, float, np.integer, np.floating))
+               or not float(o).is_integer() for o in items):
+            raise ConfigError("order", f"derivative orders are whole numbers, got {orders!r}")
         orders_list = [int(o) for o in items]
         if any(not 0 <= o <= MAX_ORDER for o in orders_list):
             raise ConfigError("order", f"derivative orders must be in [0, {MAX_ORDER}], got {orders_list}")

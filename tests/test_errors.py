@@ -354,7 +354,7 @@ _T = avp.PerchTarget.from_incline([3.5, 0.0, 1.5], math.pi / 2)
         (lambda: avp.plan(_S, _T)(0.5, 100), "order"),
         (lambda: avp.plan(_S, _T)("x"), "t"),
         (lambda: avp.Trajectory.from_json(None), "source"),
-        (lambda: avp.Trajectory.from_json("[]"), "json"),
+        (lambda: avp.Trajectory.from_json("[]"), "source"),  # a path (only "{" starts JSON text): not found
         (lambda: avp.OverhangFlip(min_incline="x"), "flip.min_incline"),
         (lambda: avp.Workspace(body_offset="x"), "workspace.body_offset"),
         (lambda: avp.PlannerConfig(q="x"), "config.q"),
@@ -412,9 +412,9 @@ def test_a_warm_start_too_large_to_fit_is_dropped_not_iterated() -> None:
 
 
 def test_a_unix_time_start_is_planned_to_the_micrometre() -> None:
-    """The time limit leaves room for ROS/UNIX timestamps (1.7e9 s): the plan is the one made at
-    time 0, shifted (time invariance), to 1e-5 m and 1e-4 m/s at contact (float64 knots there
-    resolve 2.4e-7 s)."""
+    """The time limit leaves room for a one-shot pad plan at a UNIX timestamp (1.7e9 s): it is
+    the plan made at time 0, shifted (time invariance), to 1e-5 m and 1e-4 m/s at contact
+    (float64 knots there resolve 2.4e-7 s). Replans and moving pads need a local clock (State)."""
     res = avp.plan_detailed(avp.State.hover([0.0, 0.0, 1.5], time=1.7e9), _T)
     ref = avp.plan_detailed(_S, _T).trajectory
     assert res.status is avp.PlanStatus.SOLVED
@@ -422,3 +422,31 @@ def test_a_unix_time_start_is_planned_to_the_micrometre() -> None:
     assert np.linalg.norm(traj(traj.tf) - _T.point) < 1e-5
     assert np.linalg.norm(traj(traj.tf, 1) - ref(ref.tf, 1)) < 1e-4
     assert traj.duration == pytest.approx(ref.duration, abs=1e-6)
+
+
+def test_a_json_file_that_is_not_an_object_is_a_typed_error(tmp_path) -> None:
+    path = tmp_path / "list.json"
+    path.write_text("[1, 2]")
+    with pytest.raises(avp.ConfigError) as exc:
+        avp.Trajectory.from_json(path)
+    assert field_of(exc) == "json"
+
+
+def test_relaxing_to_the_cone_band_keeps_a_valid_dt() -> None:
+    """dt is checked whatever pre_impact is: a relaxation that turns the band on mid-search
+    (CONE_BAND) cannot meet a dt that gives it no sample (it raised from inside the search)."""
+    with pytest.raises(avp.ConfigError) as exc:
+        avp.PlannerConfig(pre_impact=avp.PreImpactMode.OFF, dt=1.0)
+    assert field_of(exc) == "config.dt"
+
+
+def test_whole_number_float_orders_still_evaluate() -> None:
+    traj = avp.plan(_S, _T)
+    assert np.array_equal(traj(0.5, 1.0), traj(0.5, 1))
+    assert np.array_equal(traj.derivatives(0.5, np.arange(3.0)), traj.derivatives(0.5, (0, 1, 2)))
+
+
+def test_a_default_moving_plan_logs_no_unused_setting() -> None:
+    pad = avp.MovingTarget.on_platform([0.0, 0.0, 1.0], incline=0.5, speed=1.0)
+    res = avp.moving.plan_moving_detailed(avp.State(position=[-3.0, 0.0, 1.0], velocity=pad.velocity), pad)
+    assert not any(line.startswith("config:") for line in res.log)
