@@ -21,6 +21,7 @@ from __future__ import annotations
 import csv
 import json
 import math
+import zipfile
 from collections.abc import Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -176,7 +177,13 @@ def write_npz(traj: Trajectory, path: str | Path, rate: float | None = None) -> 
 def read_npz(path: str | Path) -> Trajectory:
     from .trajectory import Trajectory
 
-    with np.load(path, allow_pickle=False) as z:
+    try:
+        z = np.load(path, allow_pickle=False)
+    except (OSError, ValueError, zipfile.BadZipFile) as exc:  # missing, unreadable, not an NPZ
+        raise ConfigError("path", f"{str(path)!r} is not a readable {FORMAT} NPZ file: {exc}") from exc
+    if not isinstance(z, np.lib.npyio.NpzFile):
+        raise ConfigError("path", f"{str(path)!r} is a single array, not an {FORMAT} NPZ file")
+    with z:
         if "format" not in z.files or str(z["format"]) != FORMAT:
             raise ConfigError("path", f"{str(path)!r} is not an {FORMAT} NPZ file")
         traj = Trajectory(z["coefficients"], z["knots"], g=float(z["g"]))
@@ -220,9 +227,17 @@ def read_csv(path: str | Path) -> Trajectory:
     n_seg = len(body) // 4
     if n_seg == 0 or len(body) != 4 * n_seg:
         raise ConfigError("path", f"{str(path)!r}: expected 4 rows (x, y, z, yaw) per segment, got {len(body)}")
-    coeffs = np.array([[float(x) for x in r[len(COEFFICIENT_HEADER):]] for r in body]).reshape(n_seg, 4, -1)
-    knots = [float(body[4 * s][2]) for s in range(n_seg)] + [float(body[-1][3])]
-    return Trajectory(coeffs, knots, g=float(body[0][4]))
+    width = len(rows[0])
+    for i, r in enumerate(body):
+        if len(r) != width:
+            raise ConfigError("path", f"{str(path)!r}: row {i + 2} has {len(r)} fields, the header {width}")
+    try:
+        coeffs = np.array([[float(x) for x in r[len(COEFFICIENT_HEADER):]] for r in body]).reshape(n_seg, 4, -1)
+        knots = [float(body[4 * s][2]) for s in range(n_seg)] + [float(body[-1][3])]
+        g = float(body[0][4])
+    except ValueError as exc:
+        raise ConfigError("path", f"{str(path)!r}: a field is not a number ({exc})") from exc
+    return Trajectory(coeffs, knots, g=g)
 
 
 def read_samples(path: str | Path) -> dict[str, Array]:

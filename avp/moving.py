@@ -128,8 +128,8 @@ class MovingConfig:
             if not 0.0 <= m < 0.5:
                 raise ConfigError("moving.contact_thrust_margin", f"must be in [0, 0.5), got {m}")
         g = v.finite_float("moving.growth", self.growth)
-        if g <= 1.0:
-            raise ConfigError("moving.growth", f"must be > 1, got {g}")
+        if not 1.0 < g <= 10.0:
+            raise ConfigError("moving.growth", f"must be in (1, 10] (as BoundsPolicy.growth), got {g}")
         if isinstance(self.max_solves, bool) or not isinstance(self.max_solves, int) or self.max_solves < 1:
             raise ConfigError("moving.max_solves", f"must be an integer >= 1, got {self.max_solves!r}")
         if not 1e-2 <= v.positive_float("moving.max_duration", self.max_duration) <= LIMITS["duration"][0]:

@@ -450,3 +450,26 @@ def test_a_default_moving_plan_logs_no_unused_setting() -> None:
     pad = avp.MovingTarget.on_platform([0.0, 0.0, 1.0], incline=0.5, speed=1.0)
     res = avp.moving.plan_moving_detailed(avp.State(position=[-3.0, 0.0, 1.0], velocity=pad.velocity), pad)
     assert not any(line.startswith("config:") for line in res.log)
+
+
+def test_broken_export_files_are_typed_errors(tmp_path) -> None:
+    """A CSV row longer than its header (was read as a higher degree), a non-number field, a
+    file that is not an NPZ and a single .npy array: ConfigError naming the path."""
+    traj = avp.plan(_S, _T)
+    good = traj.to_csv(tmp_path / "plan.csv")
+    lines = good.read_text().splitlines()
+    for broken in (lines[:2] + [lines[2] + ",0.0"] + lines[3:], lines[:2] + [lines[2].replace(lines[2].split(",")[-1], "x")] + lines[3:]):
+        bad = tmp_path / "bad.csv"
+        bad.write_text("\n".join(broken) + "\n")
+        with pytest.raises(avp.ConfigError) as exc:
+            avp.Trajectory.from_csv(bad)
+        assert field_of(exc) == "path"
+    assert np.array_equal(avp.Trajectory.from_csv(good).coefficients, traj.coefficients)
+    junk = tmp_path / "junk.npz"
+    junk.write_bytes(b"not a zip file at all")
+    single = tmp_path / "single.npy"
+    np.save(single, np.zeros(3))
+    for path in (junk, single):
+        with pytest.raises(avp.ConfigError) as exc:
+            avp.Trajectory.from_npz(path)
+        assert field_of(exc) == "path"
