@@ -83,6 +83,16 @@ def within(field: str, value: Any, kind: str) -> None:
                           f"{kind.replace('_', ' ')} of a flight (check the units and the frame)")
 
 
+def integer(field: str, value: Any, lo: int, hi: int | None = None, hint: str = "") -> int:
+    """``value`` as an ``int`` in ``[lo, hi]`` (``hi`` ``None``: no upper end); a bool, a float
+    or a string is refused. ``hint`` is appended to the message (what the range means)."""
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)) \
+            or value < lo or (hi is not None and value > hi):
+        span = f">= {lo}" if hi is None else f"in [{lo}, {hi}]"
+        raise ConfigError(field, f"must be an integer {span}{' ' + hint if hint else ''}, got {value!r}")
+    return int(value)
+
+
 def finite_float(field: str, value: Any) -> float:
     """``value`` as a finite float (a bool or a string is refused, :data:`_NOT_QUANTITIES`)."""
     if isinstance(value, _NOT_QUANTITIES) or _is_bool_array(value):
@@ -144,15 +154,15 @@ def rotation(field: str, value: Any) -> npt.NDArray[np.float64]:
     return R
 
 
-def unit_vector(field: str, value: Any) -> npt.NDArray[np.float64]:
-    """``value`` normalised to unit length; rejects (near) zero vectors."""
+def unit_vector(field: str, value: Any, zero: str = "must be a nonzero vector") -> npt.NDArray[np.float64]:
+    """``value`` normalised to unit length; rejects (near) zero vectors (message ``zero``)."""
     v = np.array(frozen_array(field, value, (3,)))
     scale = float(np.max(np.abs(v)))
     if scale > 1e150:  # |v| would overflow: scaled first
         v = v / scale
     n = float(np.linalg.norm(v))
     if n < 1e-9:
-        raise ConfigError(field, "must be a nonzero vector")
+        raise ConfigError(field, zero)
     return v / n
 
 

@@ -178,10 +178,10 @@ class TimeAllocation:
 
     def __post_init__(self) -> None:
         v.positive_float("time_allocation.nominal_acceleration", self.nominal_acceleration)
-        for name in ("attitude_time", "min_duration"):
-            value = (v.nonnegative_float if name == "attitude_time" else v.positive_float)(f"time_allocation.{name}",
-                                                                                         getattr(self, name))
-            v.within(f"time_allocation.{name}", value, "duration")
+        v.within("time_allocation.attitude_time",
+                 v.nonnegative_float("time_allocation.attitude_time", self.attitude_time), "duration")
+        v.within("time_allocation.min_duration",
+                 v.positive_float("time_allocation.min_duration", self.min_duration), "duration")
 
     def total(self, distance: float, speed: float) -> float:
         a = self.nominal_acceleration
@@ -323,9 +323,7 @@ class BoundsPolicy:
         growth = v.finite_float("bounds.growth", self.growth)
         if not 1.0 < growth <= 10.0:
             raise ConfigError("bounds.growth", f"must be in (1, 10], got {self.growth}")
-        if isinstance(self.max_steps, bool) or not isinstance(self.max_steps, (int, np.integer)) \
-                or not 0 <= self.max_steps <= 100:
-            raise ConfigError("bounds.max_steps", f"must be an integer in [0, 100], got {self.max_steps!r}")
+        v.integer("bounds.max_steps", self.max_steps, 0, 100)
 
     def schedule(self) -> tuple[float, ...]:
         """Duration factors to try after the first solve, in order (SCALING: its fallback list)."""
@@ -428,9 +426,7 @@ class Workspace:
             if not isinstance(sph, Sphere):
                 raise ConfigError("workspace.spheres", f"expected avp.Sphere items, got {type(sph).__name__}")
         for name, lo, hi in (("samples_per_segment", 2, 1000), ("refinement_rounds", 0, 100)):
-            val = getattr(self, name)
-            if isinstance(val, bool) or not isinstance(val, (int, np.integer)) or not lo <= val <= hi:
-                raise ConfigError(f"workspace.{name}", f"must be an integer in [{lo}, {hi}], got {val!r}")
+            v.integer(f"workspace.{name}", getattr(self, name), lo, hi)
         object.__setattr__(self, "refinement_margin",
                            v.nonnegative_float("workspace.refinement_margin", self.refinement_margin))
 
@@ -526,9 +522,7 @@ class FovConfig:
     def __post_init__(self) -> None:
         v.flags("fov", self)
         for name, lo, hi in (("n_points", 1, 1000), ("sqp_iterations", 1, 100)):
-            val = getattr(self, name)
-            if isinstance(val, bool) or not isinstance(val, (int, np.integer)) or not lo <= val <= hi:
-                raise ConfigError(f"fov.{name}", f"must be an integer in [{lo}, {hi}], got {val!r}")
+            v.integer(f"fov.{name}", getattr(self, name), lo, hi)
         for name in ("trust_position", "trust_acceleration", "trust_yaw"):
             v.positive_float(f"fov.{name}", getattr(self, name), allow_inf=True)
         g = v.finite_float("fov.gate", self.gate)
@@ -650,18 +644,13 @@ class PlannerConfig:
     flip: OverhangFlip = field(default_factory=OverhangFlip)
 
     def __post_init__(self) -> None:
-        for name, lo in (("n_segments", 1), ("degree", 1), ("position_cost_order", 1),
-                         ("yaw_cost_order", 1), ("continuity_order", 0), ("cone_facets", 3)):
-            val = getattr(self, name)
-            if isinstance(val, bool) or not isinstance(val, (int, np.integer)) or val < lo:
-                raise ConfigError(f"config.{name}", f"must be an integer >= {lo}, got {val!r}")
-        if self.degree > 20:
-            raise ConfigError("config.degree", f"at most 20 is supported, got {self.degree}")
-        if self.degree < 3:
-            raise ConfigError("config.degree", f"must be >= 3: the initial state fixes position to jerk, got {self.degree}")
-        for name, hi in (("n_segments", MAX_SEGMENTS), ("cone_facets", 64)):
-            if getattr(self, name) > hi:
-                raise ConfigError(f"config.{name}", f"at most {hi} is supported, got {getattr(self, name)}")
+        for name, lo, hi, hint in (
+            ("n_segments", 1, MAX_SEGMENTS, ""),
+            ("degree", 3, 20, "(the initial state fixes position to jerk)"),
+            ("position_cost_order", 1, None, ""), ("yaw_cost_order", 1, None, ""), ("continuity_order", 0, None, ""),
+            ("cone_facets", 3, 64, ""),
+        ):
+            v.integer(f"config.{name}", getattr(self, name), lo, hi, hint)
         if self.continuity_order >= self.degree:
             raise ConfigError("config.continuity_order", f"must be below the degree ({self.degree})")
         if self.position_cost_order > self.degree or self.yaw_cost_order > self.degree:
@@ -1006,9 +995,7 @@ class ReplanConfig:
         v.positive_float("replan.freeze_horizon", self.freeze_horizon)
         if self.deadline is not None:
             v.positive_float("replan.deadline", self.deadline)
-        if isinstance(self.measured_orders, bool) or not isinstance(self.measured_orders, (int, np.integer)) \
-                or not 0 <= self.measured_orders <= 5:
-            raise ConfigError("replan.measured_orders", "must be in 0..5 (0: all orders from the plan)")
+        v.integer("replan.measured_orders", self.measured_orders, 0, 5, "(0: all orders from the plan)")
         for name in ("anchor_position", "anchor_velocity", "target_tolerance"):
             val = v.finite_float(f"replan.{name}", getattr(self, name))
             if val < 0:

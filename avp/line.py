@@ -126,10 +126,7 @@ class LineTarget:
         if not 0.0 <= pitch <= math.pi:
             raise ConfigError("line.pitch", f"must be in [0, pi] rad (0 on top, pi hanging below), got {pitch}")
         object.__setattr__(self, "pitch", pitch)
-        if isinstance(self.grasp_piece, bool) or not isinstance(self.grasp_piece, (int, np.integer)) or not (
-            0 <= self.grasp_piece < verts.shape[0] - 1
-        ):
-            raise ConfigError("line.grasp_piece", f"must be a piece index in [0, {verts.shape[0] - 2}], got {self.grasp_piece!r}")
+        v.integer("line.grasp_piece", self.grasp_piece, 0, verts.shape[0] - 2, "(a piece index)")
         pair = v.sequence("line.grasp_range", self.grasp_range, "two fractions (lo, hi)")
         if len(pair) != 2:
             raise ConfigError("line.grasp_range", f"must be (lo, hi) with 0 <= lo < hi <= 1, got {self.grasp_range!r}")
@@ -151,12 +148,7 @@ class LineTarget:
         if self.side is not None:
             s = np.array(v.frozen_array("line.side", self.side, (3,)))
             s[2] = 0.0
-            scale = float(np.max(np.abs(s)))
-            if scale > 1e150:  # its norm would overflow: scaled first
-                s = s / scale
-            if np.linalg.norm(s) < 1e-9:
-                raise ConfigError("line.side", "must have a horizontal component")
-            s = s / np.linalg.norm(s)
+            s = v.unit_vector("line.side", s, "must have a horizontal component")
             s.setflags(write=False)
             object.__setattr__(self, "side", s)
 

@@ -130,8 +130,7 @@ class MovingConfig:
         g = v.finite_float("moving.growth", self.growth)
         if not 1.0 < g <= 10.0:
             raise ConfigError("moving.growth", f"must be in (1, 10] (as BoundsPolicy.growth), got {g}")
-        if isinstance(self.max_solves, bool) or not isinstance(self.max_solves, int) or self.max_solves < 1:
-            raise ConfigError("moving.max_solves", f"must be an integer >= 1, got {self.max_solves!r}")
+        v.integer("moving.max_solves", self.max_solves, 1)
         if not 1e-2 <= v.positive_float("moving.max_duration", self.max_duration) <= LIMITS["duration"][0]:
             raise ConfigError("moving.max_duration", f"must be in [0.01, {LIMITS['duration'][0]:g}] s, got {self.max_duration}")
         if any(v.finite_float("moving.retime", f) <= 0.0 for f in v.sequence("moving.retime", self.retime, "factors")):
