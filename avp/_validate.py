@@ -68,8 +68,8 @@ LIMITS = {"position": (1e6, "m"), "velocity": (1e3, "m/s"), "acceleration": (1e4
           "jerk": (1e6, "m/s^3"), "yaw": (1e6, "rad"), "yaw_rate": (1e3, "rad/s"), "time": (1e10, "s"),
           "duration": (1e4, "s"), "distance": (1e6, "m")}
 """Magnitudes beyond which a state or a pad is not a flight (a 1000 km position, 1 km/s, or a
-time past 1e10 s: at 1e14 s float64 knots put a contact 2.5 cm off; :class:`avp.State` says
-which clock values the certificates need):
+time past 1e10 s, where float64 times resolve 2e-6 s; a plan's durations are exact at any
+clock, :class:`avp.State`):
 refused by :func:`within`, since past them the planner's arithmetic overflows or rounds instead
 of failing clearly."""
 

@@ -14,12 +14,17 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from enum import Enum
+from typing import TYPE_CHECKING
 
 import numpy as np
 import numpy.typing as npt
 
 from . import _avp_rust
 from .errors import ConfigError
+
+if TYPE_CHECKING:
+    from .config import VehicleLimits
+    from .trajectory import Trajectory
 
 __all__ = ["EXACT_BUDGET", "Bound", "BoundReport", "Certificate", "Violation", "certify_spline"]
 
@@ -250,3 +255,19 @@ def certify_spline(
     verdicts = {b: tuple(map(_CODES.__getitem__, cells)) for b, cells in zip(_BOUNDS, codes.tolist(), strict=True)}
     tmap = {b: tuple(cells) for b, cells in zip(_BOUNDS, times.tolist(), strict=True)}
     return BoundReport(verdicts=verdicts, times=tmap, limits=limits)
+
+
+def certify_trajectory(traj: Trajectory, limits: VehicleLimits, g: float, *, exact: bool = True) -> BoundReport:
+    """:func:`certify_spline` of a plan against a vehicle's limits, mass-normalised (thrust and
+    its rate per unit mass, eqs. (15), (21)-(22) and the body rate), on the plan's exact segment
+    durations (:attr:`Trajectory.knots_rel <avp.trajectory.Trajectory.knots_rel>`, so a large
+    clock value does not round them); violation times are on the plan's clock."""
+    report = certify_spline(
+        traj.coefficients, traj.knots_rel, thrust_min=limits.accel_min, thrust_max=limits.accel_max,
+        thrust_rate_max=limits.thrust_rate_max / limits.mass, tilt_rate_max=limits.tilt_rate_max,
+        body_rate_max=limits.body_rate_max, g=g, exact=exact,
+    )
+    if traj.t0 == 0.0:
+        return report
+    times = {b: tuple(traj.t0 + t for t in cells) for b, cells in report.times.items()}
+    return BoundReport(verdicts=report.verdicts, times=times, limits=report.limits)

@@ -3,7 +3,11 @@
 Two forms:
 
 - **coefficients** (exact): the knots and the ``(S, 4, N + 1)`` ascending-power coefficients of
-  x, y, z, yaw per segment (local time ``t - t_i``), and ``g``; JSON and NPZ also keep the
+  x, y, z, yaw per segment (local time ``t - t_i``), and ``g``. JSON and NPZ also store ``t0``
+  and ``knots_rel`` (:attr:`~avp.trajectory.Trajectory.knots_rel`), which they read back in
+  place of the absolute knots: the segment durations stay exact at any clock value (CSV's
+  ``t_start``, ``t_end`` are absolute, so at a clock value ``c`` they round a duration by up
+  to ``ulp(c)``, 2.4e-7 s at UNIX time). JSON and NPZ also keep the
   trajectory's provenance (status, relaxations, certificates) when the planner recorded one. JSON writes floats with Python's
   shortest round-trip representation, NPZ stores the float64 arrays, CSV writes one row per
   segment and flat output with ``repr`` floats, so loading back gives bit-identical coefficients.
@@ -89,6 +93,8 @@ def trajectory_to_dict(traj: Trajectory, rate: float | None = None) -> dict[str,
         "version": VERSION,
         "g": traj.g,
         "knots": traj.knots.tolist(),
+        "t0": traj.t0,
+        "knots_rel": traj.knots_rel.tolist(),
         "coefficients": traj.coefficients.tolist(),
     }
     prov = getattr(traj, "provenance", None)
@@ -104,7 +110,6 @@ def trajectory_to_dict(traj: Trajectory, rate: float | None = None) -> dict[str,
 
 def trajectory_from_dict(data: Mapping[str, Any]) -> Trajectory:
     """The trajectory of a :func:`trajectory_to_dict` dict (samples, if any, are ignored)."""
-    from .trajectory import Trajectory
 
     if not isinstance(data, Mapping) or data.get("format") != FORMAT:
         raise ConfigError("format", f"not an {FORMAT} document (expected a 'format': '{FORMAT}' entry)")
@@ -113,9 +118,23 @@ def trajectory_from_dict(data: Mapping[str, Any]) -> Trajectory:
     for key in ("knots", "coefficients", "g"):
         if key not in data:
             raise ConfigError(key, "missing from the trajectory document")
-    traj = Trajectory(data["coefficients"], data["knots"], g=float(data["g"]))
+    traj = _from_knots(data["coefficients"], data["knots"], data.get("t0"), data.get("knots_rel"), data["g"])
     _restore_provenance(traj, data.get("provenance"))
     return traj
+
+
+def _from_knots(coefficients: Any, knots: Any, t0: Any, knots_rel: Any, g: Any) -> Trajectory:
+    """The trajectory on ``t0 + knots_rel`` when the document has them (exact durations), else
+    on the absolute ``knots`` (documents written before they were stored)."""
+    from .trajectory import Trajectory
+
+    try:
+        gravity = float(g)
+    except (TypeError, ValueError) as exc:
+        raise ConfigError("g", f"expected a number, got {g!r}") from exc
+    if t0 is None or knots_rel is None:
+        return Trajectory(coefficients, knots, g=gravity)
+    return Trajectory.from_relative_knots(coefficients, knots_rel, t0=t0, g=gravity)
 
 
 def _restore_provenance(traj: Trajectory, data: Any) -> None:
@@ -157,9 +176,10 @@ def read_json(source: str | Path) -> Trajectory:
 
 
 def write_npz(traj: Trajectory, path: str | Path, rate: float | None = None) -> Path:
-    """``coefficients``, ``knots``, ``g`` and, with ``rate``, ``samples`` plus ``columns``."""
+    """``coefficients``, ``knots``, ``t0``, ``knots_rel``, ``g`` and, with ``rate``, ``samples`` plus ``columns``."""
     arrays: dict[str, Any] = {"format": np.array(FORMAT), "version": np.array(VERSION),
-                              "coefficients": traj.coefficients, "knots": traj.knots, "g": np.array(traj.g)}
+                              "coefficients": traj.coefficients, "knots": traj.knots, "t0": np.array(traj.t0),
+                              "knots_rel": traj.knots_rel, "g": np.array(traj.g)}
     prov = getattr(traj, "provenance", None)
     if prov is not None:
         from .configfile import to_mapping
@@ -175,7 +195,6 @@ def write_npz(traj: Trajectory, path: str | Path, rate: float | None = None) -> 
 
 
 def read_npz(path: str | Path) -> Trajectory:
-    from .trajectory import Trajectory
 
     try:
         z = np.load(path, allow_pickle=False)
@@ -186,7 +205,9 @@ def read_npz(path: str | Path) -> Trajectory:
     with z:
         if "format" not in z.files or str(z["format"]) != FORMAT:
             raise ConfigError("path", f"{str(path)!r} is not an {FORMAT} NPZ file")
-        traj = Trajectory(z["coefficients"], z["knots"], g=float(z["g"]))
+        exact = "t0" in z.files and "knots_rel" in z.files
+        traj = _from_knots(z["coefficients"], z["knots"], float(z["t0"]) if exact else None,
+                           z["knots_rel"] if exact else None, z["g"])
         if "provenance" in z.files:
             _restore_provenance(traj, json.loads(str(z["provenance"])))
         return traj

@@ -240,9 +240,10 @@ def _certificate(chk: PolyCheck, code: int, u: float, slack: float, knots: dict[
 # -- the checked polynomials ------------------------------------------------------------------
 
 def position_polys(traj: Trajectory, segment: int) -> list[DyadicPoly]:
-    """Exact x, y, z of ``segment`` in its normalised time."""
+    """Exact x, y, z of ``segment`` in its normalised time (on the plan's exact durations,
+    :attr:`~avp.trajectory.Trajectory.knots_rel`)."""
     c = traj.coefficients[segment]
-    t0, t1 = float(traj.knots[segment]), float(traj.knots[segment + 1])
+    t0, t1 = float(traj.knots_rel[segment]), float(traj.knots_rel[segment + 1])
     return [DyadicPoly.segment(c[a].tolist(), t0, t1) for a in range(3)]
 
 

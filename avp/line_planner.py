@@ -25,7 +25,7 @@ import numpy as np
 
 from . import _validate as v
 from ._typing import Array
-from .bounds import BoundReport, Certificate, certify_spline
+from .bounds import BoundReport, Certificate, certify_trajectory
 from .config import ContactVelocity, PlannerConfig, Workspace
 from .errors import ConfigError, InfeasibleError
 from .line import LineContact, LineTarget
@@ -349,9 +349,9 @@ def line_checks(traj: Trajectory, name: str, line: LineTarget, contact: LineCont
                 root_at, order = 0, start_root[1]
             checks.append(PolyCheck(f"clearance piece {k}", name, i, F, root_at=root_at, order=order, scale=scale))
     if opts.wedge_angle is not None and contact_at_end:
-        ts = traj.tf - opts.wedge_window
+        ts = traj.duration - opts.wedge_window  # times relative to the plan's start
         for i in range(S):
-            t0, t1 = float(traj.knots[i]), float(traj.knots[i + 1])
+            t0, t1 = float(traj.knots_rel[i]), float(traj.knots_rel[i + 1])
             if t1 <= ts:
                 continue
             a = 0.0 if t0 >= ts else max(0.0, math.nextafter((ts - t0) / (t1 - t0), 0.0) * (1 - 1e-12))
@@ -414,15 +414,11 @@ def workspace_refinement(traj: Trajectory, com_end: Array, normal: Array, offset
     if report.certified:
         return ()
     layout = layout_for(cfg.n_segments, cfg.degree)
-    knots_rel = traj.knots - traj.knots[0]
-    return refinement_blocks(layout, knots_rel, traj, report, round_index, replace(cfg, workspace=ws))
+    return refinement_blocks(layout, traj.knots_rel, traj, report, round_index, replace(cfg, workspace=ws))
 
 
 def _bounds(traj: Trajectory, cfg: PlannerConfig) -> BoundReport:
-    lim = cfg.limits
-    return certify_spline(traj.coefficients, traj.knots, thrust_min=lim.accel_min, thrust_max=lim.accel_max,
-                          thrust_rate_max=lim.thrust_rate_max / lim.mass, tilt_rate_max=lim.tilt_rate_max,
-                          body_rate_max=lim.body_rate_max, g=cfg.g)
+    return certify_trajectory(traj, cfg.limits, cfg.g)
 
 
 def reversed_trajectory(traj: Trajectory, t0: float) -> Trajectory:
@@ -445,8 +441,7 @@ def reversed_trajectory(traj: Trajectory, t0: float) -> Trajectory:
             # q_j = (-1)^j sum_{k>=j} c_k C(k, j) T^{k-j}
             w = np.array([math.comb(int(kk), j) * Ti ** (kk - j) if kk >= j else 0.0 for kk in k])
             out[i, :, j] = (-1.0) ** j * (src @ w)
-    knots = t0 + np.concatenate([[0.0], np.cumsum(T[::-1])])
-    return Trajectory(out, knots, g=traj.g)
+    return Trajectory.from_relative_knots(out, np.concatenate(([0.0], np.cumsum(T[::-1]))), t0=t0, g=traj.g)
 
 
 # -- entry point -------------------------------------------------------------------------------

@@ -42,7 +42,7 @@ import numpy as np
 from . import _validate as v
 from ._typing import Array
 from ._validate import LIMITS
-from .bounds import BoundReport, certify_spline
+from .bounds import BoundReport, certify_trajectory
 from .config import FovConfig, PlannerConfig
 from .errors import (
     ConfigError,
@@ -207,7 +207,7 @@ def contact_errors(
     ``config.workspace.body_offset``; the thrust ``a + g e3 + d v`` with ``d = rotor_drag`` as
     ``config.limits.rotor_drag``)."""
     moving = moving if moving is not None else MovingConfig()
-    pad = target.at(traj.tf)
+    pad = target.at(traj.t0, traj.duration)
     p, vel, acc = (traj(traj.tf, order) for order in (0, 1, 2))
     f = acc + np.array([0.0, 0.0, traj.g]) + rotor_drag * vel
     b3 = f / np.linalg.norm(f)
@@ -252,7 +252,7 @@ def _initial_duration(state: State, target: MovingTarget, cfg: PlannerConfig, mo
     predicted pad (a vehicle already tracking the platform only closes the gap)."""
     T = cfg.time_allocation.total(float(np.linalg.norm(target.point - state.position)), 0.0)
     for _ in range(3):
-        pad = target.at(state.time + T)
+        pad = target.at(state.time, T)
         gap = contact_point(pad, cfg.workspace.body_offset) - (state.position + T * state.velocity)
         T = cfg.time_allocation.total(float(np.linalg.norm(gap)), float(np.linalg.norm(state.velocity - pad.velocity)))
     return min(T, moving.max_duration)
@@ -337,7 +337,7 @@ def plan_moving_detailed(
 
     def evaluate(T: float) -> _Eval:
         nonlocal solve_time
-        pad = target.at(state.time + T)
+        pad = target.at(state.time, T)
         t0 = time.perf_counter()
         qp = builder.build(pad, T)
         safety: SafetyReport | None = None
@@ -351,11 +351,7 @@ def plan_moving_detailed(
             if not out.ok or out.c_hat is None:
                 return _Eval(T, pad, None, None, math.inf, math.inf, f"QP {out.status.value}")
             traj = qp.trajectory(out.c_hat, cfg.g)
-            report = certify_spline(
-                traj.coefficients, traj.knots, thrust_min=lim.accel_min, thrust_max=lim.accel_max,
-                thrust_rate_max=lim.thrust_rate_max / lim.mass, tilt_rate_max=lim.tilt_rate_max,
-                body_rate_max=lim.body_rate_max, g=cfg.g,
-            )
+            report = certify_trajectory(traj, lim, cfg.g)
             J = objective(qp, out.c_hat, cfg)
             if not report.certified:
                 note = "; ".join(str(x) for x in report.violations[:2]) or "bounds undecided"

@@ -157,16 +157,19 @@ def _integrate(p: _IPoly) -> _IPoly:
     return _IPoly(m, r + TINY)
 
 
-def _pad_enclosures(pad_f: MovingTarget, sigma_max: float) -> tuple[list[_IPoly], _IPoly | None, _IPoly | None, int]:
+def _pad_enclosures(pad_f: MovingTarget, span: float, sigma_max: float
+                    ) -> tuple[list[_IPoly], _IPoly | None, _IPoly | None, int]:
     """``rho(t_f - sigma)`` per axis, the rotation ``cos``/``sin`` of ``omega sigma`` that turns
     ``s3_f`` back to ``s3(t_f - sigma)`` (``None`` for a non-turning platform: ``s3`` is constant),
-    and the Taylor order used."""
+    and the Taylor order used. ``pad_f`` was predicted over ``span = |t_f - t_ref|`` (s) from the
+    estimate's time ``t_ref``: its rounding grows with that span, not with the clock's value (the
+    difference of two times is rounded relative to itself)."""
     omega = pad_f.omega
     K = _taylor_order(omega, sigma_max)
     theta = pad_f.heading
-    phase_rad = 4 * EPS * (abs(theta) + abs(omega) * abs(pad_f.time)) + 2 * EPS
+    phase_rad = 4 * EPS * (abs(theta) + abs(omega) * span) + 2 * EPS
     cos_h, sin_h = _trig_series(theta, phase_rad, omega, K)
-    reach = abs(pad_f.time) + sigma_max
+    reach = span + sigma_max
     scale_rho = 16 * EPS * (float(np.max(np.abs(pad_f.point))) + (abs(pad_f.speed) + abs(pad_f.vertical_speed)) * reach) + TINY
     drift = [_integrate(cos_h).scaled(pad_f.speed), _integrate(sin_h).scaled(pad_f.speed),
              _IPoly(np.array([0.0, pad_f.vertical_speed]), np.array([0.0, EPS * abs(pad_f.vertical_speed)]))]
@@ -263,13 +266,14 @@ def certify_moving_clearance(
     traj: Trajectory, target: MovingTarget, body_offset: float = 0.0, contact_tol: float = RESIDUAL_TOL
 ) -> ClearanceReport:
     """Prove ``(p(t) - rho(t)) . s3(t) - l > 0`` on ``[t_0, t_f)`` (module docstring)."""
-    knots = np.asarray(traj.knots, dtype=float)
+    knots = traj.knots_rel  # sigma = t_f - t in the plan's own (exact) durations
     tf = float(knots[-1])
-    pad_f = target.at(tf)
-    rho, cos_w, sin_w, K = _pad_enclosures(pad_f, tf - float(knots[0]))
+    pad_f = target.at(traj.t0, tf)
+    span = abs((traj.t0 - target.time) + tf)
+    rho, cos_w, sin_w, K = _pad_enclosures(pad_f, span, tf)
     coeffs = traj.coefficients
     # s3_f = R_z(omega dt) s3(t_ref) in floating point: a few ulps plus the rounding of the angle.
-    s3_rad = 8 * EPS * (1.0 + abs(pad_f.omega * (tf - target.time)))
+    s3_rad = 8 * EPS * (1.0 + abs(pad_f.omega) * span)
     rho_s3 = _normal_component(rho, pad_f.s3, s3_rad, cos_w, sin_w) + _IPoly.const(body_offset)
     verdicts: list[bool] = []
     t_bad = math.nan
@@ -289,6 +293,6 @@ def certify_moving_clearance(
         code, t_sig = _avp_rust.certify_below(np.ascontiguousarray(F), sig_lo, sig_hi)
         verdicts.append(code == 0)
         if code != 0 and math.isnan(t_bad):
-            t_bad = tf - float(t_sig)
+            t_bad = traj.t0 + (tf - float(t_sig))
     ok = all(verdicts) and r_lo >= -contact_tol
     return ClearanceReport(certified=ok, segments=tuple(verdicts), violation_time=t_bad, contact_residual_lower=r_lo, contact_residual_upper=r_hi, taylor_order=K)

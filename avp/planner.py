@@ -14,7 +14,7 @@ import numpy as np
 from . import _validate as v
 from ._typing import Array
 from .attempt import Attempt, no_time_for, solve_at
-from .bounds import BoundReport, certify_spline
+from .bounds import BoundReport, certify_trajectory
 from .config import PlannerConfig, PreImpactMode, Relaxation
 from .errors import (
     BoundsNotCertifiedError,
@@ -177,20 +177,10 @@ def _certify(traj: Trajectory, cfg: PlannerConfig) -> BoundReport:
     fallback (up to :data:`~avp.bounds.EXACT_BUDGET` on near-tangent cells) runs only when that
     path left cells undecided and proved nothing violated. A failed plan's report may then keep
     UNKNOWN cells next to its proven violations; a certified one is decided everywhere."""
-    lim = cfg.limits
-
-    def run(exact: bool) -> BoundReport:
-        return certify_spline(
-            traj.coefficients, traj.knots,
-            thrust_min=lim.accel_min, thrust_max=lim.accel_max,
-            thrust_rate_max=lim.thrust_rate_max / lim.mass,
-            tilt_rate_max=lim.tilt_rate_max, body_rate_max=lim.body_rate_max, g=cfg.g, exact=exact,
-        )
-
-    fast = run(False)
+    fast = certify_trajectory(traj, cfg.limits, cfg.g, exact=False)
     if fast.certified or fast.violations or not fast.unknown:
         return fast
-    return run(True)
+    return certify_trajectory(traj, cfg.limits, cfg.g)
 
 
 def _relax(cfg: PlannerConfig, relaxation: Relaxation, target: PerchTarget) -> PlannerConfig:

@@ -168,7 +168,10 @@ class MovingTarget(PerchTarget):
         CTRV in closed form: ``rho(t) = rho_0 + v_h dt sinc(w dt / 2) (cos, sin)(theta_0 + w dt / 2)
         + v_v dt e3`` (the chord of the arc; ``w -> 0`` is the straight line without cancellation).
         """
-        dt = np.atleast_1d(np.asarray(times, dtype=float)) - self.time
+        return self._predict(np.atleast_1d(np.asarray(times, dtype=float)) - self.time)
+
+    def _predict(self, dt: Array) -> tuple[Array, Array, Array]:
+        """:meth:`predict` at ``dt`` (s) after ``time``."""
         w = self.omega
         half = 0.5 * w * dt
         chord = self.speed * dt * _sinc(half)
@@ -180,12 +183,15 @@ class MovingTarget(PerchTarget):
         s3 = np.stack([c * n[0] - s * n[1], s * n[0] + c * n[1], np.full_like(dt, n[2])], axis=-1)
         return points, heading, s3
 
-    def at(self, time: float) -> MovingTarget:
-        """The target at ``time``: predicted pad pose and platform state (any sign of
-        ``time - self.time``); the pad frame turns with the heading."""
+    def at(self, time: float, after: float = 0.0) -> MovingTarget:
+        """The target at ``time + after``: predicted pad pose and platform state (any sign of
+        ``time + after - self.time``); the pad frame turns with the heading. The prediction
+        runs over ``(time - self.time) + after``, so a plan's pad at contact, ``at(t0,
+        duration)``, is not rounded to the clock as ``t0 + duration`` would be."""
         t = v.finite_float("time", time)
-        points, heading, _ = self.predict(t)
-        w_dt = self.omega * (t - self.time)
+        dt = (t - self.time) + v.finite_float("after", after) if after else t - self.time
+        points, heading, _ = self._predict(np.array([dt]))
+        w_dt = self.omega * dt
         R = rot_z(w_dt) @ self.R_WS if w_dt != 0.0 else self.R_WS
         # Derived from validated fields: skip re-validation (it dominates the cost of at()).
         out = object.__new__(type(self))
@@ -199,7 +205,7 @@ class MovingTarget(PerchTarget):
         object.__setattr__(out, "point", point)
         object.__setattr__(out, "R_WS", R)
         object.__setattr__(out, "heading", float(heading[0]))
-        object.__setattr__(out, "time", t)
+        object.__setattr__(out, "time", t + after if after else t)
         return out
 
     def velocity_at(self, time: float) -> Array:

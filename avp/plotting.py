@@ -229,7 +229,7 @@ def figure_plan(
     for a in axes[1:]:
         a.sharex(axes[0])
     tk = cfg.t_k
-    knots = traj.knots - traj.t0
+    knots = traj.knots_rel
 
     def decorate(a: Any) -> None:
         for k in knots[1:-1]:

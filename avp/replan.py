@@ -184,7 +184,9 @@ def anticipate(plan: Trajectory, odometry: State, t_rp: float, t_ex: float, meas
     measured[0, 3], measured[1, 3] = odometry.yaw, odometry.yaw_rate
     odo[:measured_orders] = measured[:measured_orders]
     try:
-        x0 = _avp_rust.anticipate(plan.coefficients, plan.knots, np.ascontiguousarray(odo), float(t_rp), float(t_ex))
+        # on the plan's exact durations, in times since its start (any clock value)
+        x0 = _avp_rust.anticipate(plan.coefficients, plan.knots_rel, np.ascontiguousarray(odo),
+                                  float(t_rp) - plan.t0, float(t_ex) - plan.t0)
     except ValueError as exc:
         raise ConfigError("t", str(exc)) from exc
     return State(position=x0[0, :3], velocity=x0[1, :3], acceleration=x0[2, :3], jerk=x0[3, :3],
@@ -198,10 +200,13 @@ def _plan_state(plan: Trajectory, t: float) -> State:
                  yaw=float(d[0, 3]), yaw_rate=float(d[1, 3]), time=float(t))
 
 
-def _knots_after(plan: Trajectory, t: float) -> Array:
-    """The plan's interior knots after ``t`` (its contact time excluded)."""
-    knots = plan.knots
-    return knots[(knots > t) & (knots < plan.tf)]
+def _knots_after(plan: Trajectory, t: float) -> tuple[float, Array]:
+    """``t`` and the plan's interior knots after it (its contact time excluded), relative to
+    the plan's start (:attr:`~avp.trajectory.Trajectory.knots_rel`, exact at any clock value)."""
+    rel, t_rel = plan.knots_rel, float(t) - plan.t0
+    # a knot within the clock's resolution of t is t itself (t may be a knot rounded to the clock)
+    after = t_rel + 4.0 * math.ulp(abs(float(t)))
+    return t_rel, rel[(rel > after) & (rel < rel[-1])]
 
 
 def _blend(a: PerchTarget, b: PerchTarget, f: float) -> PerchTarget:
@@ -564,7 +569,8 @@ class Replanner:
         n = self.config.n_segments
         if not self._keeps_knots:
             return np.full(n, total / n)
-        pieces = list(np.diff(np.concatenate(([t_ex], _knots_after(committed, t_ex), [committed.tf]))))
+        t_rel, inner = _knots_after(committed, t_ex)
+        pieces = list(np.diff(np.concatenate(([t_rel], inner, [committed.duration]))))
         while len(pieces) < n:
             i = int(np.argmax(pieces))
             pieces[i:i + 1] = [0.5 * pieces[i], 0.5 * pieces[i]]
@@ -583,9 +589,9 @@ class Replanner:
         if not self._keeps_knots:
             return t_ex
         n = self.config.n_segments
-        inner = _knots_after(committed, t_ex)
-        reach = self.replan.keep_knots_min * (committed.tf - t_ex) / n
-        return float(inner[0]) if inner.size and inner[0] <= t_ex + reach else t_ex
+        t_rel, inner = _knots_after(committed, t_ex)
+        reach = self.replan.keep_knots_min * (committed.duration - t_rel) / n
+        return committed.t0 + float(inner[0]) if inner.size and inner[0] <= t_rel + reach else t_ex
 
     def _retimed(self, remaining: float, goal: PerchTarget) -> float:
         """Time left after moving the contact time with the normal part of the correction."""

@@ -214,8 +214,9 @@ def _touch_order(traj: Trajectory, normal: Array) -> int:
 
 def certify_workspace(traj: Trajectory, target: PerchTarget, workspace: Workspace) -> SafetyReport:
     """Certifies every region of ``workspace`` on every segment of ``traj`` (Rust, exact
-    fallback: a "within" verdict is never wrong)."""
-    c, k = traj.coefficients, traj.knots
+    fallback: a "within" verdict is never wrong), on the plan's exact segment durations
+    (:attr:`~avp.trajectory.Trajectory.knots_rel`); violation times are on its clock."""
+    c, k, t0 = traj.coefficients, traj.knots_rel, traj.t0
     checks = []
     for r in regions_for(target, workspace):
         order = 0
@@ -226,6 +227,7 @@ def certify_workspace(traj: Trajectory, target: PerchTarget, workspace: Workspac
             codes, times, residual = _avp_rust.certify_sphere_outside(c, k, r.normal, r.offset)
         else:
             codes, times, residual = _avp_rust.certify_speed(c, k, r.offset)
+        times = times + t0 if t0 else times
         checks.append(RegionCheck(region=r, verdicts=tuple(map(_CODES.__getitem__, codes.tolist())), times=tuple(times.tolist()), residual=float(residual), touch_order=order))
     return SafetyReport(checks=tuple(checks))
 

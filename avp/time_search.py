@@ -64,7 +64,7 @@ def _midpoints(per_segment: int) -> Array:
 def _samples(traj: Trajectory, per_segment: int) -> tuple[Array, Array, Array, Array]:
     """``|a|^2``, ``a_z``, ``|j|^2`` and the yaw rate of ``traj`` at ``per_segment`` midpoints
     of equal parts of every segment."""
-    knots = traj.knots
+    knots = traj.knots_rel
     t = (knots[:-1, None] + _midpoints(per_segment)[None, :] * (knots[1:] - knots[:-1])[:, None]).reshape(-1)
     # interior times of valid knots: the kernel directly, without the public range checks
     d = _avp_rust.eval_spline(traj.coefficients, knots, t, [1, 2, 3]).reshape(3, t.size, 4)

@@ -163,11 +163,11 @@ def trackability_rows(trajectory: Trajectory, snap_max: float, snap_thrust_max: 
     if math.isinf(snap_max) and math.isinf(snap_thrust_max):
         raise ConfigError("snap_max", "both limits are inf: no polynomial to build (certify_snap reports NOT_CHECKED)")
     try:
-        return _avp_rust.trackability_rows(trajectory.coefficients, trajectory.knots, snap_max, snap_thrust_max,
+        return _avp_rust.trackability_rows(trajectory.coefficients, trajectory.knots_rel, snap_max, snap_thrust_max,
                                            trajectory.g)
     except _avp_rust.KernelError:
         pass
-    knots = trajectory.knots
+    knots = trajectory.knots_rel  # the exact durations at any clock value
     rows = []
     for i in range(trajectory.n_segments):
         T = Fraction(float(knots[i + 1])) - Fraction(float(knots[i]))

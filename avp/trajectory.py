@@ -104,6 +104,13 @@ class Trajectory:
         ``(S + 1,)`` absolute times (s).
     g:
         Gravity used by the flatness map (m/s^2).
+
+    The spline is held as its start time ``t0`` and the knots relative to it
+    (:attr:`knots_rel`, from 0): the segment durations the planner solved for stay exact
+    whatever the clock's value, and the certificates read them. An absolute time ``t`` is
+    evaluated at ``t - t0`` (``tf`` itself at the spline's end exactly). At a clock value ``c``,
+    absolute times resolve to ``ulp(c)`` (2.4e-7 s at UNIX time), so there ``traj(t)`` is the
+    spline at a time within that of ``t``; the plan and its certificates are unaffected.
     """
 
     def __init__(self, coefficients: npt.ArrayLike, knots: npt.ArrayLike, g: float = frames.GRAVITY) -> None:
@@ -117,23 +124,49 @@ class Trajectory:
             raise ConfigError("coefficients", "contains NaN or inf; a trajectory must be finite")
         if np.any(np.diff(k) <= 0):
             raise ConfigError("knots", "must be strictly increasing")
-        c.setflags(write=False)
-        k.setflags(write=False)
         v.within("knots", k, "time")
-        self._c = c
-        self._k = k
-        self.g = v.positive_float("g", g)
+        rel = k - k[0]
+        if np.any(np.diff(rel) <= 0):  # knots closer than the rounding of their clock
+            raise ConfigError("knots", "segments shorter than the resolution of the clock at these times; "
+                              "use a local clock (seconds since the start of the flight)")
+        c.setflags(write=False)
+        self._init(c, float(k[0]), rel, v.positive_float("g", g))
+
+    @classmethod
+    def from_relative_knots(cls, coefficients: npt.ArrayLike, knots_rel: npt.ArrayLike, t0: float = 0.0,
+                            g: float = frames.GRAVITY) -> Trajectory:
+        """The spline of ``coefficients`` on the knots ``t0 + knots_rel`` (s; ``knots_rel``
+        strictly increasing from 0), which it keeps exactly whatever the clock's value
+        (:attr:`knots_rel`)."""
+        c = np.ascontiguousarray(np.array(coefficients, dtype=float))
+        rel = np.array(knots_rel, dtype=float)  # a copy: held read-only
+        start = v.finite_float("t0", t0)
+        if rel.ndim != 1 or rel.size < 2 or rel[0] != 0.0:
+            raise ConfigError("knots_rel", f"expected increasing times from 0.0, got {rel!r}")
+        if not np.all(np.isfinite(rel)) or np.any(np.diff(rel) <= 0):
+            raise ConfigError("knots_rel", "must be finite and strictly increasing")
+        v.within("knots_rel", rel[-1], "duration")
+        traj = cls(c, start + rel, g=g)  # every other check: shapes, coefficients, the clock
+        traj._init(traj._c, start, rel, traj.g)
+        return traj
+
+    def _init(self, coefficients: Array, t0: float, knots_rel: Array, g: float) -> None:
+        knots_rel.setflags(write=False)
+        self._c, self._t0, self._rel, self.g = coefficients, t0, knots_rel, g
+        self._tf = t0 + float(knots_rel[-1])
+        self._tol = max(TIME_TOL, 4.0 * math.ulp(max(abs(t0), abs(self._tf))))
+        self._knots: Array | None = None
         self.provenance: Provenance | None = None
         """Set by the planner: status, relaxations, certificates (``None`` for a bare spline)."""
 
     @classmethod
-    def _trusted(cls, coefficients: Array, knots: Array, g: float) -> Trajectory:
+    def _trusted(cls, coefficients: Array, t0: float, knots_rel: Array, g: float) -> Trajectory:
         """A trajectory from arrays the caller guarantees valid (the planner's QP solutions:
-        finite, shaped, increasing knots); they are taken over read-only, without copies."""
+        finite, shaped, relative knots increasing from 0, ``t0`` within the time limit); they
+        are taken over read-only, without copies."""
         self = cls.__new__(cls)
         coefficients.setflags(write=False)
-        knots.setflags(write=False)
-        self._c, self._k, self.g, self.provenance = coefficients, knots, float(g), None
+        self._init(coefficients, float(t0), knots_rel, float(g))
         return self
 
     # -- structure -------------------------------------------------------------------------
@@ -144,25 +177,35 @@ class Trajectory:
 
     @property
     def knots(self) -> Array:
-        """Read-only knot times (s)."""
-        return self._k
+        """Read-only absolute knot times (s): ``t0 + knots_rel``, rounded to the clock."""
+        if self._knots is None:
+            knots = self._t0 + self._rel
+            knots.setflags(write=False)
+            self._knots = knots
+        return self._knots
+
+    @property
+    def knots_rel(self) -> Array:
+        """Read-only knot times relative to :attr:`t0` (s), from 0: exact at any clock value."""
+        return self._rel
 
     @property
     def durations(self) -> Array:
         """Segment durations (s)."""
-        return np.diff(self._k)
+        return np.diff(self._rel)
 
     @property
     def t0(self) -> float:
-        return float(self._k[0])
+        return self._t0
 
     @property
     def tf(self) -> float:
-        return float(self._k[-1])
+        return self._tf
 
     @property
     def duration(self) -> float:
-        return self.tf - self.t0
+        """``tf - t0`` (s), exact (the last relative knot)."""
+        return float(self._rel[-1])
 
     @property
     def n_segments(self) -> int:
@@ -178,8 +221,10 @@ class Trajectory:
 
     # -- evaluation ------------------------------------------------------------------------
     def _times(self, t: Any) -> tuple[Array, tuple[int, ...]]:
-        if isinstance(t, float) and self.t0 - TIME_TOL <= t <= self.tf + TIME_TOL:  # one time, in range
-            return np.array([min(max(t, self.t0), self.tf)]), ()
+        """Times relative to :attr:`t0`, clipped to the spline, and the shape of ``t``."""
+        t0, tf, tol = self._t0, self._tf, self._tol
+        if isinstance(t, float) and t0 - tol <= t <= tf + tol:  # one time, in range
+            return np.array([self.duration if t >= tf else max(t - t0, 0.0)]), ()
         try:
             arr = np.asarray(t, dtype=float)
         except (TypeError, ValueError) as exc:
@@ -188,10 +233,12 @@ class Trajectory:
             lo, hi = float(arr.min()), float(arr.max())  # NaN propagates to both
             if not (math.isfinite(lo) and math.isfinite(hi)):
                 raise ConfigError("t", "contains NaN or inf")
-            if lo < self.t0 - TIME_TOL or hi > self.tf + TIME_TOL:
-                raise ConfigError("t", f"times must lie in [{self.t0}, {self.tf}] s, got [{lo}, {hi}]")
-        flat = arr.reshape(-1).clip(self.t0, self.tf)  # a new contiguous array
-        return flat, arr.shape
+            if lo < t0 - tol or hi > tf + tol:
+                raise ConfigError("t", f"times must lie in [{t0}, {tf}] s, got [{lo}, {hi}]")
+        flat = arr.reshape(-1) - t0  # a new contiguous array
+        if t0 != 0.0:  # tf (rounded to the clock) is the end of the spline
+            flat[arr.reshape(-1) >= tf] = self.duration
+        return flat.clip(0.0, self.duration), arr.shape
 
     def derivatives(self, t: Any, orders: Any = (0, 1, 2, 3, 4)) -> Array:
         """All four flat outputs for each order: shape ``(len(orders), *shape(t), 4)``."""
@@ -203,7 +250,7 @@ class Trajectory:
         orders_list = [int(o) for o in items]
         if any(not 0 <= o <= MAX_ORDER for o in orders_list):
             raise ConfigError("order", f"derivative orders must be in [0, {MAX_ORDER}], got {orders_list}")
-        out = _avp_rust.eval_spline(self._c, self._k, flat, orders_list)
+        out = _avp_rust.eval_spline(self._c, self._rel, flat, orders_list)
         return out.reshape((len(orders_list), *shape, 4))
 
     def evaluate(self, t: Any, order: int = 0) -> Array:
@@ -245,13 +292,16 @@ class Trajectory:
 
     def sample(self, dt: float) -> Array:
         """Times ``t0, t0 + dt, ...`` up to and including ``tf`` (at most :data:`MAX_SAMPLES`)."""
+        return np.minimum(self._t0 + self._sample_rel(dt), self._tf)
+
+    def _sample_rel(self, dt: float) -> Array:
+        """:meth:`sample` relative to ``t0``: ``0, dt, ...`` up to and including :attr:`duration`."""
         dt = v.positive_float("dt", dt)
         steps = max(1, math.ceil(self.duration / dt - 1e-9))  # t0 and tf at least
         if steps >= MAX_SAMPLES:
             raise ConfigError("dt", f"{dt:g} s gives {steps + 1:.3g} samples over {self.duration:.3g} s; at most "
                               f"{MAX_SAMPLES:g}: sample at dt >= {self.duration / (MAX_SAMPLES - 1):.3g} s")
-        n = int(steps)
-        return np.minimum(self.t0 + dt * np.arange(n + 1), self.tf)
+        return np.minimum(dt * np.arange(int(steps) + 1), self.duration)
 
     # -- exports (avp.export) ---------------------------------------------------------------
     def to_json(self, path: Any = None, *, rate: float | None = None, indent: int | None = None) -> str:

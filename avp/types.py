@@ -40,11 +40,10 @@ class State:
     Each must be finite and within a flight's magnitudes (``avp._validate.LIMITS``: 1000 km,
     1 km/s, 1e4 m/s^2, 1e6 m/s^3, 1e6 rad, 1e3 rad/s, 1e10 s); beyond them the planner's
     arithmetic overflows or loses the millisecond, so they are refused (``ConfigError``).
-    Known limit: plans hold absolute knot times, so large clock values round the contact.
-    A one-shot pad plan at UNIX time (1.7e9 s) meets its contact to 2e-7 m. The contact
-    certificates of replans (from 1e9 s; 1e8 s works) and of moving pads (from a day, 86,400 s;
-    an hour works) then fail on that rounding. Keep ``time`` on a local clock (seconds since the
-    start of the flight).
+    Any clock works up to that limit (a UNIX timestamp, ROS time): a plan holds its start and
+    its knots relative to it (:attr:`Trajectory.knots_rel <avp.trajectory.Trajectory.knots_rel>`),
+    so it is the plan made at time 0, shifted, and its certificates hold as they do at 0. Only
+    absolute times themselves are rounded to the clock (2.4e-7 s at UNIX time).
     """
 
     position: Array

@@ -411,19 +411,6 @@ def test_a_warm_start_too_large_to_fit_is_dropped_not_iterated() -> None:
     assert res.ok and any(line.startswith("warm start not used") for line in res.log)
 
 
-def test_a_unix_time_start_is_planned_to_the_micrometre() -> None:
-    """The time limit leaves room for a one-shot pad plan at a UNIX timestamp (1.7e9 s): it is
-    the plan made at time 0, shifted (time invariance), to 1e-5 m and 1e-4 m/s at contact
-    (float64 knots there resolve 2.4e-7 s). Replans and moving pads need a local clock (State)."""
-    res = avp.plan_detailed(avp.State.hover([0.0, 0.0, 1.5], time=1.7e9), _T)
-    ref = avp.plan_detailed(_S, _T).trajectory
-    assert res.status is avp.PlanStatus.SOLVED
-    traj = res.trajectory
-    assert np.linalg.norm(traj(traj.tf) - _T.point) < 1e-5
-    assert np.linalg.norm(traj(traj.tf, 1) - ref(ref.tf, 1)) < 1e-4
-    assert traj.duration == pytest.approx(ref.duration, abs=1e-6)
-
-
 def test_a_json_file_that_is_not_an_object_is_a_typed_error(tmp_path) -> None:
     path = tmp_path / "list.json"
     path.write_text("[1, 2]")

@@ -441,12 +441,10 @@ class PerchingQp:
         return _read_only(inv(b)), _read_only(inv(lo)), _read_only(inv(hi))
 
     @cached_property
-    def _knots(self) -> tuple[Array, bool]:
-        """The plan's knot times ``t0 + knots_rel`` (read-only, shared by every trajectory of
-        this QP and its copies) and whether they increase strictly."""
-        knots = self.t0 + self.knots_rel
-        k = knots.tolist()
-        return _read_only(knots), all(map(float.__lt__, k[:-1], k[1:]))
+    def _increasing(self) -> bool:
+        """Whether :attr:`knots_rel` increases strictly (the trajectory's own check)."""
+        k = self.knots_rel.tolist()
+        return all(map(float.__lt__, k[:-1], k[1:]))
 
     @cached_property
     def _physical_scale(self) -> Array:
@@ -457,10 +455,9 @@ class PerchingQp:
         """The :class:`~avp.trajectory.Trajectory` of normalised coefficients ``c_hat``, starting
         at ``t0`` with this QP's durations."""
         coeffs = self.layout.to_physical(c_hat, self.durations, scale=self._physical_scale)
-        knots, increasing = self._knots
-        if not (increasing and np.isfinite(coeffs).all()):
-            return Trajectory(coeffs, knots.copy(), g=g)  # raises the typed error
-        return Trajectory._trusted(coeffs, knots, g)
+        if not (self._increasing and np.isfinite(coeffs).all()):
+            return Trajectory(coeffs, self.t0 + self.knots_rel, g=g)  # raises the typed error
+        return Trajectory._trusted(coeffs, self.t0, self.knots_rel, g)
 
     def with_inequalities(self, *blocks: ConstraintBlock) -> PerchingQp:
         """A copy with more inequality blocks (e.g. the FoV rows (8) and trust region (9)); its
@@ -476,7 +473,7 @@ class PerchingQp:
 
     def _same_equalities(self, other: PerchingQp) -> PerchingQp:
         """``other`` has this QP's cost and equalities: hand over the elimination if computed."""
-        for name in ("elimination", "_stacked_equalities", "knots_rel", "_knots", "_physical_scale"):
+        for name in ("elimination", "_stacked_equalities", "knots_rel", "_increasing", "_physical_scale"):
             if name in self.__dict__:
                 other.__dict__[name] = self.__dict__[name]
         return other

@@ -1,0 +1,186 @@
+"""Plans on a large clock (a UNIX timestamp, ROS time) are the plans made at time 0, shifted.
+
+A trajectory holds its start time ``t0`` and its knots relative to it (``knots_rel``), and the
+certificates read those, so the clock's value cannot round the segment durations the planner
+solved for. Before, absolute knots rounded them: replans from 1e9 s and moving pads from a day
+failed their contact certificates. The oracle here is time invariance: the planning problem is
+the same at any clock, so the answer must be too (bit for bit where no time is rounded)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+import avp
+from avp.line import LineTarget
+from avp.line_planner import plan_line
+from avp.moving import MovingConfig, MovingReplanner, contact_errors, plan_moving_detailed
+from avp.platform import MotionModel, MovingTarget
+from avp.replan import Replanner
+from avp.sim.run import sim_config
+
+ReplanAction = avp.ReplanAction
+CLOCKS = [86_400.0, 1.7e9, 9.9e9]  # a day, UNIX time, near the time limit
+WALL = avp.PerchTarget.from_incline([4.5, 0.0, 1.5], math.radians(90.0))
+SLOPE = avp.PerchTarget.from_incline([3.0, 0.5, 0.3], math.radians(40.0))
+MOVING_CFG = avp.PlannerConfig(limits=avp.VehicleLimits(mass=1.0, thrust_min=5.0, thrust_max=17.0, tilt_rate_max=3.0),
+                               alpha=5.5, pre_impact=avp.PreImpactMode.OFF)
+
+
+def _same_spline(a: avp.Trajectory, b: avp.Trajectory, shift: float) -> None:
+    np.testing.assert_array_equal(a.coefficients, b.coefficients)
+    np.testing.assert_array_equal(a.knots_rel, b.knots_rel)
+    assert a.t0 == b.t0 + shift
+
+
+@pytest.mark.parametrize("clock", CLOCKS)
+@pytest.mark.parametrize("target", [WALL, SLOPE], ids=["wall", "slope"])
+def test_a_pad_plan_is_the_same_at_any_clock(clock, target):
+    ground = avp.PlannerConfig(workspace=avp.Workspace(ground_z=0.0))
+    ref = avp.plan_detailed(avp.State.hover([0.0, 0.0, 1.5]), target, ground)
+    res = avp.plan_detailed(avp.State.hover([0.0, 0.0, 1.5], time=clock), target, ground)
+    assert ref.status is avp.PlanStatus.SOLVED and res.status is ref.status
+    _same_spline(res.trajectory, ref.trajectory, clock)
+    assert res.trajectory.provenance.workspace_certified
+    # the contact is the spline's end, exactly (tf is evaluated there, not at tf - t0 rounded)
+    np.testing.assert_array_equal(res.trajectory(res.trajectory.tf), ref.trajectory(ref.trajectory.tf))
+
+
+@pytest.mark.parametrize("clock", CLOCKS)
+@pytest.mark.parametrize("turn", [0.0, 0.2])
+def test_a_moving_pad_plan_is_the_same_at_any_clock(clock, turn):
+    """Before, a day's clock failed the moving-plane clearance (contact residual 1e-9 m) and
+    UNIX time widened the enclosure to 2e-5 m."""
+    def plan(t: float):
+        pad = MovingTarget.on_platform([0.0, 0.0, 1.0], incline=0.5, speed=2.0, turn_rate=turn, time=t)
+        start = avp.State(position=pad.point - [3.0, 0.0, -1.0], velocity=pad.velocity, time=t)
+        return plan_moving_detailed(start, pad, MOVING_CFG), pad
+
+    (ref, _), (res, pad) = plan(0.0), plan(clock)
+    assert ref.status is avp.PlanStatus.SOLVED and res.status is ref.status
+    _same_spline(res.trajectory, ref.trajectory, clock)
+    assert res.clearance.contact_residual_lower == ref.clearance.contact_residual_lower
+    assert res.clearance.certified
+    assert contact_errors(res.trajectory, pad).position < 1e-9
+
+
+@pytest.mark.parametrize("clock", CLOCKS)
+def test_a_line_perch_and_its_recovery_are_the_same_at_any_clock(clock):
+    line = LineTarget.segment([3.0, -1.5, 2.5], [3.0, 1.5, 2.5], pitch=math.radians(80.0))
+    cfg = avp.PlannerConfig(limits=avp.VehicleLimits(mass=0.8, thrust_min=0.5, thrust_max=4 * 0.8 * 9.81),
+                            workspace=avp.Workspace(ground_z=0.8))
+    ref = plan_line(avp.State.hover([1.0, 0.0, 2.6]), line, cfg)
+    res = plan_line(avp.State.hover([1.0, 0.0, 2.6], time=clock), line, cfg)
+    assert ref.ok and res.ok and res.status is ref.status
+    _same_spline(res.perch, ref.perch, clock)
+    assert res.recovery is not None and ref.recovery is not None
+    np.testing.assert_array_equal(res.recovery.knots_rel, ref.recovery.knots_rel)
+    assert [c.verdict for c in res.certificates] == [c.verdict for c in ref.certificates]
+
+
+def _fly(replanner: Replanner, t: float) -> avp.State:
+    """Odometry of a vehicle that tracks the reference perfectly."""
+    ref = replanner.reference(t)
+    return avp.State(position=ref.position, velocity=ref.velocity, acceleration=ref.acceleration, jerk=ref.jerk,
+                     yaw=float(ref.yaw), yaw_rate=float(ref.yaw_rate), time=t)
+
+
+def _wall_loop(clock: float) -> tuple[list[avp.ReplanAction], avp.Trajectory]:
+    """30 Hz replanning on a wall whose estimate wobbles by 5 cm (replans, holds, partial
+    corrections and CANNOT_REACH all occur at clock 0)."""
+    rp = Replanner(WALL, sim_config())
+    rp.step(clock, avp.State.hover([0.0, 0.0, 1.5], time=clock))
+    k, t = 0, clock
+    while t < rp.trajectory.tf - 0.3:
+        k += 1
+        t = clock + k / 30
+        moved = avp.PerchTarget(point=WALL.point + [0.0, 0.0, 0.05 * math.sin(7 * k / 30)], R_WS=WALL.R_WS)
+        rp.step(t, _fly(rp, t), moved)
+    return [s.action for s in rp.history], rp.trajectory
+
+
+@pytest.mark.parametrize("clock", [1e9, 1.7e9])
+def test_replanning_decides_the_same_at_any_clock(clock):
+    """Before, from 1e9 s a third of these steps kept the previous plan: no replan kept its
+    workspace certificate (the rounded knots moved the contact by 1e-8 m). The step times
+    ``clock + k / 30`` are rounded to the clock (2.4e-7 s at UNIX time), so the plans differ by
+    that much, and decide the same."""
+    ref_actions, ref_traj = _wall_loop(0.0)
+    actions, traj = _wall_loop(clock)
+    assert ReplanAction.REPLANNED in ref_actions and ReplanAction.HELD in ref_actions
+    assert actions == ref_actions
+    assert abs(traj.tf - clock - ref_traj.tf) < 1e-5
+    assert np.linalg.norm(traj(traj.tf) - ref_traj(ref_traj.tf)) < 1e-6
+
+
+@pytest.mark.parametrize("clock", [86_400.0, 1.7e9])
+def test_moving_replanning_decides_the_same_at_any_clock(clock):
+    def loop(t0: float) -> tuple[list[avp.ReplanAction], float]:
+        first = MovingTarget.on_platform([0.0, 0.0, 1.0], incline=0.5, speed=2.0, time=t0,
+                                         model=MotionModel.CONSTANT_VELOCITY)
+        rp = MovingReplanner(first, MOVING_CFG, avp.ReplanConfig(latency=0.02, freeze_horizon=0.25))
+        rp.step(t0, avp.State(position=first.point - [3.0, 0.0, 0.0], velocity=first.velocity, time=t0), first)
+        faster = None
+        k = 1
+        while (t := t0 + k / 30) < rp.trajectory.tf:
+            if faster is None and k / 30 > 0.4 * rp.trajectory.duration:  # the platform speeds up
+                now = first.at(t)
+                faster = MovingTarget(point=now.point, R_WS=now.R_WS, heading=now.heading, speed=2.5, time=t,
+                                      model=MotionModel.CONSTANT_VELOCITY)
+            rp.step(t, _fly(rp, t), (faster or first).at(t))
+            k += 1
+        assert faster is not None
+        return [s.action for s in rp.history], contact_errors(rp.trajectory, faster, MovingConfig()).position
+
+    ref_actions, ref_err = loop(0.0)
+    actions, err = loop(clock)
+    assert ReplanAction.REPLANNED in ref_actions
+    assert actions == ref_actions
+    assert ref_err < 1e-3 and err < ref_err + 1e-6
+
+
+# -- the trajectory itself -------------------------------------------------------------------
+
+@settings(max_examples=300, deadline=None)
+@given(clock=st.floats(-9.99e9, 9.99e9), durations=st.lists(st.floats(1e-3, 10.0), min_size=1, max_size=5),
+       u=st.lists(st.floats(0.0, 1.0), min_size=1, max_size=20), seed=st.integers(0, 2**32 - 1))
+def test_evaluation_is_the_time_zero_spline_within_the_clock_resolution(clock, durations, u, seed):
+    """``traj(t0 + tau)`` is the spline at a time within ``ulp(clock)`` of ``tau``, and at ``tf``
+    exactly its end; the durations are the ones given, exactly."""
+    rng = np.random.default_rng(seed)
+    c = rng.normal(size=(len(durations), 4, 6))
+    rel = np.concatenate(([0.0], np.cumsum(durations)))
+    at0 = avp.Trajectory.from_relative_knots(c, rel)
+    shifted = avp.Trajectory.from_relative_knots(c, rel, t0=clock)
+    np.testing.assert_array_equal(shifted.durations, at0.durations)
+    assert shifted.duration == at0.duration
+    np.testing.assert_array_equal(shifted.derivatives(shifted.tf), at0.derivatives(at0.tf))
+    tau = np.asarray(u) * at0.duration
+    t = clock + tau  # rounded to the clock: within ulp(clock + tau) / 2 of the wanted time
+    got, want = shifted.evaluate(t), at0.evaluate(tau)
+    speed = np.abs(at0.evaluate(tau, 1)) + 1.0
+    tol = 2 * math.ulp(abs(clock) + at0.duration) * speed + 1e-12 * (np.abs(want) + 1.0)
+    assert np.all(np.abs(got - want) <= tol)
+
+
+@pytest.mark.parametrize("fmt", ["json", "npz"])
+def test_exports_keep_the_durations_exact_on_a_large_clock(tmp_path, fmt):
+    res = avp.plan_detailed(avp.State.hover([0.0, 0.0, 1.5], time=1.7e9), WALL)
+    traj = res.trajectory
+    path = tmp_path / f"plan.{fmt}"
+    back = avp.Trajectory.from_json(traj.to_json(path)) if fmt == "json" else avp.Trajectory.from_npz(traj.to_npz(path))
+    _same_spline(back, traj, 0.0)
+    # the absolute knots alone round the durations at this clock: they are not what is read back
+    assert not np.array_equal(np.diff(traj.knots), traj.durations)
+
+
+def test_knots_closer_than_the_clock_resolves_are_a_typed_error():
+    """Knots spanning 1e10 s, the last two one ulp of 5e9 s apart: relative to the first they
+    round to the same time."""
+    knots = [-5e9, 5e9, 5e9 + math.ulp(5e9)]
+    with pytest.raises(avp.ConfigError, match="local clock"):
+        avp.Trajectory(np.zeros((2, 4, 3)), knots)
