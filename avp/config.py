@@ -344,6 +344,7 @@ class HalfSpace:
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "point", v.frozen_array("workspace.half_spaces.point", self.point, (3,)))
+        v.within("workspace.half_spaces.point", self.point, "position")
         object.__setattr__(self, "normal", v.unit_vector("workspace.half_spaces.normal", self.normal))
 
     @property
@@ -361,7 +362,9 @@ class Sphere:
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "center", v.frozen_array("workspace.spheres.center", self.center, (3,)))
-        v.positive_float("workspace.spheres.radius", self.radius)
+        v.within("workspace.spheres.center", self.center, "position")
+        object.__setattr__(self, "radius", v.positive_float("workspace.spheres.radius", self.radius))
+        v.within("workspace.spheres.radius", self.radius, "distance")
 
 
 @dataclass(frozen=True)
@@ -413,8 +416,10 @@ class Workspace:
     def __post_init__(self) -> None:
         v.flags("workspace", self)
         object.__setattr__(self, "body_offset", v.nonnegative_float("workspace.body_offset", self.body_offset))
+        v.within("workspace.body_offset", self.body_offset, "distance")
         if self.ground_z is not None:
             object.__setattr__(self, "ground_z", v.finite_float("workspace.ground_z", self.ground_z))
+            v.within("workspace.ground_z", self.ground_z, "position")
         v.positive_float("workspace.max_speed", self.max_speed, allow_inf=True)
         for name, kind in (("half_spaces", HalfSpace), ("spheres", Sphere)):
             object.__setattr__(self, name, v.sequence(f"workspace.{name}", getattr(self, name),

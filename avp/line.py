@@ -104,6 +104,7 @@ class LineTarget:
         if raw.ndim != 2 or raw.shape[1] != 3 or raw.shape[0] < 2:
             raise ConfigError("line.vertices", f"expected shape (K + 1, 3) with K >= 1, got {raw.shape}")
         verts = v.frozen_array("line.vertices", raw, raw.shape)
+        v.within("line.vertices", verts, "position")
         lengths = np.linalg.norm(np.diff(verts, axis=0), axis=1)
         if np.any(lengths < 1e-6):
             k = int(np.argmin(lengths))
@@ -119,6 +120,7 @@ class LineTarget:
             raise ConfigError("line.radius", f"must be >= 0 m, got {radius}")
         object.__setattr__(self, "radius", radius)
         offset = v.positive_float("line.gripper_offset", self.gripper_offset)
+        v.within("line.gripper_offset", offset, "distance")
         if offset <= radius:
             raise ConfigError("line.gripper_offset", f"({offset} m) must exceed the cable radius ({radius} m)")
         object.__setattr__(self, "gripper_offset", offset)

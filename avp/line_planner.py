@@ -145,6 +145,7 @@ class LineOptions:
         v.positive_float("options.takeoff_snap", self.takeoff_snap)
         if self.recovery_point is not None:
             object.__setattr__(self, "recovery_point", v.frozen_array("options.recovery_point", self.recovery_point, (3,)))
+            v.within("options.recovery_point", self.recovery_point, "position")
         v.within("options.recovery_distance", v.positive_float("options.recovery_distance", self.recovery_distance),
                  "distance")
         v.positive_float("options.recovery_height_margin", self.recovery_height_margin)

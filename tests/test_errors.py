@@ -369,6 +369,16 @@ _T = avp.PerchTarget.from_incline([3.5, 0.0, 1.5], math.pi / 2)
         (lambda: avp.plan_line(_S, avp.LineTarget.segment([3, -1.5, 2.5], [3, 1.5, 2.5]), perch_search="no"),
          "perch_search"),
         (lambda: avp.State(position=[True, 0.0, 1.0]), "state.position"),
+        # coordinates and sizes of the world beyond a flight (overflow warnings, then a wrong field or
+        # INFEASIBLE): the line's vertices said "duration: ... inf"
+        (lambda: avp.plan_line(_S, avp.LineTarget.segment([3, -1.5, 2.5], [3, 1.5, 1e300])), "line.vertices"),
+        (lambda: avp.LineTarget.segment([3, -1.5, 2.5], [3, 1.5, 2.5], gripper_offset=1e300), "line.gripper_offset"),
+        (lambda: avp.Sphere(center=[1e300, 0.0, 0.0], radius=0.3), "workspace.spheres.center"),
+        (lambda: avp.Sphere(center=[0.0, 0.0, 0.0], radius=1e300), "workspace.spheres.radius"),
+        (lambda: avp.HalfSpace(point=[0.0, 0.0, 1e300], normal=[0.0, 0.0, -1.0]), "workspace.half_spaces.point"),
+        (lambda: avp.Workspace(ground_z=-1e300), "workspace.ground_z"),
+        (lambda: avp.Workspace(body_offset=1e300), "workspace.body_offset"),
+        (lambda: avp.LineOptions(recovery_point=[0.0, 0.0, 1e300]), "options.recovery_point"),
     ],
 )
 def test_unphysical_sizes_are_typed_errors(make, field) -> None:
