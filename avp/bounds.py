@@ -26,7 +26,7 @@ if TYPE_CHECKING:
     from .config import VehicleLimits
     from .trajectory import Trajectory
 
-__all__ = ["EXACT_BUDGET", "Bound", "BoundReport", "Certificate", "Violation", "certify_spline"]
+__all__ = ["EXACT_BUDGET", "Bound", "BoundReport", "Certificate", "Violation", "certify_spline", "certify_trajectory"]
 
 EXACT_BUDGET = 0.01
 """Default time budget (s, wall clock) of the exact fallback per :func:`certify_spline` call.

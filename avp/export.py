@@ -32,6 +32,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from . import _validate as v
 from ._typing import Array
 from .errors import ConfigError
 
@@ -128,10 +129,7 @@ def _from_knots(coefficients: Any, knots: Any, t0: Any, knots_rel: Any, g: Any) 
     on the absolute ``knots`` (documents written before they were stored)."""
     from .trajectory import Trajectory
 
-    try:
-        gravity = float(g)
-    except (TypeError, ValueError) as exc:
-        raise ConfigError("g", f"expected a number, got {g!r}") from exc
+    gravity = v.finite_float("g", g)
     if t0 is None or knots_rel is None:
         return Trajectory(coefficients, knots, g=gravity)
     return Trajectory.from_relative_knots(coefficients, knots_rel, t0=t0, g=gravity)
@@ -206,7 +204,7 @@ def read_npz(path: str | Path) -> Trajectory:
         if "format" not in z.files or str(z["format"]) != FORMAT:
             raise ConfigError("path", f"{str(path)!r} is not an {FORMAT} NPZ file")
         exact = "t0" in z.files and "knots_rel" in z.files
-        traj = _from_knots(z["coefficients"], z["knots"], float(z["t0"]) if exact else None,
+        traj = _from_knots(z["coefficients"], z["knots"], z["t0"] if exact else None,
                            z["knots_rel"] if exact else None, z["g"])
         if "provenance" in z.files:
             _restore_provenance(traj, json.loads(str(z["provenance"])))

@@ -142,6 +142,7 @@ class LineTarget:
                 raise ConfigError("line.grasp", f"must be in [0, 1] along the piece (or None = free), got {lam}")
             object.__setattr__(self, "grasp", lam)
         speed = v.finite_float("line.contact_speed", self.contact_speed)
+        v.within("line.contact_speed", speed, "velocity")
         if speed < 0.0:
             raise ConfigError("line.contact_speed", f"must be >= 0 m/s (along -n, into the line), got {speed}")
         object.__setattr__(self, "contact_speed", speed)

@@ -161,9 +161,10 @@ def _pad_enclosures(pad_f: MovingTarget, span: float, sigma_max: float
                     ) -> tuple[list[_IPoly], _IPoly | None, _IPoly | None, int]:
     """``rho(t_f - sigma)`` per axis, the rotation ``cos``/``sin`` of ``omega sigma`` that turns
     ``s3_f`` back to ``s3(t_f - sigma)`` (``None`` for a non-turning platform: ``s3`` is constant),
-    and the Taylor order used. ``pad_f`` was predicted over ``span = |t_f - t_ref|`` (s) from the
-    estimate's time ``t_ref``: its rounding grows with that span, not with the clock's value (the
-    difference of two times is rounded relative to itself)."""
+    and the Taylor order used. ``pad_f`` was predicted from the estimate's time ``t_ref`` over
+    ``dt = (t_0 - t_ref) + (t_f - t_0)`` (:meth:`MovingTarget.at`); ``span = |t_0 - t_ref| +
+    (t_f - t_0) >= |dt|`` (s) bounds both roundings. They grow with that span, not with the
+    clock's value (the difference of two times is rounded relative to itself)."""
     omega = pad_f.omega
     K = _taylor_order(omega, sigma_max)
     theta = pad_f.heading
@@ -256,10 +257,11 @@ class ClearanceReport:
 
 
 def clearance(traj: Trajectory, target: MovingTarget, times: Array, body_offset: float = 0.0) -> Array:
-    """``h(t) = (p(t) - rho(t)) . s3(t) - l`` at ``times`` (floating point, for checks and plots)."""
-    t = np.atleast_1d(np.asarray(times, dtype=float))
-    points, _, s3 = target.predict(t)
-    return np.einsum("ij,ij->i", traj(t) - points, s3) - body_offset
+    """``h(t) = (p(t) - rho(t)) . s3(t) - l`` at ``times`` (floating point, for checks and plots;
+    the plan and the pad at the same time since the plan's start, as the certificate has them)."""
+    tau, _ = traj._times(np.atleast_1d(np.asarray(times, dtype=float)))
+    points, _, s3 = target._predict((traj.t0 - target.time) + tau)
+    return np.einsum("ij,ij->i", traj._derivatives_rel(tau, [0])[0, :, :3] - points, s3) - body_offset
 
 
 def certify_moving_clearance(
@@ -269,7 +271,10 @@ def certify_moving_clearance(
     knots = traj.knots_rel  # sigma = t_f - t in the plan's own (exact) durations
     tf = float(knots[-1])
     pad_f = target.at(traj.t0, tf)
-    span = abs((traj.t0 - target.time) + tf)
+    # |dt| with dt = (t0 - time) + tf as at() computes it, plus the rounding of t0 - time (exact
+    # when they are close; not when the estimate's time is far from t0, and then the sum may
+    # cancel while its rounding stays)
+    span = abs(traj.t0 - target.time) + tf
     rho, cos_w, sin_w, K = _pad_enclosures(pad_f, span, tf)
     coeffs = traj.coefficients
     # s3_f = R_z(omega dt) s3(t_ref) in floating point: a few ulps plus the rounding of the angle.

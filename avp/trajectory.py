@@ -93,6 +93,33 @@ class Provenance:
         return f"{self.status.split(':')[0]} ({'; '.join(certs)}{relax}{fov})"
 
 
+def _coefficients(coefficients: npt.ArrayLike) -> Array:
+    """``(S, 4, N + 1)`` finite coefficients as a new contiguous float array."""
+    try:
+        c = np.ascontiguousarray(np.array(coefficients, dtype=float))
+    except (TypeError, ValueError) as exc:
+        raise ConfigError("coefficients", "expected (segments, 4, degree + 1) numbers") from exc
+    if c.ndim != 3 or c.shape[1] != 4 or c.shape[0] == 0 or c.shape[2] == 0:
+        raise ConfigError("coefficients", f"expected shape (segments >= 1, 4, degree + 1 >= 1), got {c.shape}")
+    if not np.all(np.isfinite(c)):
+        raise ConfigError("coefficients", "contains NaN or inf; a trajectory must be finite")
+    return c
+
+
+def _times_array(field: str, values: npt.ArrayLike, n: int) -> Array:
+    """``n`` finite times (s) within the time limit as a new contiguous float array."""
+    try:
+        k = np.ascontiguousarray(np.array(values, dtype=float))
+    except (TypeError, ValueError) as exc:
+        raise ConfigError(field, f"expected {n} times (s), got {values!r}") from exc
+    if k.shape != (n,):
+        raise ConfigError(field, f"expected shape ({n},), got {k.shape}")
+    if not np.all(np.isfinite(k)):
+        raise ConfigError(field, "contains NaN or inf; a trajectory must be finite")
+    v.within(field, k, "time")
+    return k
+
+
 class Trajectory:
     """A spline of ``S`` segments over the knots ``t0 < t1 < ... < tS``.
 
@@ -114,22 +141,14 @@ class Trajectory:
     """
 
     def __init__(self, coefficients: npt.ArrayLike, knots: npt.ArrayLike, g: float = frames.GRAVITY) -> None:
-        c = np.ascontiguousarray(np.array(coefficients, dtype=float))
-        k = np.ascontiguousarray(np.array(knots, dtype=float))
-        if c.ndim != 3 or c.shape[1] != 4 or c.shape[0] == 0 or c.shape[2] == 0:
-            raise ConfigError("coefficients", f"expected shape (segments >= 1, 4, degree + 1 >= 1), got {c.shape}")
-        if k.shape != (c.shape[0] + 1,):
-            raise ConfigError("knots", f"expected shape ({c.shape[0] + 1},), got {k.shape}")
-        if not (np.all(np.isfinite(c)) and np.all(np.isfinite(k))):
-            raise ConfigError("coefficients", "contains NaN or inf; a trajectory must be finite")
+        c = _coefficients(coefficients)
+        k = _times_array("knots", knots, c.shape[0] + 1)
         if np.any(np.diff(k) <= 0):
             raise ConfigError("knots", "must be strictly increasing")
-        v.within("knots", k, "time")
         rel = k - k[0]
         if np.any(np.diff(rel) <= 0):  # knots closer than the rounding of their clock
             raise ConfigError("knots", "segments shorter than the resolution of the clock at these times; "
                               "use a local clock (seconds since the start of the flight)")
-        c.setflags(write=False)
         self._init(c, float(k[0]), rel, v.positive_float("g", g))
 
     @classmethod
@@ -137,25 +156,25 @@ class Trajectory:
                             g: float = frames.GRAVITY) -> Trajectory:
         """The spline of ``coefficients`` on the knots ``t0 + knots_rel`` (s; ``knots_rel``
         strictly increasing from 0), which it keeps exactly whatever the clock's value
-        (:attr:`knots_rel`)."""
-        c = np.ascontiguousarray(np.array(coefficients, dtype=float))
-        rel = np.array(knots_rel, dtype=float)  # a copy: held read-only
+        (:attr:`knots_rel`; :attr:`knots` is then ``t0 + knots_rel`` rounded to the clock)."""
+        c = _coefficients(coefficients)
+        rel = _times_array("knots_rel", knots_rel, c.shape[0] + 1)
+        if rel[0] != 0.0 or np.any(np.diff(rel) <= 0):
+            raise ConfigError("knots_rel", "must start at 0.0 and increase strictly")
         start = v.finite_float("t0", t0)
-        if rel.ndim != 1 or rel.size < 2 or rel[0] != 0.0:
-            raise ConfigError("knots_rel", f"expected increasing times from 0.0, got {rel!r}")
-        if not np.all(np.isfinite(rel)) or np.any(np.diff(rel) <= 0):
-            raise ConfigError("knots_rel", "must be finite and strictly increasing")
-        v.within("knots_rel", rel[-1], "duration")
-        traj = cls(c, start + rel, g=g)  # every other check: shapes, coefficients, the clock
-        traj._init(traj._c, start, rel, traj.g)
-        return traj
+        v.within("t0", np.array([start, start + rel[-1]]), "time")
+        self = cls.__new__(cls)
+        self._init(c, start, rel, v.positive_float("g", g))
+        return self
 
     def _init(self, coefficients: Array, t0: float, knots_rel: Array, g: float) -> None:
+        """Take over ``coefficients`` and ``knots_rel``, read-only."""
+        coefficients.setflags(write=False)
         knots_rel.setflags(write=False)
         self._c, self._t0, self._rel, self.g = coefficients, t0, knots_rel, g
+        self._knots: Array | None = None
         self._tf = t0 + float(knots_rel[-1])
         self._tol = max(TIME_TOL, 4.0 * math.ulp(max(abs(t0), abs(self._tf))))
-        self._knots: Array | None = None
         self.provenance: Provenance | None = None
         """Set by the planner: status, relaxations, certificates (``None`` for a bare spline)."""
 
@@ -165,7 +184,6 @@ class Trajectory:
         finite, shaped, relative knots increasing from 0, ``t0`` within the time limit); they
         are taken over read-only, without copies."""
         self = cls.__new__(cls)
-        coefficients.setflags(write=False)
         self._init(coefficients, float(t0), knots_rel, float(g))
         return self
 
@@ -177,7 +195,10 @@ class Trajectory:
 
     @property
     def knots(self) -> Array:
-        """Read-only absolute knot times (s): ``t0 + knots_rel``, rounded to the clock."""
+        """Read-only absolute knot times (s): ``t0 + knots_rel``, rounded to the clock (the
+        constructor's knots, bit for bit, when their differences from the first are exact: a
+        first knot at 0, or all within a factor 2 of each other, as on any clock past the
+        flight's duration)."""
         if self._knots is None:
             knots = self._t0 + self._rel
             knots.setflags(write=False)
@@ -252,6 +273,11 @@ class Trajectory:
             raise ConfigError("order", f"derivative orders must be in [0, {MAX_ORDER}], got {orders_list}")
         out = _avp_rust.eval_spline(self._c, self._rel, flat, orders_list)
         return out.reshape((len(orders_list), *shape, 4))
+
+    def _derivatives_rel(self, tau: Array, orders: list[int]) -> Array:
+        """:meth:`derivatives` at times ``tau`` since :attr:`t0` (s, within ``[0, duration]``,
+        a flat float array; unchecked): shape ``(len(orders), tau.size, 4)``."""
+        return _avp_rust.eval_spline(self._c, self._rel, tau, orders)
 
     def evaluate(self, t: Any, order: int = 0) -> Array:
         """``order``-th derivative of (x, y, z, yaw): shape ``(*shape(t), 4)``."""
@@ -359,8 +385,7 @@ class RotorpyTrajectory:
 
     def update(self, t: float) -> dict[str, Any]:
         tr = self.trajectory
-        tt = min(max(tr.t0 + float(t), tr.t0), tr.tf)
-        d = tr.derivatives(tt)
+        d = tr._derivatives_rel(np.array([min(max(float(t), 0.0), tr.duration)]), [0, 1, 2, 3, 4])[:, 0]
         return {
             "x": d[0, :3], "x_dot": d[1, :3], "x_ddot": d[2, :3], "x_dddot": d[3, :3],
             "x_ddddot": d[4, :3], "yaw": float(d[0, 3]), "yaw_dot": float(d[1, 3]),

@@ -9,6 +9,7 @@ the same at any clock, so the answer must be too (bit for bit where no time is r
 from __future__ import annotations
 
 import dataclasses
+import json
 import math
 
 import numpy as np
@@ -17,13 +18,19 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import avp
+import avp.export
+import avp.replan
+from avp.bounds import certify_trajectory
 from avp.line import LineTarget
+from avp.line_certify import position_polys
 from avp.line_planner import plan_line
 from avp.line_replan import LineReplanner
 from avp.moving import MovingConfig, MovingReplanner, contact_errors, plan_moving_detailed
+from avp.moving_clearance import clearance
 from avp.platform import MotionModel, MovingTarget
 from avp.replan import Replanner
 from avp.sim.run import sim_config
+from avp.trackability import trackability_rows
 
 ReplanAction = avp.ReplanAction
 CLOCKS = [86_400.0, 1.7e9, 9.9e9]  # a day, UNIX time, near the time limit
@@ -211,3 +218,108 @@ def test_knots_closer_than_the_clock_resolves_are_a_typed_error():
     knots = [-5e9, 5e9, 5e9 + math.ulp(5e9)]
     with pytest.raises(avp.ConfigError, match="local clock"):
         avp.Trajectory(np.zeros((2, 4, 3)), knots)
+
+
+# -- each consumer of the durations, on its own ----------------------------------------------
+
+def _pair(clock: float) -> tuple[avp.Trajectory, avp.Trajectory]:
+    """The wall plan at time 0 and the same plan at ``clock``."""
+    at0 = avp.plan(avp.State.hover([0.0, 0.0, 1.5]), WALL)
+    return at0, avp.plan(avp.State.hover([0.0, 0.0, 1.5], time=clock), WALL)
+
+
+def test_anticipation_is_the_same_at_any_clock():
+    """Anticipation (6) at ``clock + 0.25`` and ``clock + 0.5`` (exact at 1.7e9 s: multiples of
+    its ulp, 2^-22 s): the state at time 0's offsets, bit for bit."""
+    clock = 1.7e9
+    at0, shifted = _pair(clock)
+    odo0 = avp.State(position=[0.01, -0.02, 1.5], velocity=[0.5, 0.0, 0.1], time=0.25)
+    a = avp.replan.anticipate(at0, odo0, 0.25, 0.5)
+    b = avp.replan.anticipate(shifted, dataclasses.replace(odo0, time=clock + 0.25), clock + 0.25, clock + 0.5)
+    for name in ("position", "velocity", "acceleration", "jerk"):
+        np.testing.assert_array_equal(getattr(b, name), getattr(a, name))
+    assert (b.yaw, b.yaw_rate, b.time) == (a.yaw, a.yaw_rate, clock + 0.5)
+
+
+def test_the_snap_certificate_and_the_line_polynomials_read_the_exact_durations():
+    at0, shifted = _pair(1.7e9)
+    np.testing.assert_array_equal(trackability_rows(shifted, 600.0, 45.0), trackability_rows(at0, 600.0, 45.0))
+    for i in range(at0.n_segments):
+        for p, q in zip(position_polys(shifted, i), position_polys(at0, i), strict=True):
+            assert (p.c, p.e) == (q.c, q.e)
+
+
+def test_a_violation_time_is_on_the_plan_clock():
+    """A thrust limit below the plan's peak: the certificate proves a violation, at the same
+    time since the start on both clocks."""
+    clock = 1.7e9
+    at0, shifted = _pair(clock)
+    tight = avp.VehicleLimits(mass=1.0, thrust_max=float(at0.thrust(at0.sample(1e-3)).max()) - 0.5)  # N = m/s^2
+    r0 = certify_trajectory(at0, tight, at0.g)
+    r1 = certify_trajectory(shifted, tight, shifted.g)
+    assert r0.violations and r1.verdicts == r0.verdicts
+    assert [clock + x.t for x in r0.violations] == [x.t for x in r1.violations]
+
+
+def test_replanning_on_the_committed_knots_decides_the_same_at_any_clock():
+    """``ReplanConfig.keep_knots``: a replan's segments lie on the committed plan's knots, found
+    in time since its start (a switch time moved onto a knot, rounded to the clock, is that knot)."""
+    def loop(clock: float) -> list[avp.ReplanAction]:
+        rp = Replanner(WALL, sim_config(), avp.ReplanConfig(keep_knots=True))
+        rp.step(clock, avp.State.hover([0.0, 0.0, 1.5], time=clock))
+        k = 1
+        while (t := clock + k / 30) < rp.trajectory.tf - 0.3:
+            moved = avp.PerchTarget(point=WALL.point + [0.0, 0.0, 0.05 * math.sin(7 * k / 30)], R_WS=WALL.R_WS)
+            rp.step(t, _fly(rp, t), moved)
+            k += 1
+        return [s.action for s in rp.history]
+
+    ref = loop(0.0)
+    assert ReplanAction.REPLANNED in ref
+    assert loop(1.7e9) == ref
+
+
+def test_relative_knots_are_checked_and_long_plans_round_trip():
+    c = np.zeros((3, 4, 4))
+    for bad, field in [("abc", "knots_rel"), ([0.0, "x", 1.0, 2.0], "knots_rel"), ([0.1, 1.0, 2.0, 3.0], "knots_rel"),
+                       ([0.0, 2.0, 1.0, 3.0], "knots_rel"), ([0.0, 1.0, 2.0], "knots_rel")]:
+        with pytest.raises(avp.ConfigError) as exc:
+            avp.Trajectory.from_relative_knots(c, bad)
+        assert exc.value.field == field
+    with pytest.raises(avp.ConfigError) as exc:
+        avp.Trajectory.from_relative_knots(c, [0.0, 1.0, 2.0, 3.0], t0=1e300)
+    assert exc.value.field == "t0"
+    # segments shorter than the clock resolves are kept exactly when given relative to t0
+    fine = avp.Trajectory.from_relative_knots(c, [0.0, 1e-7, 1.0, 2.0], t0=1.7e9)
+    assert fine.durations[0] == 1e-7
+    long = avp.Trajectory(c, [0.0, 1.0, 2.0, 2e4])  # longer than a flight's durations: still a spline
+    np.testing.assert_array_equal(avp.Trajectory.from_json(long.to_json()).knots_rel, long.knots_rel)
+
+
+def test_exports_without_the_relative_knots_still_load_and_bad_ones_are_typed_errors(tmp_path):
+    traj = avp.plan(avp.State.hover([0.0, 0.0, 1.5], time=100.0), WALL)
+    doc = json.loads(traj.to_json())
+    old = {k: val for k, val in doc.items() if k not in ("t0", "knots_rel")}  # written before they existed
+    back = avp.export.trajectory_from_dict(old)
+    np.testing.assert_array_equal(back.knots, traj.knots)
+    np.testing.assert_array_equal(back.coefficients, traj.coefficients)
+    with pytest.raises(avp.ConfigError) as exc:
+        avp.export.trajectory_from_dict({**doc, "knots_rel": {"a": 1}})
+    assert exc.value.field == "knots_rel"
+    path = tmp_path / "bad.npz"
+    np.savez(path, format=np.array(avp.export.FORMAT), version=np.array(avp.export.VERSION),
+             coefficients=traj.coefficients, knots=traj.knots, t0=np.array([1.0, 2.0]),
+             knots_rel=traj.knots_rel, g=np.array(traj.g))
+    with pytest.raises(avp.ConfigError) as exc:
+        avp.Trajectory.from_npz(path)
+    assert exc.value.field == "t0"
+
+
+def test_the_sampled_clearance_meets_the_pad_at_contact_on_a_large_clock():
+    """:func:`avp.moving_clearance.clearance` evaluates the plan and the pad at the same time
+    since the start: zero at contact at UNIX time too (it was -9e-8 m from the rounding of tf)."""
+    pad = MovingTarget.on_platform([0.0, 0.0, 1.0], incline=0.5, speed=2.0, turn_rate=0.2, time=1.7e9)
+    res = plan_moving_detailed(avp.State(position=pad.point - [3.0, 0.0, -1.0], velocity=pad.velocity, time=1.7e9),
+                               pad, MOVING_CFG)
+    traj = res.trajectory
+    assert abs(clearance(traj, pad, [traj.tf])[0]) < 1e-12
