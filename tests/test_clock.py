@@ -323,3 +323,29 @@ def test_the_sampled_clearance_meets_the_pad_at_contact_on_a_large_clock():
                                pad, MOVING_CFG)
     traj = res.trajectory
     assert abs(clearance(traj, pad, [traj.tf])[0]) < 1e-12
+
+
+def test_the_bound_certificate_gets_the_exact_durations(monkeypatch):
+    """:func:`avp.bounds.certify_trajectory` hands the kernel the plan's own durations (the
+    absolute knots at 1.7e9 s differ from them by 1e-8 s; its verdicts rarely show it)."""
+    seen = []
+    real = avp.bounds.certify_spline
+
+    def spy(coeffs, knots, **kw):
+        seen.append(np.array(knots))
+        return real(coeffs, knots, **kw)
+
+    monkeypatch.setattr(avp.bounds, "certify_spline", spy)
+    _, shifted = _pair(1.7e9)
+    assert not np.array_equal(np.diff(shifted.knots), shifted.durations)  # what rounding would give
+    certify_trajectory(shifted, avp.VehicleLimits(), shifted.g)
+    np.testing.assert_array_equal(np.diff(seen[-1]), shifted.durations)
+
+
+def test_a_knot_rounded_to_the_clock_is_that_knot():
+    """The replanner's kept knots after a switch time: a switch time that is a knot, rounded to
+    the clock (1.6e-8 s early here), does not leave a 1e-8 s segment before it."""
+    _, shifted = _pair(1.7e9)
+    for i in range(1, shifted.n_segments):
+        _, inner = avp.replan._knots_after(shifted, float(shifted.knots[i]))
+        np.testing.assert_array_equal(inner, shifted.knots_rel[i + 1:-1])
