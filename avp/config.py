@@ -841,7 +841,8 @@ class ReplanConfig:
         a closed-loop report from an independent simulator measured 1/5 such perches when every
         replan re-anchored on noisy odometry.
     target_tolerance:
-        Change (m) of the estimated pad centre (and ``target_tolerance`` rad of its normal)
+        Change (m) of the estimated pad centre (and ``target_tolerance`` rad of its normal; a
+        turn of the pad about its normal counts beyond 0.1 rad, ``avp.replan.ROTATION_TOLERANCE``)
         below which, when anchored, the step holds the committed plan without solving. 5 mm:
         a sixth of the 3 cm plane tolerance of a perch (chosen, not tuned; with a perfect
         estimate every step holds, which is what makes AVP equal one-shot there). A static pad
@@ -859,7 +860,9 @@ class ReplanConfig:
         first, the last, and only if the last certifies the ones between, in order; the first
         of those that certifies is committed, else the last. So when the smallest certifies the
         largest certifying fraction is committed; when it does not, none is (a larger one that
-        would have certified is not tried). A step that cannot correct at all costs two solves
+        would have certified is not tried). Only the full correction is tried when the estimated
+        normal turned by 90 deg or more from the committed one (a flipped normal): no blend of
+        the two frames lies between them. A step that cannot correct at all costs two solves
         (plus the failed ``retime_retries``), a committed fraction between one solve more than in
         plain order. Over 168 closed-loop
         runs against plain order: the same number of perches (142), the step p99 at 6.0 instead

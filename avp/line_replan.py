@@ -20,6 +20,7 @@ from typing import Any
 import numpy as np
 
 from ._typing import Array
+from ._values import fields_equal
 from .config import PlannerConfig, ReplanConfig
 from .errors import ConfigError
 from .line import LineTarget
@@ -89,7 +90,10 @@ class LineReplanner(Replanner):
 
     @property
     def _can_hold(self) -> bool:
-        return True
+        """Only while the estimate differs from the committed line in its vertices alone (by
+        less than the tolerances): a new ``pitch``, ``grasp``, radius or gripper offset asks
+        for another perch."""
+        return fields_equal(self.committed_target, self.target, skip=("vertices",)) is True
 
     def _solve(  # type: ignore[override]  # returns the duck-compatible LinePlanResult
         self, state: State, durations: Array | None, previous: Trajectory | None, config: PlannerConfig,

@@ -199,6 +199,19 @@ class MovingPlanResult:
         return len(self.candidates)
 
 
+def _predicted_now(target: MovingTarget, time: float, field: str) -> MovingTarget:
+    """``target`` predicted at ``time``; a pad predicted beyond a flight's positions
+    (``avp._validate.LIMITS``) is a :class:`ConfigError` on ``field``: an estimate stamped on
+    another clock than the state's (a UNIX time against a loop's seconds, say)."""
+    pad = target.at(time)
+    size = float(np.max(np.abs(pad.point)))
+    if not size <= LIMITS["position"][0]:
+        raise ConfigError(field, f"the pad predicted at t = {time:.6g} s from the estimate at {target.time:.6g} s "
+                          f"lies {size:.3g} m out (beyond {LIMITS['position'][0]:g} m): stamp the estimate on the "
+                          "same clock as the state")
+    return pad
+
+
 def contact_errors(
     traj: Trajectory, target: MovingTarget, moving: MovingConfig | None = None, body_offset: float = 0.0,
     rotor_drag: float = 0.0,
@@ -321,7 +334,7 @@ def plan_moving_detailed(
     if unused:
         log.append("config: the moving planner does not use " + ", ".join(unused) + " (set away from the defaults; "
                    "docs/moving.md)")
-    pad_now = target.at(state.time)  # the pad where it is at the start
+    pad_now = _predicted_now(target, state.time, "target.time")  # the pad where it is at the start
     gap = float(np.linalg.norm(pad_now.point - state.position))
     if gap < cfg.min_distance and float(np.linalg.norm(state.velocity - pad_now.velocity)) < STILL_SPEED:
         raise ConfigError("target.point", f"is {gap:.3f} m from a start at rest relative to the pad (config.min_distance "
@@ -507,14 +520,17 @@ class MovingReplanner(Replanner):
     :class:`~avp.platform.MovingTarget` (pad pose and platform state at its own ``time``), which
     the motion model predicts to the contact time. The first plan searches the arrival time; a
     replan anticipates the start state (6) exactly as for a static pad and keeps the committed
-    contact time (``duration = t_f - t_ex``), so only the predicted pad changes.
+    contact time (``duration = t_f - t_ex``), so only the predicted pad changes, unless that
+    plan does not certify: the planner then tries the time left scaled by ``MovingConfig.retime``
+    (:func:`plan_moving_detailed` ``duration``), and a step that commits such a plan reports
+    the scale in ``time_factor`` and its reason.
 
     A step compares estimates where they put the pad at the committed contact time. When a
     step commits nothing (or is frozen near contact) and that predicted pad is farther than
     ``reach_tolerance`` from the committed contact point, it says ``CANNOT_REACH``, the cue to
     abort, as for a static pad. The pad policy's other steps do not apply here: every estimate
     moves the pad, so a step never holds (``target_tolerance``), and a correction is full or
-    none (no ``reach_acceleration`` budget, ``partial_fractions`` or retimed retries), because
+    none (no ``reach_acceleration`` budget, ``partial_fractions`` or ``retime_retries``), because
     partial corrections blend two pad frames. A full correction is committed only when its plan
     is certified.
     """
@@ -538,8 +554,10 @@ class MovingReplanner(Replanner):
         self._replan_config = self.config
 
     def step(self, t: float, odometry: State, target_estimate: PerchTarget | None = None) -> ReplanStep:
-        if target_estimate is not None and not isinstance(target_estimate, MovingTarget):
-            raise ConfigError("target_estimate", f"expected avp.platform.MovingTarget, got {type(target_estimate).__name__}")
+        if target_estimate is not None:
+            if not isinstance(target_estimate, MovingTarget):
+                raise ConfigError("target_estimate", f"expected avp.platform.MovingTarget, got {type(target_estimate).__name__}")
+            _predicted_now(target_estimate, v.finite_float("t", t), "target_estimate.time")
         return super().step(t, odometry, target_estimate)
 
     def _change(self, a: Any, b: Any) -> tuple[float, float]:

@@ -1,0 +1,152 @@
+"""The replanners under the irregular use of a real flight stack (found by an audit of the API):
+a plan handed in, a pad turned about its normal or flipped, a moving planner that retimes, line
+estimates that change more than their vertices, bad times, an estimate on another clock, and a
+yaw that odometry wraps."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+
+import avp
+from avp.moving import MovingReplanner, plan_moving_detailed
+from avp.platform import MovingTarget
+from avp.replan import ReplanAction
+
+WALL = avp.PerchTarget.from_incline([4.5, 0.0, 1.5], math.pi / 2)
+START = avp.State.hover([0.0, 0.0, 1.5])
+MOVING_CFG = avp.PlannerConfig(limits=avp.VehicleLimits(mass=1.0, thrust_min=5.0, thrust_max=17.0, tilt_rate_max=3.0),
+                               alpha=5.5, pre_impact=avp.PreImpactMode.OFF)
+
+
+def _fly(rp: avp.Replanner, t: float) -> avp.State:
+    """Odometry of a vehicle that tracks the reference perfectly."""
+    f = rp.reference(t)
+    return avp.State(position=f.position, velocity=f.velocity, acceleration=f.acceleration, jerk=f.jerk,
+                     yaw=float(f.yaw), yaw_rate=float(f.yaw_rate), time=t)
+
+
+def test_a_plan_handed_in_sets_the_snap_limits_as_a_first_plan_does():
+    """Replans certify snap against the first plan's peaks; a plan given to the constructor is
+    that first plan (before, the defaults stayed, and a short perch, whose own peak is above
+    them, could not replan at all)."""
+    near = avp.PerchTarget.from_incline([1.5, 0.0, 1.5], math.pi / 2)
+    own = avp.Replanner(near)
+    own.step(0.0, START)
+    given = avp.Replanner(near, trajectory=own.trajectory)
+    assert given.snap_limits == own.snap_limits
+    assert given.snap_limits[1] > avp.ReplanConfig().snap_thrust_max  # the perch's own peak is above the default
+    moved = avp.PerchTarget(point=near.point + [0.0, 0.0, 0.01], R_WS=near.R_WS)
+    actions = [rp.step(0.2, _fly(rp, 0.2), moved).action for rp in (own, given)]
+    assert actions[0] is actions[1] is ReplanAction.REPLANNED
+
+
+def test_a_pad_turned_about_its_normal_is_replanned():
+    """A floor pad re-estimated with its heading turned by 90 deg: the normal is the same, the
+    contact yaw is not. Before, every step held the committed plan."""
+    pad = avp.PerchTarget.from_incline([3.0, 0.0, 0.5], 0.0, heading=0.0)
+    turned = avp.PerchTarget.from_incline([3.0, 0.0, 0.5], 0.0, heading=math.pi / 2)
+    want = avp.plan(START, turned)
+    rp = avp.Replanner(pad)
+    rp.step(0.0, START)
+    first = rp.step(1 / 30, _fly(rp, 1 / 30), turned)
+    assert first.action is ReplanAction.REPLANNED
+    assert rp.committed_target is turned
+    # then it holds: nothing more to correct
+    assert rp.step(2 / 30, _fly(rp, 2 / 30), turned).action is ReplanAction.HELD
+    end = rp.trajectory
+    assert float(end.yaw(end.tf)) == pytest.approx(float(want.yaw(want.tf)), abs=1e-6)
+
+
+def test_a_flipped_normal_is_not_blended():
+    """An estimate of the wall with its normal reversed: no partial correction (a blend of the
+    two frames is the committed frame below half the correction, degenerate at half). Before,
+    every step committed a "50 %" plan to the unchanged target."""
+    flipped = avp.PerchTarget.from_normal(WALL.point, -WALL.s3)
+    rp = avp.Replanner(WALL)
+    rp.step(0.0, START)
+    steps = [rp.step(t, _fly(rp, t), flipped) for t in (0.5, 0.55, 0.6)]
+    assert all(s.action is not ReplanAction.PARTIAL and s.fraction in (0.0, 1.0) for s in steps)
+    assert all(s.n_solves <= 1 + len(avp.ReplanConfig().retime_retries) for s in steps)
+
+
+def test_a_moving_replan_that_moves_the_contact_time_says_so():
+    """The moving planner nudges the time left by ``MovingConfig.retime`` when the nominal one
+    does not certify; the step reports the factor (it said 1.0 and "ok")."""
+    pad = MovingTarget.on_platform([0.0, 0.0, 1.0], incline=0.5, speed=2.0)
+    rp = MovingReplanner(pad, MOVING_CFG)
+    rp.step(0.0, avp.State(position=[-3.0, 0.0, 1.0], velocity=[2.0, 0.0, 0.0]), pad)
+    moved = 0
+    for t in np.arange(1, 70) / 30:
+        now = pad.at(t)
+        est = now if t < 0.8 else MovingTarget(point=now.point, R_WS=now.R_WS, heading=now.heading, speed=1.0, time=t)
+        before = rp.trajectory.tf
+        step = rp.step(t, _fly(rp, t), est)
+        if step.committed and step.t_ex < before:
+            nominal = before - step.t_ex
+            assert step.time_factor == pytest.approx(rp.trajectory.duration / nominal, rel=1e-12)
+            if abs(rp.trajectory.tf - before) > 1e-9:
+                moved += 1
+                assert step.time_factor != 1.0 and "time left x" in step.reason
+    assert moved >= 1
+
+
+@pytest.mark.parametrize("field, value", [("grasp", 0.25), ("pitch", math.radians(30))])
+def test_a_line_estimate_with_a_new_grasp_or_pitch_is_not_held(field, value):
+    limits = avp.VehicleLimits(mass=0.8, thrust_min=0.5, thrust_max=4.0 * 0.8 * 9.81)
+    line = avp.LineTarget.segment([2.5, -1.5, 3.94], [2.5, 1.5, 4.46], pitch=math.radians(80), gripper_offset=0.15)
+    rp = avp.LineReplanner(line, avp.PlannerConfig(limits=limits))
+    rp.step(0.0, avp.State.hover([0.0, 0.0, 4.0]))
+    estimate = dataclasses.replace(line, **{field: value})
+    first = rp.step(1 / 30, _fly(rp, 1 / 30), estimate)
+    assert first.action is ReplanAction.REPLANNED
+    assert getattr(rp.committed_target, field) == value
+
+
+def test_bad_times_are_typed_errors_and_do_not_lock_the_replanner():
+    rp = avp.Replanner(WALL)
+    rp.step(0.0, START)
+    for bad in (None, "0.5", [0.5, 0.6], True, math.nan):
+        with pytest.raises(avp.ConfigError) as exc:
+            rp.reference(bad)
+        assert exc.value.field == "t"
+    with pytest.raises(avp.ConfigError) as exc:  # a millisecond timestamp by mistake
+        rp.step(1.7e12, START)
+    assert exc.value.field == "t"
+    assert rp.step(0.1, _fly(rp, 0.1)).action is not ReplanAction.NO_PLAN  # not locked out
+
+
+def test_a_moving_estimate_on_another_clock_is_a_typed_error():
+    """A platform estimate stamped in UNIX time against a loop in seconds since take-off puts the
+    pad 3.4e9 m away at the state's time: a ConfigError naming the estimate's time (it was an
+    "infeasible" plan, or CANNOT_REACH mid-flight)."""
+    pad = MovingTarget.on_platform([0.0, 0.0, 1.0], incline=0.5, speed=2.0, time=1.7e9)
+    start = avp.State(position=[-3.0, 0.0, 1.0], velocity=[2.0, 0.0, 0.0])
+    with pytest.raises(avp.ConfigError) as exc:
+        plan_moving_detailed(start, pad, MOVING_CFG)
+    assert exc.value.field == "target.time"
+    rp = MovingReplanner(MovingTarget.on_platform([0.0, 0.0, 1.0], incline=0.5, speed=2.0), MOVING_CFG)
+    with pytest.raises(avp.ConfigError) as exc:
+        rp.step(0.0, start, pad)
+    assert exc.value.field == "target_estimate.time"
+
+
+def test_a_wrapped_odometry_yaw_continues_the_plan_yaw():
+    """A perch heading to -x flies at yaw pi; odometry reports it wrapped to (-pi, pi]. A step that
+    re-anchors on odometry takes the yaw on the plan's branch: the reference yaw is continuous
+    at the switch (it jumped by 2 pi)."""
+    target = avp.PerchTarget.from_incline([-4.5, 0.0, 1.5], math.pi / 2, heading=math.pi)
+    rp = avp.Replanner(target)
+    rp.step(0.0, avp.State.hover([0.0, 0.0, 1.5], yaw=math.pi))
+    f = rp.reference(0.5)
+    wrapped = (float(f.yaw) + math.pi) % (2 * math.pi) - math.pi
+    assert abs(wrapped - float(f.yaw)) > math.pi  # the case: odometry is on the other branch
+    off = avp.State(position=f.position + [0.0, 0.3, 0.0], velocity=f.velocity + [0.0, 0.6, 0.0],
+                    acceleration=f.acceleration, jerk=f.jerk, yaw=wrapped, yaw_rate=float(f.yaw_rate), time=0.5)
+    step = rp.step(0.5, off, None)
+    assert step.committed and not step.anchored
+    before, after = rp.reference(step.t_ex - 1e-4), rp.reference(step.t_ex + 1e-4)
+    assert abs(float(after.yaw) - float(before.yaw)) < 0.01
