@@ -874,6 +874,13 @@ class ReplanConfig:
         step without a full correction reports ``CANNOT_REACH``. 0.05 m: half the in-plane
         success radius. For a moving pad, the distance to the pad the estimate predicts at the
         committed contact time; not for a line (:mod:`avp.line_replan`).
+    reach_angle_tolerance:
+        Angle (rad) between the committed pad's normal and the latest estimate's (or of the
+        rotation between their frames, beyond ``avp.replan.ROTATION_TOLERANCE``) above which a
+        step without a full correction reports ``CANNOT_REACH`` as for ``reach_tolerance``:
+        the plan would touch the surface that far from square. 10 deg: the simulator's perch
+        criterion (``b3`` within 10 deg of ``s3``); its estimates turn by at most 6.3 deg
+        (wall and slope at 4.5 and 7.5 m, seeds 0-2).
     snap_max, snap_thrust_max:
         Trackability limits certified on every committed replan (:mod:`avp.trackability`;
         ``inf`` skips one): ``|s| < snap_max`` (m/s^4) and ``|s| < snap_thrust_max |a + g e3|``
@@ -985,6 +992,7 @@ class ReplanConfig:
     reach_acceleration: float = 6.0
     partial_fractions: tuple[float, ...] = (1.0, 0.5, 0.25, 0.125)
     reach_tolerance: float = 0.05
+    reach_angle_tolerance: float = math.radians(10.0)
     snap_max: float = 600.0
     snap_thrust_max: float = 45.0
     retime_normal: bool = False
@@ -1010,6 +1018,8 @@ class ReplanConfig:
                 raise ConfigError(f"replan.{name}", f"must be >= 0 (0: never anchor / never hold), got {val}")
         v.positive_float("replan.reach_acceleration", self.reach_acceleration, allow_inf=True)
         v.positive_float("replan.reach_tolerance", self.reach_tolerance)
+        if not 0.0 < v.finite_float("replan.reach_angle_tolerance", self.reach_angle_tolerance) <= math.pi:
+            raise ConfigError("replan.reach_angle_tolerance", f"must be in (0, pi] rad, got {self.reach_angle_tolerance}")
         kmin = v.finite_float("replan.keep_knots_min", self.keep_knots_min)
         if not 0.0 < kmin <= 0.5:
             raise ConfigError("replan.keep_knots_min",

@@ -275,6 +275,7 @@ UNITS: dict[str, str] = {
     "Workspace.half_spaces": "m (point), - (normal)", "Workspace.spheres": "m",
     # ReplanConfig
     "ReplanConfig.latency": "s", "ReplanConfig.freeze_horizon": "s", "ReplanConfig.deadline": "s",
+    "ReplanConfig.reach_tolerance": "m", "ReplanConfig.reach_angle_tolerance": "rad",
     # LineOptions
     "LineOptions.approach_deceleration": "m/s^2", "LineOptions.guide_dt": "s", "LineOptions.wedge_angle": "rad",
     "LineOptions.wedge_window": "s", "LineOptions.takeoff_snap": "m/s^4", "LineOptions.recovery_point": "m",

@@ -40,9 +40,10 @@ certified. The policy
   ``snap_max`` (:mod:`avp.trackability`), which bounds the angular acceleration.
 - **Freeze** within ``freeze_horizon`` s of contact (no replan can be tracked there).
 - **Cannot reach.** When the committed contact point is farther from the latest estimate than
-  ``reach_tolerance`` and no certified plan closes the gap, the step's action is
-  ``CANNOT_REACH`` with the numbers (``target_error``, ``reach_budget``): the user's cue to abort
-  or go around.
+  ``reach_tolerance``, or the committed pad frame turned from it by more than
+  ``reach_angle_tolerance``, and no certified plan closes the gap, the step's action is
+  ``CANNOT_REACH`` with the numbers (``target_error``, ``target_angle``, ``reach_budget``): the
+  user's cue to abort or go around.
 
 It never raises for a planning or solver failure (including ``ValueError`` / ``LinAlgError`` from
 inside planning): the :class:`ReplanStep` says what happened.
@@ -136,7 +137,9 @@ class ReplanStep:
 
     ``target_error`` (m) is the distance from the committed plan's contact point to the latest
     estimate after the step (for a moving pad, to the pad the estimate predicts at the contact
-    time); ``reach_budget`` (m) how far the contact point could move in the time left (``inf``
+    time); ``target_angle`` (rad) the angle between the committed pad's normal and the estimate's
+    (or of the rotation between their frames beyond ``avp.replan.ROTATION_TOLERANCE``);
+    ``reach_budget`` (m) how far the contact point could move in the time left (``inf``
     where no budget applies: a moving pad, a line); ``fraction`` the share of the requested correction committed (0 when nothing
     was); ``anchored`` whether the plan started from the committed reference (True) or from
     odometry; ``snap`` the trackability certificate of the committed plan, when one was checked;
@@ -154,6 +157,7 @@ class ReplanStep:
     result: PlanResult | None = None
     solve_time: float = 0.0
     target_error: float = 0.0
+    target_angle: float = 0.0
     reach_budget: float = float("inf")
     fraction: float = 0.0
     anchored: bool = False
@@ -420,15 +424,17 @@ class Replanner:
         budget = 0.5 * rc.reach_acceleration * max(remaining, 0.0) ** 2
 
         def record(action: ReplanAction, reason: str, **kw: object) -> ReplanStep:
-            err = shift if self.committed_target is committed_target else self._change(self.committed_target, self.target)[0]
+            err, ang = ((shift, turn) if self.committed_target is committed_target
+                        else self._change(self.committed_target, self.target))
             if action in (ReplanAction.KEPT_PREVIOUS, ReplanAction.FROZEN_NEAR_CONTACT, ReplanAction.PARTIAL) \
-                    and err > rc.reach_tolerance and self._reach_cue:
+                    and (err > rc.reach_tolerance or ang > rc.reach_angle_tolerance) and self._reach_cue:
                 limit = (f"budget {budget:.3f} m in {max(remaining, 0.0):.2f} s" if self._static_pad
                          else f"{max(remaining, 0.0):.2f} s left")
-                reason = (f"{action.name.lower()}: committed contact point {err:.3f} m from the estimate "
-                          f"(tolerance {rc.reach_tolerance:.3f} m, {limit}); {reason}")
+                reason = (f"{action.name.lower()}: committed contact point {err:.3f} m and "
+                          f"{math.degrees(ang):.1f} deg from the estimate (tolerances {rc.reach_tolerance:.3f} m, "
+                          f"{math.degrees(rc.reach_angle_tolerance):.1f} deg; {limit}); {reason}")
                 action = ReplanAction.CANNOT_REACH
-            return ReplanStep(t=t, action=action, trajectory=self.trajectory, reason=reason, t_ex=t_ex, target_error=err, reach_budget=budget if self._static_pad else math.inf, **kw)  # type: ignore[arg-type]
+            return ReplanStep(t=t, action=action, trajectory=self.trajectory, reason=reason, t_ex=t_ex, target_error=err, target_angle=ang, reach_budget=budget if self._static_pad else math.inf, **kw)  # type: ignore[arg-type]
 
         if remaining < max(rc.freeze_horizon, self.config.t_k):
             return record(ReplanAction.FROZEN_NEAR_CONTACT, f"{max(remaining, 0.0):.3f} s to contact")
@@ -692,8 +698,9 @@ class Replanner:
     @property
     def _reach_cue(self) -> bool:
         """Whether a step that leaves the committed contact point farther than
-        ``reach_tolerance`` from the estimate (:meth:`_change`) says ``CANNOT_REACH`` (a static
-        or moving pad; not a line, :mod:`avp.line_replan`)."""
+        ``reach_tolerance`` from the estimate, or its frame turned by more than
+        ``reach_angle_tolerance`` (:meth:`_change`), says ``CANNOT_REACH`` (a static or moving
+        pad; not a line, :mod:`avp.line_replan`)."""
         return self._static_pad
 
     @property

@@ -172,7 +172,7 @@ def test_a_late_jump_of_the_estimate_is_reported_as_cannot_reach():
     last = steps[-1]
     assert last.action is ReplanAction.CANNOT_REACH and rp.cannot_reach
     assert 0.5 < last.target_error <= 1.0 + 1e-9
-    assert "m from the estimate" in last.reason
+    assert "1.000 m and 0.0 deg from the estimate" in last.reason
     assert last.reach_budget < 0.5  # the numbers say why: the budget has collapsed
 
 

@@ -150,3 +150,22 @@ def test_a_wrapped_odometry_yaw_continues_the_plan_yaw():
     assert step.committed and not step.anchored
     before, after = rp.reference(step.t_ex - 1e-4), rp.reference(step.t_ex + 1e-4)
     assert abs(float(after.yaw) - float(before.yaw)) < 0.01
+
+
+def test_an_estimate_turned_beyond_reach_says_cannot_reach():
+    """The wall re-estimated as a 60 deg slope late in the flight: no certified plan turns the
+    contact by 30 deg, and the step says so (it said KEPT_PREVIOUS with a target error of 0 m:
+    the cue counted distance only)."""
+    slope = avp.PerchTarget.from_incline(WALL.point, math.radians(60))
+    rp = avp.Replanner(WALL)
+    rp.step(0.0, START)
+    steps = [rp.step(t, _fly(rp, t), slope) for t in np.arange(48, 75) / 30]
+    uncorrected = [s for s in steps if not s.committed]
+    assert uncorrected and all(s.action is ReplanAction.CANNOT_REACH for s in uncorrected)
+    assert all(s.target_angle == pytest.approx(math.radians(30), abs=1e-9) for s in uncorrected)
+    assert all("30.0 deg" in s.reason for s in uncorrected)
+    # a turn within the tolerance is not the cue
+    within = avp.Replanner(WALL, replan=avp.ReplanConfig(reach_angle_tolerance=math.radians(40)))
+    within.step(0.0, START)
+    assert all(within.step(t, _fly(within, t), slope).action is not ReplanAction.CANNOT_REACH
+               for t in np.arange(48, 75) / 30)
