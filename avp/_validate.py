@@ -99,8 +99,8 @@ def finite_float(field: str, value: Any) -> float:
         raise ConfigError(field, f"expected a number, got {value!r}")
     try:
         out = float(value)
-    except (TypeError, ValueError) as exc:
-        raise ConfigError(field, f"expected a number, got {value!r}") from exc
+    except (TypeError, ValueError, OverflowError) as exc:
+        raise ConfigError(field, f"expected a finite number, got {value!r}") from exc
     if not math.isfinite(out):
         raise ConfigError(field, f"must be finite, got {out}")
     return out

@@ -18,15 +18,12 @@ def _key(value: Any) -> Any:
     return value
 
 
-def fields_equal(self: Any, other: object, *, skip: tuple[str, ...] = ()) -> bool:
-    """``self == other``: the same type and equal fields (arrays element-wise), the fields named
-    in ``skip`` aside."""
+def fields_equal(self: Any, other: object) -> bool:
+    """``self == other``: the same type and equal fields (arrays element-wise)."""
     fields = dataclasses.fields(self)
     if type(other) is not type(self):
         return NotImplemented  # type: ignore[no-any-return]
     for f in fields:
-        if f.name in skip:
-            continue
         a, b = getattr(self, f.name), getattr(other, f.name)
         if isinstance(a, np.ndarray) or isinstance(b, np.ndarray):
             if not np.array_equal(a, b):

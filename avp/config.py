@@ -841,9 +841,9 @@ class ReplanConfig:
         a closed-loop report from an independent simulator measured 1/5 such perches when every
         replan re-anchored on noisy odometry.
     target_tolerance:
-        Change (m) of the estimated pad centre (and ``target_tolerance`` rad of its normal; a
-        turn of the pad about its normal counts beyond 0.1 rad, ``avp.replan.ROTATION_TOLERANCE``)
-        below which, when anchored, the step holds the committed plan without solving. 5 mm:
+        Change (m) of the estimated pad centre (and ``target_tolerance`` rad of its normal)
+        below which, when anchored, the step holds the committed plan without solving (a turn
+        of the pad about its normal is not a change: the committed contact yaw stays). 5 mm:
         a sixth of the 3 cm plane tolerance of a perch (chosen, not tuned; with a perfect
         estimate every step holds, which is what makes AVP equal one-shot there). A static pad
         only: a moving pad's estimate moves it at every step (:class:`~avp.moving.MovingReplanner`
@@ -861,8 +861,9 @@ class ReplanConfig:
         of those that certifies is committed, else the last. So when the smallest certifies the
         largest certifying fraction is committed; when it does not, none is (a larger one that
         would have certified is not tried). Only the full correction is tried when the estimated
-        normal turned by 90 deg or more from the committed one (a flipped normal): no blend of
-        the two frames lies between them. A step that cannot correct at all costs two solves
+        normal turned by 90 deg or more from the committed one (a flipped normal): a blend of
+        the two frames barely turns below half the correction and flips past it. A step that
+        cannot correct at all costs two solves
         (plus the failed ``retime_retries``), a committed fraction between one solve more than in
         plain order. Over 168 closed-loop
         runs against plain order: the same number of perches (142), the step p99 at 6.0 instead
@@ -875,8 +876,7 @@ class ReplanConfig:
         success radius. For a moving pad, the distance to the pad the estimate predicts at the
         committed contact time; not for a line (:mod:`avp.line_replan`).
     reach_angle_tolerance:
-        Angle (rad) between the committed pad's normal and the latest estimate's (or of the
-        rotation between their frames, beyond ``avp.replan.ROTATION_TOLERANCE``) above which a
+        Angle (rad) between the committed pad's normal and the latest estimate's above which a
         step without a full correction reports ``CANNOT_REACH`` as for ``reach_tolerance``:
         the plan would touch the surface that far from square. 10 deg: the simulator's perch
         criterion (``b3`` within 10 deg of ``s3``); its estimates turn by at most 6.3 deg

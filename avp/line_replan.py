@@ -14,13 +14,14 @@ do not apply to a line. The recovery of the last committed plan is :attr:`LineRe
 
 from __future__ import annotations
 
+import dataclasses
 import math
+from enum import Enum
 from typing import Any
 
 import numpy as np
 
 from ._typing import Array
-from ._values import fields_equal
 from .config import PlannerConfig, ReplanConfig
 from .errors import ConfigError
 from .line import LineTarget
@@ -44,6 +45,19 @@ def line_change(a: LineTarget, b: LineTarget) -> tuple[float, float]:
         c = float(da @ db) / (float(np.linalg.norm(da)) * float(np.linalg.norm(db)))
         turn = max(turn, math.acos(min(1.0, max(-1.0, c))))
     return shift, turn
+
+
+def _close(x: Any, y: Any, tol: float) -> bool:
+    """Numbers and arrays within ``tol`` of each other, element-wise; anything else equal."""
+    if x is None or y is None:
+        return x is y
+    if isinstance(x, Enum) or isinstance(y, Enum):
+        return bool(x == y)
+    try:
+        xa, ya = np.asarray(x, dtype=float), np.asarray(y, dtype=float)
+    except (TypeError, ValueError):
+        return bool(x == y)
+    return xa.shape == ya.shape and bool(np.all(np.abs(xa - ya) <= tol))
 
 
 class LineReplanner(Replanner):
@@ -90,10 +104,13 @@ class LineReplanner(Replanner):
 
     @property
     def _can_hold(self) -> bool:
-        """Only while the estimate differs from the committed line in its vertices alone (by
-        less than the tolerances): a new ``pitch``, ``grasp``, radius or gripper offset asks
-        for another perch."""
-        return fields_equal(self.committed_target, self.target, skip=("vertices",)) is True
+        """Only while the estimate's other fields stay within ``replan.target_tolerance`` of
+        the committed line's (m, rad, grasp fraction; names and counts exactly): a new
+        ``pitch``, ``grasp``, radius, gripper offset or side asks for another perch. The
+        vertices are compared by :func:`line_change`."""
+        a, b, tol = self.committed_target, self.target, self.replan.target_tolerance
+        return all(_close(getattr(a, f.name), getattr(b, f.name), tol)
+                   for f in dataclasses.fields(LineTarget) if f.name != "vertices")
 
     def _solve(  # type: ignore[override]  # returns the duck-compatible LinePlanResult
         self, state: State, durations: Array | None, previous: Trajectory | None, config: PlannerConfig,

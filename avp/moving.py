@@ -554,10 +554,14 @@ class MovingReplanner(Replanner):
         self._replan_config = self.config
 
     def step(self, t: float, odometry: State, target_estimate: PerchTarget | None = None) -> ReplanStep:
+        t = v.finite_float("t", t)
+        v.within("t", t, "time")
         if target_estimate is not None:
             if not isinstance(target_estimate, MovingTarget):
                 raise ConfigError("target_estimate", f"expected avp.platform.MovingTarget, got {type(target_estimate).__name__}")
-            _predicted_now(target_estimate, v.finite_float("t", t), "target_estimate.time")
+            _predicted_now(target_estimate, t, "target_estimate.time")
+        elif self.trajectory is None and isinstance(self.target, MovingTarget):  # the constructor's
+            _predicted_now(self.target, t, "target.time")  # estimate plans the first step
         return super().step(t, odometry, target_estimate)
 
     def _change(self, a: Any, b: Any) -> tuple[float, float]:

@@ -40,7 +40,7 @@ certified. The policy
   ``snap_max`` (:mod:`avp.trackability`), which bounds the angular acceleration.
 - **Freeze** within ``freeze_horizon`` s of contact (no replan can be tracked there).
 - **Cannot reach.** When the committed contact point is farther from the latest estimate than
-  ``reach_tolerance``, or the committed pad frame turned from it by more than
+  ``reach_tolerance``, or the committed pad's normal turned from it by more than
   ``reach_angle_tolerance``, and no certified plan closes the gap, the step's action is
   ``CANNOT_REACH`` with the numbers (``target_error``, ``target_angle``, ``reach_budget``): the
   user's cue to abort or go around.
@@ -65,6 +65,7 @@ from . import _validate as v
 from ._blas import serial_blas
 from ._blas import warm as _warm_blas
 from ._typing import Array
+from ._validate import LIMITS
 from .config import PlannerConfig, ReplanConfig
 from .errors import AvpError, ConfigError
 from .planner import PlanResult, PlanStatus, plan_detailed
@@ -137,8 +138,7 @@ class ReplanStep:
 
     ``target_error`` (m) is the distance from the committed plan's contact point to the latest
     estimate after the step (for a moving pad, to the pad the estimate predicts at the contact
-    time); ``target_angle`` (rad) the angle between the committed pad's normal and the estimate's
-    (or of the rotation between their frames beyond ``avp.replan.ROTATION_TOLERANCE``);
+    time); ``target_angle`` (rad) the angle between the committed pad's normal and the estimate's;
     ``reach_budget`` (m) how far the contact point could move in the time left (``inf``
     where no budget applies: a moving pad, a line); ``fraction`` the share of the requested correction committed (0 when nothing
     was); ``anchored`` whether the plan started from the committed reference (True) or from
@@ -233,23 +233,15 @@ def _blend(a: PerchTarget, b: PerchTarget, f: float) -> PerchTarget:
         return PerchTarget(point=point, R_WS=a.R_WS)
 
 
-ROTATION_TOLERANCE = 0.1
-"""Rotation (rad) of an estimated pad frame beyond which :func:`_target_change` reports it in
-place of the angle between the normals: a pad turned about its normal (a floor pad's heading)
-changes the plan's contact yaw, so it is a change to correct. Below it only the normal counts,
-as in-plane noise of the frame would otherwise keep a hold from holding: in the simulator's
-fused estimates (wall and slope at 4.5 and 7.5 m, seeds 0-2) the rotation about the normal
-stayed under 0.055 rad, and ``bench_replan.py --seeds 6`` makes the same decisions with it."""
+_TIME_LIMIT = LIMITS["time"][0]
 
 
 def _target_change(a: PerchTarget, b: PerchTarget) -> tuple[float, float]:
-    """Distance (m) between the pad centres and angle (rad) between the normals, or of the
-    rotation between the frames when that exceeds :data:`ROTATION_TOLERANCE`."""
+    """Distance (m) between the pad centres and angle (rad) between the normals. A turn of the
+    pad about its normal is not a change: the committed contact yaw stays (on a level pad built
+    from a normal, ``PerchTarget.from_normal``, that rotation is noise)."""
     p = b.point - a.point
-    turn = math.acos(min(max(float(a.s3 @ b.s3), -1.0), 1.0))
-    c = 0.5 * (float(np.einsum("ij,ij->", a.R_WS, b.R_WS)) - 1.0)  # cos of the rotation between the frames
-    rotation = math.acos(min(max(c, -1.0), 1.0))
-    return math.sqrt(float(p @ p)), rotation if rotation > ROTATION_TOLERANCE else turn
+    return math.sqrt(float(p @ p)), math.acos(min(max(float(a.s3 @ b.s3), -1.0), 1.0))
 
 
 class Replanner:
@@ -346,7 +338,8 @@ class Replanner:
         kind are reported in the returned :class:`ReplanStep`.
         """
         t = v.finite_float("t", t)
-        v.within("t", t, "time")
+        if abs(t) > _TIME_LIMIT:
+            v.within("t", t, "time")  # raises, with the message
         if self._last_t is not None and t < self._last_t:
             raise ConfigError("t", f"went back from {self._last_t:.6g} s to {t:.6g} s: steps must come in time "
                               "order on one clock (after a clock reset, build a new Replanner)")
@@ -454,7 +447,8 @@ class Replanner:
         except ConfigError as exc:
             return record(ReplanAction.KEPT_PREVIOUS, f"no start state: {exc}")
         f_max = 1.0 if shift <= budget or not self._static_pad else budget / shift
-        # a normal turned by 90 deg or more (flipped) has no blend between the two frames (_blend)
+        # a normal turned by 90 deg or more (flipped): a blend of the two frames barely turns below
+        # half the correction and flips past it (degenerate when opposite, _blend)
         flipped = self._static_pad and float(self.committed_target.s3 @ self.target.s3) <= 0.0
         if flipped and f_max < 1.0:
             return record(ReplanAction.KEPT_PREVIOUS, f"the estimated normal turned by {math.degrees(turn):.0f} deg "
@@ -471,7 +465,9 @@ class Replanner:
             self._retries_failed = False
             self._previous = committed
             assert result.trajectory is not None
-            moved = result.trajectory.duration / total  # a planner may retime by itself (MovingConfig.retime)
+            # against the goal's own nominal time: a planner may retime by itself (MovingConfig.retime,
+            # the duration search with search_on_replan)
+            moved = result.trajectory.duration / self._retimed(remaining, goal)
             if abs(moved - time_factor) > 1e-9 * time_factor:
                 time_factor = moved
             self.trajectory = result.trajectory
@@ -698,7 +694,7 @@ class Replanner:
     @property
     def _reach_cue(self) -> bool:
         """Whether a step that leaves the committed contact point farther than
-        ``reach_tolerance`` from the estimate, or its frame turned by more than
+        ``reach_tolerance`` from the estimate, or its normal turned by more than
         ``reach_angle_tolerance`` (:meth:`_change`), says ``CANNOT_REACH`` (a static or moving
         pad; not a line, :mod:`avp.line_replan`)."""
         return self._static_pad

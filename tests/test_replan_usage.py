@@ -44,21 +44,19 @@ def test_a_plan_handed_in_sets_the_snap_limits_as_a_first_plan_does():
     assert actions[0] is actions[1] is ReplanAction.REPLANNED
 
 
-def test_a_pad_turned_about_its_normal_is_replanned():
-    """A floor pad re-estimated with its heading turned by 90 deg: the normal is the same, the
-    contact yaw is not. Before, every step held the committed plan."""
-    pad = avp.PerchTarget.from_incline([3.0, 0.0, 0.5], 0.0, heading=0.0)
-    turned = avp.PerchTarget.from_incline([3.0, 0.0, 0.5], 0.0, heading=math.pi / 2)
-    want = avp.plan(START, turned)
+def test_a_level_pad_estimated_from_noisy_normals_holds_its_contact_yaw():
+    """A floor pad re-estimated from a plane fit (``from_normal``, 1 mrad of normal noise): the
+    frame's rotation about the normal is arbitrary, and is not a change. An attempt to replan on
+    it (the frame's full rotation) replanned every step and swung the contact yaw by 170 deg."""
+    pad = avp.PerchTarget.from_normal([3.0, 0.0, 0.5], [0.0, 0.0, 1.0])
+    rng = np.random.default_rng(0)
     rp = avp.Replanner(pad)
     rp.step(0.0, START)
-    first = rp.step(1 / 30, _fly(rp, 1 / 30), turned)
-    assert first.action is ReplanAction.REPLANNED
-    assert rp.committed_target is turned
-    # then it holds: nothing more to correct
-    assert rp.step(2 / 30, _fly(rp, 2 / 30), turned).action is ReplanAction.HELD
-    end = rp.trajectory
-    assert float(end.yaw(end.tf)) == pytest.approx(float(want.yaw(want.tf)), abs=1e-6)
+    yaw0 = float(rp.trajectory.yaw(rp.trajectory.tf))
+    steps = [rp.step(t, _fly(rp, t), avp.PerchTarget.from_normal(pad.point, [0.0, 0.0, 1.0] + 1e-3 * rng.normal(size=3)))
+             for t in np.arange(1, 40) / 30]
+    assert all(s.action in (ReplanAction.HELD, ReplanAction.FROZEN_NEAR_CONTACT) for s in steps)
+    assert float(rp.trajectory.yaw(rp.trajectory.tf)) == yaw0
 
 
 def test_a_flipped_normal_is_not_blended():
@@ -71,6 +69,13 @@ def test_a_flipped_normal_is_not_blended():
     steps = [rp.step(t, _fly(rp, t), flipped) for t in (0.5, 0.55, 0.6)]
     assert all(s.action is not ReplanAction.PARTIAL and s.fraction in (0.0, 1.0) for s in steps)
     assert all(s.n_solves <= 1 + len(avp.ReplanConfig().retime_retries) for s in steps)
+    # flipped and moved beyond the reach budget late in the flight: nothing to try, the cue
+    late = avp.Replanner(WALL)
+    late.step(0.0, START)
+    away = avp.PerchTarget.from_normal(WALL.point + [0.0, 0.5, 0.0], -WALL.s3)
+    step = late.step(1.9, _fly(late, 1.9), away)
+    assert step.action is ReplanAction.CANNOT_REACH and step.n_solves == 0 and step.reach_budget < 0.5
+    assert "no partial correction" in step.reason
 
 
 def test_a_moving_replan_that_moves_the_contact_time_says_so():
@@ -169,3 +174,52 @@ def test_an_estimate_turned_beyond_reach_says_cannot_reach():
     within.step(0.0, START)
     assert all(within.step(t, _fly(within, t), slope).action is not ReplanAction.CANNOT_REACH
                for t in np.arange(48, 75) / 30)
+
+
+def test_the_time_factor_of_a_committed_fraction_is_its_own():
+    """With ``retime_normal`` each fraction has its own nominal time left; the smallest one,
+    committed after the fractions between failed, reports 1 (it reported the last fraction's
+    ratio, 0.96, and "the nominal time failed a certificate")."""
+    rp = avp.Replanner(WALL, replan=avp.ReplanConfig(retime_normal=True, retime_retries=()))
+    rp.step(0.0, START)
+    deeper = avp.PerchTarget(point=WALL.point - 0.2 * WALL.s3, R_WS=WALL.R_WS)
+    real = rp._plan
+
+    def only_the_smallest(state, target, durations, previous, config, deadline=None):
+        if abs(float(np.linalg.norm(target.point - WALL.point)) / 0.2 - 0.125) > 1e-6:
+            return None, 0.0, "forced failure"
+        return real(state, target, durations, previous, config, deadline)
+
+    rp._plan = only_the_smallest
+    step = rp.step(0.5, _fly(rp, 0.5), deeper)
+    assert step.committed and step.fraction == 0.125  # a partial commit (labelled CANNOT_REACH: 17.5 cm left)
+    assert step.time_factor == pytest.approx(1.0, abs=1e-12) and "time left x" not in step.reason
+
+
+def test_a_line_estimate_within_the_tolerances_is_held():
+    """Fields other than the vertices compare within ``target_tolerance`` (a radius re-measured
+    to 1e-7 m, a side vector recomputed each step): the step holds."""
+    limits = avp.VehicleLimits(mass=0.8, thrust_min=0.5, thrust_max=4.0 * 0.8 * 9.81)
+    line = avp.LineTarget.segment([2.5, -1.5, 3.94], [2.5, 1.5, 4.46], pitch=math.radians(80), gripper_offset=0.15,
+                                  side=[-1.0, 0.0, 0.0])
+    rp = avp.LineReplanner(line, avp.PlannerConfig(limits=limits))
+    rp.step(0.0, avp.State.hover([0.0, 0.0, 4.0]))
+    again = dataclasses.replace(line, radius=line.radius + 1e-7, side=[-1.0, 1e-4, 0.0])
+    assert rp.step(1 / 30, _fly(rp, 1 / 30), again).action is ReplanAction.HELD
+
+
+def test_bad_clocks_of_a_moving_replanner_are_typed_errors():
+    pad = MovingTarget.on_platform([0.0, 0.0, 1.0], incline=0.5, speed=2.0)
+    start = avp.State(position=[-3.0, 0.0, 1.0], velocity=[2.0, 0.0, 0.0])
+    with pytest.raises(avp.ConfigError) as exc:  # a millisecond timestamp: the step's own clock
+        MovingReplanner(pad, MOVING_CFG).step(1.7e12, start, pad)
+    assert exc.value.field == "t"
+    unix = dataclasses.replace(pad, time=1.7e9)  # the constructor's estimate on another clock
+    with pytest.raises(avp.ConfigError) as exc:
+        MovingReplanner(unix, MOVING_CFG).step(0.0, start)
+    assert exc.value.field == "target.time"
+    rp = avp.Replanner(WALL)
+    rp.step(0.0, START)
+    with pytest.raises(avp.ConfigError) as exc:
+        rp.reference(10**400)  # OverflowError before
+    assert exc.value.field == "t"
