@@ -317,7 +317,9 @@ class Trajectory:
         return frames.body_rates(d[2, ..., :3], d[3, ..., :3], d[0, ..., 3], d[1, ..., 3], self.g)
 
     def sample(self, dt: float) -> Array:
-        """Times ``t0, t0 + dt, ...`` up to and including ``tf`` (at most :data:`MAX_SAMPLES`)."""
+        """Times ``t0, t0 + dt, ...`` up to and including ``tf`` (at most :data:`MAX_SAMPLES`),
+        rounded to the clock: on a clock ``c``, a ``dt`` below ``ulp(c)`` (2.4e-7 s at UNIX time)
+        repeats times."""
         return np.minimum(self._t0 + self._sample_rel(dt), self._tf)
 
     def _sample_rel(self, dt: float) -> Array:
