@@ -211,7 +211,8 @@ class OverhangFlip:
     enabled:
         Add the horizontal-thrust waypoint on overhangs. The waypoint is the planner's device,
         not the user's constraint: when no duration certifies with it, :func:`avp.plan_detailed`
-        searches again without it before relaxing anything (noisy wall estimates that tip just
+        searches again without it (and with the band as asked: ``cone_band``'s cone stays)
+        before relaxing anything (noisy wall estimates that tip just
         past ``min_incline`` otherwise planned only with relaxations: 2 of 20 first plans at 7.5 m
         in the realistic simulator).
     min_incline:

@@ -337,7 +337,10 @@ def plan_detailed(
     stage_cfg = cfg
     for stage in stages:
         if stage is _WITHOUT_WAYPOINT:
-            stage_cfg = replace(cfg, flip=replace(cfg.flip, enabled=False))
+            # the waypoint off; the band as asked (flip.enabled off would also drop cone_band's cone)
+            cone = cfg.pre_impact is PreImpactMode.PAPER and cfg.flip.cone_band
+            stage_cfg = replace(cfg, flip=replace(cfg.flip, enabled=False),
+                                pre_impact=PreImpactMode.CONE if cone else cfg.pre_impact)
             log.append("overhang: searching again without the horizontal-thrust waypoint (a planner heuristic; "
                        "nothing the request asked is relaxed)")
         elif isinstance(stage, Relaxation):

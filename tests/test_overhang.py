@@ -96,3 +96,43 @@ def test_a_barely_overhanging_estimate_is_solved_without_the_waypoint() -> None:
     assert res.bounds is not None and res.bounds.certified
     assert res.safety is not None and res.safety.certified
     assert any("without the horizontal-thrust waypoint" in line for line in res.log)
+
+
+def _band_at_contact(traj: avp.Trajectory, target: avp.PerchTarget, config: avp.PlannerConfig) -> tuple[np.ndarray, np.ndarray]:
+    """``f . s3`` and the tilt of ``f = a + g e3 + d v`` from ``s3`` (rad) at the band's sample
+    times ``t_f - t_k + j dt``, from the spline's own coefficients (not the planner's rows)."""
+    kr, C = traj.knots_rel, traj.coefficients
+    ts = kr[-1] - config.t_k + config.dt * np.arange(int(round(config.t_k / config.dt)))
+    seg = np.clip(np.searchsorted(kr, ts, side="right") - 1, 0, traj.n_segments - 1)
+    tau = ts - kr[seg]
+    k = np.arange(C.shape[2])
+    v = np.einsum("sak,sk->sa", C[seg, :3, 1:], k[1:] * tau[:, None] ** (k[1:] - 1))
+    a = np.einsum("sak,sk->sa", C[seg, :3, 2:], k[2:] * (k[2:] - 1) * tau[:, None] ** (k[2:] - 2))
+    f = a + config.limits.rotor_drag * v + [0.0, 0.0, config.g]
+    fs = f @ target.s3
+    return fs, np.arctan2(np.linalg.norm(np.cross(f, target.s3), axis=1), fs)
+
+
+def test_the_search_without_the_waypoint_keeps_the_cone_band():
+    """An overhang whose plan needs the search without the horizontal-thrust waypoint: the band
+    asked (PAPER with ``cone_band``: the tilt cone) stays the cone. That search turned the flip
+    off, which also dropped the cone for the box, and the plan, 1.4e-3 m/s^2 under the cone's
+    ``alpha``, said SOLVED with nothing relaxed (found by an independent audit)."""
+    state = avp.State.hover([1.014755075755966, 1.2843552588657738, 3.435395575028842], yaw=0.7335482938268485)
+    target = avp.PerchTarget.from_incline([-1.7628476495686467, -0.8821583453555246, 3.868461153758506],
+                                          math.radians(120), -3.1055475609748036)
+    cfg = avp.PlannerConfig(
+        limits=avp.VehicleLimits(mass=0.3, thrust_min=0.15, thrust_max=7.3575, tilt_rate_max=15.0,
+                                 body_rate_max=8.84445913790563),
+        workspace=avp.Workspace(body_offset=0.15, ground_z=2.0986216134041547, half_spaces=(
+            avp.HalfSpace(point=[0, 0, 4.89144837907693], normal=[0, 0, -1]),
+            avp.HalfSpace(point=[-1.2316798953997017, 1.3861960180239965, 3.6144283643936737],
+                          normal=[0.6150288826707363, -0.7885045805071685, 0.0]))),
+        contact_velocity=avp.ContactVelocity(normal=-0.1, slope=None, lateral=None))
+    res = avp.plan_detailed(state, target, cfg)
+    assert any("without the horizontal-thrust waypoint" in line for line in res.log)
+    assert res.status is avp.PlanStatus.SOLVED and not res.relaxations
+    fs, tilt = _band_at_contact(res.trajectory, target, cfg)
+    alpha = cfg.contact_alpha(target.incline)
+    assert fs.min() >= alpha - 1e-9 and fs.max() <= (1 + cfg.q) * alpha + 1e-9
+    assert tilt.max() <= cfg.cone_half_angle + 1e-9
