@@ -26,7 +26,8 @@ if TYPE_CHECKING:
     from .config import VehicleLimits
     from .trajectory import Trajectory
 
-__all__ = ["EXACT_BUDGET", "Bound", "BoundReport", "Certificate", "Violation", "certify_spline", "certify_trajectory"]
+__all__ = ["EXACT_BUDGET", "Bound", "BoundReport", "Certificate", "Violation", "certify_spline", "certify_trajectory",
+           "drag_thrust_spline"]
 
 EXACT_BUDGET = 0.01
 """Default time budget (s, wall clock) of the exact fallback per :func:`certify_spline` call.
@@ -257,13 +258,32 @@ def certify_spline(
     return BoundReport(verdicts=verdicts, times=tmap, limits=limits)
 
 
+def drag_thrust_spline(coeffs: npt.ArrayLike, drag: float) -> np.ndarray:
+    """Coefficients ``(S, 4, C + 1)`` of ``q = p + d int p`` per segment (x, y, z; yaw as is):
+    ``q'' + g e3 = a + g e3 + d v`` is the thrust with linear rotor drag ``d``
+    (:class:`~avp.config.VehicleLimits` ``rotor_drag``) and ``q''' = j + d a`` its rate, so
+    :func:`certify_spline` on ``q`` certifies the limits on the thrust the rotors make.
+    ``q_k = p_k + d p_(k-1) / k`` in floating point (three roundings per coefficient, at the
+    level of the QP solution's own; the certificate takes ``q``'s floats as the truth)."""
+    c = np.asarray(coeffs, dtype=np.float64)
+    out = np.zeros((c.shape[0], 4, c.shape[2] + 1))
+    out[:, :, : c.shape[2]] = c
+    k = np.arange(1, c.shape[2] + 1, dtype=np.float64)
+    out[:, :3, 1:] += (drag / k) * c[:, :3, :]
+    return out
+
+
 def certify_trajectory(traj: Trajectory, limits: VehicleLimits, g: float, *, exact: bool = True) -> BoundReport:
     """:func:`certify_spline` of a plan against a vehicle's limits, mass-normalised (thrust and
     its rate per unit mass, eqs. (15), (21)-(22) and the body rate), on the plan's exact segment
     durations (:attr:`Trajectory.knots_rel <avp.trajectory.Trajectory.knots_rel>`, so a large
-    clock value does not round them); violation times are on the plan's clock."""
+    clock value does not round them); violation times are on the plan's clock. With
+    ``limits.rotor_drag`` the limits are certified on the thrust ``a + g e3 + d v`` that the
+    rotors make (:func:`drag_thrust_spline`), not on the drag-free ``a + g e3``."""
+    drag = limits.rotor_drag
     report = certify_spline(
-        traj.coefficients, traj.knots_rel, thrust_min=limits.accel_min, thrust_max=limits.accel_max,
+        drag_thrust_spline(traj.coefficients, drag) if drag else traj.coefficients, traj.knots_rel,
+        thrust_min=limits.accel_min, thrust_max=limits.accel_max,
         thrust_rate_max=limits.thrust_rate_max / limits.mass, tilt_rate_max=limits.tilt_rate_max,
         body_rate_max=limits.body_rate_max, g=g, exact=exact,
     )

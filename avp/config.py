@@ -86,9 +86,11 @@ class VehicleLimits:
     rotorpy's wall the drag turned the camera by 4-8 deg, which put the pad up to 3 deg outside
     the 35 deg cone for a second of the approach). A line perch (:func:`avp.plan_line`) takes
     its contact thrust, its rest at contact (``j + d a = 0``) and its flip rows on the same
-    thrust (:func:`avp.qp.line.line_terminal_blocks`). The bound certificates and
-    :class:`~avp.trajectory.Trajectory`'s attitude keep the drag-free flatness map (11): along
-    the path the true attitude differs by up to ``atan(d |v| / |a + g e3|)``.
+    thrust (:func:`avp.qp.line.line_terminal_blocks`). The bound certificates prove the thrust
+    range, thrust rate, tilt rate and body rate on that thrust and its rate ``j + d a``
+    (:func:`avp.bounds.certify_trajectory`). :class:`~avp.trajectory.Trajectory`'s attitude and
+    the duration search's predictions keep the drag-free flatness map (11): along the path the
+    true attitude differs from ``traj.attitude`` by up to ``atan(d |v| / |a + g e3|)``.
     """
 
     mass: float = 0.5

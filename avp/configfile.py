@@ -301,7 +301,8 @@ MEANINGS: dict[str, str] = {
                                  "so at contact the thrust, not the acceleration, is along s3 (12) and the band (14) bounds "
                                  "a + d v; the FoV rows (8)-(9) and the visibility score take the camera's attitude from "
                                  "that thrust; a line perch's contact thrust, rest rates (j + d a = 0) and flip rows are on "
-                                 "it too. Certificates and Trajectory.attitude stay drag-free (11)."),
+                                 "it too, and the bound certificates prove the limits on it. Trajectory.attitude stays "
+                                 "drag-free (11)."),
     "ContactVelocity.normal": "v . s3 at contact (negative: into the pad); none: free.",
     "ContactVelocity.slope": "v . s1 at contact (negative: down the slope); none: free.",
     "ContactVelocity.lateral": "v . s2 at contact; none: free.",

@@ -7,7 +7,7 @@ half-spaces, spheres, speed) with :func:`avp.safety.certify_workspace`, and the 
 and wedge corridor with :mod:`avp.line_certify`, searching the total duration (``config.bounds`` factors) until every
 certificate holds. With ``config.limits.rotor_drag = d`` the contact thrust, its rest rates and
 the flip rows are on the thrust ``a + g e3 + d v`` (:func:`avp.qp.line.line_terminal_blocks`);
-the bound certificates keep the drag-free map (11), as for a pad. It then plans the **recovery**: a second spline that starts at the perch's
+the bound certificates prove the limits on that thrust, as for a pad. It then plans the **recovery**: a second spline that starts at the perch's
 final state (continuous up to snap on all four flat outputs) and ends at rest at a safe hover
 point, with the same certificates, as Paneque et al., "Perception-Aware Perching on Powerlines
 with Multirotors", append a recovery to every perch. ``docs/lines.md`` has the derivations.

@@ -300,3 +300,51 @@ def test_line_recovery_with_drag_continues_the_perch(search):
     end, begin = p.derivatives(p.tf), r.derivatives(r.t0)
     assert np.all(np.abs(end - begin) / np.maximum(1.0, np.abs(end)) < 1e-6)
     assert np.linalg.norm(end[3, :3] + drag * end[2, :3]) < 1e-6 * max(1.0, float(np.linalg.norm(end[2, :3])))
+
+
+@settings(max_examples=200, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), drag=st.floats(0.01, 1.0), degree=st.integers(1, 9))
+def test_the_drag_thrust_spline_is_the_thrust_with_drag(seed, drag, degree):
+    """``q = p + d int p``: ``q''`` and ``q'''`` are ``a + d v`` and ``j + d a`` of ``p``, checked in
+    exact rational arithmetic on the coefficients (three roundings per coefficient of ``q``:
+    ``d / k``, the product and the sum, so within 2 eps of the terms' magnitudes)."""
+    from fractions import Fraction
+
+    from avp.bounds import drag_thrust_spline
+
+    rng = np.random.default_rng(seed)
+    c = rng.normal(size=(2, 4, degree + 1)) * 10.0 ** rng.uniform(-2, 2, size=(2, 4, degree + 1))
+    q = drag_thrust_spline(c, drag)
+    assert q.shape == (2, 4, degree + 2)
+    np.testing.assert_array_equal(q[:, 3, : degree + 1], c[:, 3])  # yaw as is
+    d = Fraction(drag)
+    for s in range(2):
+        for ax in range(3):
+            p = [Fraction(x) for x in c[s, ax]]
+            terms = [((p[k] if k <= degree else 0), (d * p[k - 1] / k if k else 0)) for k in range(degree + 2)]
+            for k, (got, (own, drag_term)) in enumerate(zip(q[s, ax], terms, strict=True)):
+                err = abs(Fraction(got) - own - drag_term)
+                assert err <= (abs(own) + abs(drag_term)) * Fraction(2.0**-51), (s, ax, k)
+
+
+def test_a_solved_plan_keeps_the_limits_on_the_thrust_the_rotors_make():
+    """An overhang with rotor drag ``d = 0.3 /s``: the certificate bounds the thrust
+    ``a + g e3 + d v`` and its turn (``j + d a``), sampled densely here. With the limits
+    certified on the drag-free ``a + g e3`` this plan said SOLVED and turned at 1.057 x the
+    tilt-rate limit (found by an independent audit, and by a search over 150 such perches)."""
+    limits = avp.VehicleLimits(tilt_rate_max=6.348282557827985, rotor_drag=0.3)
+    target = avp.PerchTarget.from_incline([1.828458037016572, 0.0, 2.5], math.radians(122.7753264445449))
+    res = avp.plan_detailed(avp.State.hover([0.0, 0.0, 2.0]), target, avp.PlannerConfig(limits=limits))
+    assert res.trajectory is not None
+    traj = res.trajectory
+    t = np.linspace(traj.t0, traj.tf, 20001)
+    D = traj.derivatives(t, (1, 2, 3))
+    f = D[1][:, :3] + 0.3 * D[0][:, :3] + [0.0, 0.0, traj.g]
+    f_dot = D[2][:, :3] + 0.3 * D[1][:, :3]
+    norm = np.linalg.norm(f, axis=1)
+    tilt_rate = np.linalg.norm(np.cross(f, f_dot), axis=1) / norm**2
+    if res.ok:
+        assert tilt_rate.max() <= limits.tilt_rate_max * (1 + 1e-9)
+        assert limits.accel_min * (1 - 1e-9) <= norm.min() and norm.max() <= limits.accel_max * (1 + 1e-9)
+    else:  # not certified: then it is not SOLVED either
+        assert res.status is not avp.PlanStatus.SOLVED
