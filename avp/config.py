@@ -88,9 +88,9 @@ class VehicleLimits:
     its contact thrust, its rest at contact (``j + d a = 0``) and its flip rows on the same
     thrust (:func:`avp.qp.line.line_terminal_blocks`). The bound certificates prove the thrust
     range, thrust rate, tilt rate and body rate on that thrust and its rate ``j + d a``
-    (:func:`avp.bounds.certify_trajectory`). :class:`~avp.trajectory.Trajectory`'s attitude and
-    the duration search's predictions keep the drag-free flatness map (11): along the path the
-    true attitude differs from ``traj.attitude`` by up to ``atan(d |v| / |a + g e3|)``.
+    (:func:`avp.bounds.certify_trajectory`), and the duration search samples it.
+    :class:`~avp.trajectory.Trajectory`'s attitude keeps the drag-free flatness map (11): along
+    the path the true attitude differs from ``traj.attitude`` by up to ``atan(d |v| / |a + g e3|)``.
     """
 
     mass: float = 0.5

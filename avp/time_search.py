@@ -27,6 +27,7 @@ import numpy as np
 
 from . import _avp_rust
 from ._typing import Array
+from .bounds import drag_thrust_spline
 from .config import BoundsPolicy, TimeSearch, VehicleLimits
 from .trajectory import Trajectory
 
@@ -61,13 +62,15 @@ def _midpoints(per_segment: int) -> Array:
     return u
 
 
-def _samples(traj: Trajectory, per_segment: int) -> tuple[Array, Array, Array, Array]:
+def _samples(traj: Trajectory, per_segment: int, drag: float = 0.0) -> tuple[Array, Array, Array, Array]:
     """``|a|^2``, ``a_z``, ``|j|^2`` and the yaw rate of ``traj`` at ``per_segment`` midpoints
-    of equal parts of every segment."""
+    of equal parts of every segment; with rotor ``drag`` ``a + d v`` and ``j + d a`` in place of
+    ``a`` and ``j`` (the thrust the certificate bounds, :func:`avp.bounds.drag_thrust_spline`)."""
     knots = traj.knots_rel
     t = (knots[:-1, None] + _midpoints(per_segment)[None, :] * (knots[1:] - knots[:-1])[:, None]).reshape(-1)
+    coeffs = drag_thrust_spline(traj.coefficients, drag) if drag else traj.coefficients
     # interior times of valid knots: the kernel directly, without the public range checks
-    d = _avp_rust.eval_spline(traj.coefficients, knots, t, [1, 2, 3]).reshape(3, t.size, 4)
+    d = _avp_rust.eval_spline(coeffs, knots, t, [1, 2, 3]).reshape(3, t.size, 4)
     a, j = d[1, :, :3], d[2, :, :3]
     return (a * a).sum(axis=1), a[:, 2].copy(), (j * j).sum(axis=1), d[0, :, 3]
 
@@ -78,8 +81,10 @@ def scaled_excess(traj: Trajectory, limits: VehicleLimits, g: float, scales: Arr
     (thrust range (15), thrust rate (21), tilt rate (22), body rate (24)), of ``traj``
     time-scaled by ``scales[k]``, on ``per_segment`` samples per segment (negative: every
     sample within). A positive excess at scale 1 is a proven violation of the certified
-    polynomial at a sample (the tilt and body rates as the certificate bounds them)."""
-    return _excess(_samples(traj, per_segment), limits, g, np.asarray(scales, dtype=float))
+    polynomial at a sample (the tilt and body rates as the certificate bounds them; with rotor
+    drag on the drag thrust, whose time scaling the other scales take as drag-free: a
+    prediction, not a proof)."""
+    return _excess(_samples(traj, per_segment, limits.rotor_drag), limits, g, np.asarray(scales, dtype=float))
 
 
 def _excess(samples: tuple[Array, Array, Array, Array], limits: VehicleLimits, g: float, scales: Array) -> Array:
@@ -106,7 +111,7 @@ def _excess(samples: tuple[Array, Array, Array, Array], limits: VehicleLimits, g
 def predicted_factor(traj: Trajectory, limits: VehicleLimits, g: float, lo: float, hi: float) -> float | None:
     """The relative time-scale factor in ``[lo, hi]`` closest to 1 (in ratio) at which ``traj``,
     scaled, meets every bound with :data:`MARGIN` on the samples; ``None`` when there is none."""
-    return _predict(_samples(traj, SAMPLES_PER_SEGMENT), limits, g, lo, hi)
+    return _predict(_samples(traj, SAMPLES_PER_SEGMENT, limits.rotor_drag), limits, g, lo, hi)
 
 
 def _predict(samples: tuple[Array, Array, Array, Array], limits: VehicleLimits, g: float,
@@ -183,7 +188,7 @@ class DurationSearch:
         if self.predicted >= self.policy.max_steps:
             return None
         current = self.current
-        samples = _samples(traj, SAMPLES_PER_SEGMENT)
+        samples = _samples(traj, SAMPLES_PER_SEGMENT, limits.rotor_drag)
         if not self.measured:  # the scaling law of this plan
             s, excess = _predict_with_excess(samples, limits, g, self.lo / current, self.hi / current)
             self.measured.append((math.log(current), excess))
