@@ -328,18 +328,20 @@ def demo(args: argparse.Namespace) -> int:
     summary: dict[str, Any] = {}
     if traj is not None:
         tf = traj.tf
-        b3 = traj.attitude(tf)[:, 2]
+        drag = config.limits.rotor_drag  # the thrust the planner certifies: a + g e3 + d v
+        R_tf = traj.attitude(tf, rotor_drag=drag)
+        b3 = R_tf[:, 2]
         v_S = target.to_target_frame(traj(tf, 1))
         want = config.contact_velocity.components(target.incline)
         ts = traj.sample(1e-3)
-        thrust = traj.thrust(ts)
-        rates = np.linalg.norm(traj.body_rates(ts), axis=-1)
+        thrust = traj.thrust(ts, rotor_drag=drag)
+        rates = np.linalg.norm(traj.body_rates(ts, rotor_drag=drag), axis=-1)
         summary = {
             "duration_s": traj.duration, "n_segments": traj.n_segments, "degree": traj.degree,
             "contact_position_m": traj(tf).tolist(),
             "contact_position_error_m": float(np.linalg.norm(traj(tf) - target.point)),
             "b3_error_deg": math.degrees(math.acos(max(-1.0, min(1.0, float(b3 @ target.s3))))),
-            "frame_error_deg": math.degrees(float(rotation_error_angle(traj.attitude(tf), target.R_WS))),
+            "frame_error_deg": math.degrees(float(rotation_error_angle(R_tf, target.R_WS))),
             "contact_velocity_S": v_S.tolist(),
             "contact_velocity_error_m_s": max((abs(v_S[i] - w) for i, w in enumerate(want) if w is not None), default=0.0),
             "thrust_max_m_s2": float(thrust.max()), "thrust_min_m_s2": float(thrust.min()),

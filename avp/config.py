@@ -88,9 +88,10 @@ class VehicleLimits:
     its contact thrust, its rest at contact (``j + d a = 0``) and its flip rows on the same
     thrust (:func:`avp.qp.line.line_terminal_blocks`). The bound certificates prove the thrust
     range, thrust rate, tilt rate and body rate on that thrust and its rate ``j + d a``
-    (:func:`avp.bounds.certify_trajectory`), and the duration search samples it.
-    :class:`~avp.trajectory.Trajectory`'s attitude keeps the drag-free flatness map (11): along
-    the path the true attitude differs from ``traj.attitude`` by up to ``atan(d |v| / |a + g e3|)``.
+    (:func:`avp.bounds.certify_trajectory`), and the duration search, the failure message and
+    the CLI's summary measure it (``Trajectory.attitude``, ``thrust`` and ``body_rates`` take
+    ``rotor_drag=d``). Without that argument, and in the exports' samples, they keep the
+    drag-free map (11), whose attitude differs by up to ``atan(d |v| / |a + g e3|)``.
     """
 
     mass: float = 0.5
@@ -692,6 +693,14 @@ class PlannerConfig:
                            ("time_allocation", TimeAllocation), ("fov", FovConfig)):
             if not isinstance(getattr(self, name), kind):
                 raise ConfigError(f"config.{name}", f"must be an avp.{kind.__name__}, got {getattr(self, name)!r}")
+        if math.isfinite(self.limits.body_rate_max):
+            # the certificate's body-rate polynomial has degree 4 C - 10 for C coefficients per axis
+            # (one more with rotor drag, avp.bounds.drag_thrust_spline); the kernel takes degree 40
+            top = 10 if self.limits.rotor_drag else 11
+            if self.degree > top:
+                raise ConfigError("config.degree", f"{self.degree} is above {top}, the highest whose body-rate "
+                                  "certificate (limits.body_rate_max" + (" with limits.rotor_drag" if top == 10 else "")
+                                  + ") stays within the kernel's degree 40: lower the degree or set body_rate_max = inf")
         if self.alpha_range is not None:
             pair = v.sequence("config.alpha_range", self.alpha_range, "two thrusts (lo, hi), m/s^2")
             if len(pair) != 2:

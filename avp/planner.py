@@ -333,7 +333,12 @@ def plan_detailed(
     if cfg.bounds.certify and is_overhang(target, cfg):
         stages.append(_WITHOUT_WAYPOINT)
     if cfg.bounds.certify:
-        stages += list(cfg.bounds.relaxations)
+        # CONE_BAND changes nothing where the band is the cone already (CONE, or an overhang's
+        # PAPER band with OverhangFlip.cone_band): it would repeat the previous stage's solves
+        # and report a relaxation that did not happen
+        cone = cfg.pre_impact is PreImpactMode.CONE or (
+            cfg.pre_impact is PreImpactMode.PAPER and cfg.flip.cone_band and is_overhang(target, cfg))
+        stages += [r for r in cfg.bounds.relaxations if not (cone and r is Relaxation.CONE_BAND)]
     stage_cfg = cfg
     for stage in stages:
         if stage is _WITHOUT_WAYPOINT:
@@ -450,13 +455,15 @@ _WITHOUT_WAYPOINT = "without the overhang waypoint"
 
 def _measured(traj: Trajectory, target: PerchTarget, cfg: PlannerConfig) -> str:
     """The last plan's extremes on a 1 ms grid against the limits, for the failure message. The
-    tilt rate is ``|b3'| = |P j| / |f|`` (``P = I - b3 b3^T``, ``f = a + g e3``), which equals
-    the roll-pitch part ``|(w_x, w_y)|`` of the body rates (22) without the attitude."""
-    d = traj.derivatives(traj.sample(1e-3), (2, 3))
-    f = thrust_vector(d[0, :, :3], traj.g)
+    tilt rate is ``|b3'| = |P f'| / |f|`` (``P = I - b3 b3^T``, ``f = a + g e3 + d v``, ``f' =
+    j + d a``: the thrust the certificate bounds), which equals the roll-pitch part
+    ``|(w_x, w_y)|`` of the body rates (22) without the attitude."""
+    drag = cfg.limits.rotor_drag
+    d = traj.derivatives(traj.sample(1e-3), (1, 2, 3))
+    f = thrust_vector(d[1, :, :3] + drag * d[0, :, :3], traj.g)
     f_norm = np.linalg.norm(f, axis=1)
     b3 = f / f_norm[:, None]
-    j = d[1, :, :3]
+    j = d[2, :, :3] + drag * d[1, :, :3]
     tilt = float((np.linalg.norm(j - np.sum(j * b3, axis=1)[:, None] * b3, axis=1) / f_norm).max())
     lim = cfg.limits
     return (f"the last plan ({traj.duration:.2f} s, incline {np.degrees(target.incline):.0f} deg) measured "

@@ -10,7 +10,11 @@ acceleration, which the flatness map ties to the snap ``s = x''''`` (the paper's
 so a certified snap bound ``|s| < s_max`` together with the certified thrust floor
 ``|f| > f_min`` and tilt-rate bound ``|j| < w_max |f|`` (:mod:`avp.bounds`) gives
 ``|b3''| < s_max / f_min + 3 w_max^2``, and the tilt part of the angular acceleration satisfies
-``|Omega'_{1,2}| <= |b3''| + |Omega_3| |Omega_{1,2}|``. The certificate itself is on the snap:
+``|Omega'_{1,2}| <= |b3''| + |Omega_3| |Omega_{1,2}|``. (With rotor drag ``d`` the bounds of
+:mod:`avp.bounds` are on ``f = a + g e3 + d v`` and ``f' = j + d a``, and ``f''`` is
+``s + d j``: the same argument holds with ``|s| + d |j|`` for ``|s|``; this certificate stays on
+the snap and the drag-free ``|a + g e3|``, a trackability margin, not a limit of the vehicle.)
+The certificate itself is on the snap:
 
     F_i(u) = |s_i(T_i u)|^2 - s_max^2 < 0   for u in [0, 1], every segment i,
 

@@ -301,20 +301,32 @@ class Trajectory:
         )
 
     # -- flatness map ----------------------------------------------------------------------
-    def attitude(self, t: Any) -> Array:
-        """``R_WB(t)`` from (11), (13): shape ``(*shape(t), 3, 3)``."""
-        d = self.derivatives(t, (0, 2))
-        return frames.attitude(d[1, ..., :3], d[0, ..., 3], self.g)
+    # ``rotor_drag`` (1/s, VehicleLimits.rotor_drag): the thrust is ``a + g e3 + d v`` and its
+    # rate ``j + d a`` (0: the drag-free map (11)), as the planner's certificates take it.
+    def _thrust_terms(self, t: Any, rotor_drag: float, jerk: bool) -> tuple[Array, Array | None, Array]:
+        """``a + d v``, ``j + d a`` (if ``jerk``) and the yaw derivatives ``(psi, psi')``."""
+        drag = v.nonnegative_float("rotor_drag", rotor_drag)
+        d = self.derivatives(t, (0, 1, 2, 3) if jerk else (0, 1, 2))
+        acc = d[2, ..., :3] + drag * d[1, ..., :3] if drag else d[2, ..., :3]
+        j = (d[3, ..., :3] + drag * d[2, ..., :3] if drag else d[3, ..., :3]) if jerk else None
+        return acc, j, np.stack([d[0, ..., 3], d[1, ..., 3]])
 
-    def thrust(self, t: Any, mass: float | None = None) -> Array:
+    def attitude(self, t: Any, rotor_drag: float = 0.0) -> Array:
+        """``R_WB(t)`` from (11), (13): shape ``(*shape(t), 3, 3)``."""
+        acc, _, yaw = self._thrust_terms(t, rotor_drag, jerk=False)
+        return frames.attitude(acc, yaw[0], self.g)
+
+    def thrust(self, t: Any, mass: float | None = None, rotor_drag: float = 0.0) -> Array:
         """Thrust (10): mass-normalised (m/s^2), or in newtons when ``mass`` (kg) is given."""
-        f = frames.thrust_magnitude(self(t, 2), self.g)
+        acc, _, _ = self._thrust_terms(t, rotor_drag, jerk=False)
+        f = frames.thrust_magnitude(acc, self.g)
         return f if mass is None else v.positive_float("mass", mass) * f
 
-    def body_rates(self, t: Any) -> Array:
+    def body_rates(self, t: Any, rotor_drag: float = 0.0) -> Array:
         """Body angular velocity (rad/s, B frame), (22) and the yaw term of (13)."""
-        d = self.derivatives(t, (0, 1, 2, 3))
-        return frames.body_rates(d[2, ..., :3], d[3, ..., :3], d[0, ..., 3], d[1, ..., 3], self.g)
+        acc, j, yaw = self._thrust_terms(t, rotor_drag, jerk=True)
+        assert j is not None
+        return frames.body_rates(acc, j, yaw[0], yaw[1], self.g)
 
     def sample(self, dt: float) -> Array:
         """Times ``t0, t0 + dt, ...`` up to and including ``tf`` (at most :data:`MAX_SAMPLES`),

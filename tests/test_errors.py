@@ -379,6 +379,10 @@ _T = avp.PerchTarget.from_incline([3.5, 0.0, 1.5], math.pi / 2)
         (lambda: avp.Workspace(ground_z=-1e300), "workspace.ground_z"),
         (lambda: avp.Workspace(body_offset=1e300), "workspace.body_offset"),
         (lambda: avp.LineOptions(recovery_point=[0.0, 0.0, 1e300]), "options.recovery_point"),
+        # a body-rate certificate beyond the kernel's degree 40 (it raised mid-plan)
+        (lambda: avp.PlannerConfig(degree=12, limits=avp.VehicleLimits(body_rate_max=10.0)), "config.degree"),
+        (lambda: avp.PlannerConfig(degree=11, limits=avp.VehicleLimits(body_rate_max=10.0, rotor_drag=0.3)),
+         "config.degree"),
     ],
 )
 def test_unphysical_sizes_are_typed_errors(make, field) -> None:

@@ -136,3 +136,14 @@ def test_the_search_without_the_waypoint_keeps_the_cone_band():
     alpha = cfg.contact_alpha(target.incline)
     assert fs.min() >= alpha - 1e-9 and fs.max() <= (1 + cfg.q) * alpha + 1e-9
     assert tilt.max() <= cfg.cone_half_angle + 1e-9
+
+
+def test_the_cone_band_relaxation_is_not_tried_where_the_band_is_the_cone():
+    """On an overhang (PAPER band with ``cone_band``: the cone already) CONE_BAND would repeat the
+    previous stage's solves and report a relaxation that did not happen: it is skipped."""
+    target = avp.PerchTarget.from_incline([1.9354943560314564, 0.0, 2.5], math.radians(171.14870853529328))
+    cfg = avp.PlannerConfig(limits=avp.VehicleLimits(tilt_rate_max=5.1166322448628785))
+    res = avp.plan_detailed(avp.State.hover([0.0, 0.0, 2.0]), target, cfg)
+    assert any(line.startswith("relaxing") for line in res.log)  # the relaxations were reached
+    assert avp.Relaxation.CONE_BAND not in res.relaxations
+    assert not any("replaced by the tilt cone" in line for line in res.log)

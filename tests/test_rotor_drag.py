@@ -348,3 +348,25 @@ def test_a_solved_plan_keeps_the_limits_on_the_thrust_the_rotors_make():
         assert limits.accel_min * (1 - 1e-9) <= norm.min() and norm.max() <= limits.accel_max * (1 + 1e-9)
     else:  # not certified: then it is not SOLVED either
         assert res.status is not avp.PlanStatus.SOLVED
+
+
+def test_reports_of_a_plan_with_drag_use_the_thrust_the_certificate_bounds():
+    """The failure message and the trajectory's flatness read-offs with ``rotor_drag`` measure
+    ``a + g e3 + d v`` (before: the drag-free thrust, so a plan whose tilt rate was proven over
+    the limit was reported under it, and the CLI printed b3 16 deg off s3 on a SOLVED plan)."""
+    limits = avp.VehicleLimits(tilt_rate_max=3.5, rotor_drag=0.6)
+    cfg = avp.PlannerConfig(limits=limits, bounds=avp.BoundsPolicy(relaxations=()))
+    res = avp.plan_detailed(avp.State.hover([0.0, 0.0, 2.0]), avp.PerchTarget.from_incline([2.0, 0.0, 2.3], math.pi / 2), cfg)
+    assert res.status is avp.PlanStatus.BOUNDS_NOT_CERTIFIED
+    assert any(x.bound.value == "tilt_rate" for x in res.bounds.violations)
+    line = next(x for x in res.log if "tilt rate up to" in x)
+    assert float(line.split("tilt rate up to ")[1].split(" ")[0]) > limits.tilt_rate_max
+    ok = avp.plan_detailed(avp.State.hover([0.0, 0.0, 1.5]), avp.PerchTarget.from_incline([3.5, 0.0, 1.5], math.pi / 2),
+                           avp.PlannerConfig(limits=avp.VehicleLimits(rotor_drag=0.6)))
+    traj = ok.trajectory
+    b3 = traj.attitude(traj.tf, rotor_drag=0.6)[:, 2]
+    assert float(b3 @ avp.PerchTarget.from_incline([3.5, 0.0, 1.5], math.pi / 2).s3) > 1 - 1e-12
+    t = traj.sample(0.01)
+    D = traj.derivatives(t, (1, 2))
+    np.testing.assert_allclose(traj.thrust(t, rotor_drag=0.6),
+                               np.linalg.norm(D[1][:, :3] + 0.6 * D[0][:, :3] + [0.0, 0.0, traj.g], axis=1), rtol=1e-14)
