@@ -214,10 +214,10 @@ def planner_exact_path_rate(repeats: int) -> None:
     from bench_plan import scenarios
 
     import avp
-    import avp.planner as planner
+    import avp.bounds as bounds
 
     counts = {"calls": 0, "cells": 0, "exact": 0}
-    original = planner.certify_spline
+    original = bounds.certify_spline  # what the planner's certify_trajectory calls
 
     def counting(coeffs, knots, **kw):
         rep = original(coeffs, knots, **kw)
@@ -227,14 +227,14 @@ def planner_exact_path_rate(repeats: int) -> None:
         counts["exact"] += len(fast.unknown)
         return rep
 
-    planner.certify_spline = counting
+    bounds.certify_spline = counting
     try:
         for cfg in (avp.PlannerConfig(), avp.PlannerConfig(fov=avp.FovConfig(enabled=False))):
             for state, target in scenarios():
                 for _ in range(repeats):
                     avp.plan_detailed(state, target, cfg)
     finally:
-        planner.certify_spline = original
+        bounds.certify_spline = original
     print(f"\nPlanner's own polynomials (bench_plan scenarios, FoV on and off, {repeats} repeats): "
           f"{counts['calls']} certificates, {counts['cells']} checked cells, "
           f"{counts['exact']} need the exact path ({counts['exact'] / max(counts['cells'], 1):.2%})")

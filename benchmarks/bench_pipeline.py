@@ -44,6 +44,7 @@ from bench_plan import scenarios
 from numpy.polynomial import polynomial as P
 
 import avp
+import avp.bounds
 import avp.perception as perception
 import avp.planner as planner
 import avp.solve
@@ -100,7 +101,7 @@ def instrumented(timer: StageTimer) -> Iterator[None]:
         (perception, "_score", "FoV"),  # before: one plan at a time
         (qpsolvers, "solve_problem", "solve"),  # other back-ends (and DAQP before the direct call)
         (avp.solve, "_solve_two_sided", "solve"),  # DAQP called directly on two-sided rows
-        (planner, "certify_spline", "certify"),
+        (avp.bounds, "certify_spline", "certify"),  # through planner._certify -> certify_trajectory
         (planner, "certify_workspace", "workspace"),  # clearance/workspace certificates (avp.safety)
         (planner, "workspace_blocks", "workspace"),
         (planner, "refinement_blocks", "workspace"),
