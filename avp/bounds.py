@@ -27,7 +27,7 @@ if TYPE_CHECKING:
     from .trajectory import Trajectory
 
 __all__ = ["EXACT_BUDGET", "Bound", "BoundReport", "Certificate", "Violation", "certify_spline", "certify_trajectory",
-           "drag_thrust_spline"]
+           "check_body_rate_degree", "drag_thrust_spline"]
 
 EXACT_BUDGET = 0.01
 """Default time budget (s, wall clock) of the exact fallback per :func:`certify_spline` call.
@@ -273,6 +273,19 @@ def drag_thrust_spline(coeffs: npt.ArrayLike, drag: float) -> np.ndarray:
     return out
 
 
+def check_body_rate_degree(degree: int, limits: VehicleLimits) -> None:
+    """Raise :class:`ConfigError` on ``config.degree`` when a body-rate limit cannot be certified
+    at ``degree``: the kernel's body-rate polynomial has degree ``4 C - 10`` for ``C``
+    coefficients per axis (one more with rotor drag, :func:`drag_thrust_spline`), at most 40."""
+    if not math.isfinite(limits.body_rate_max):
+        return
+    top = 10 if limits.rotor_drag else 11
+    if degree > top:
+        raise ConfigError("config.degree", f"{degree} is above {top}, the highest whose body-rate certificate "
+                          "(limits.body_rate_max" + (" with limits.rotor_drag" if top == 10 else "")
+                          + ") stays within the kernel's degree 40: lower the degree or set body_rate_max = inf")
+
+
 def certify_trajectory(traj: Trajectory, limits: VehicleLimits, g: float, *, exact: bool = True) -> BoundReport:
     """:func:`certify_spline` of a plan against a vehicle's limits, mass-normalised (thrust and
     its rate per unit mass, eqs. (15), (21)-(22) and the body rate), on the plan's exact segment
@@ -280,6 +293,7 @@ def certify_trajectory(traj: Trajectory, limits: VehicleLimits, g: float, *, exa
     clock value does not round them); violation times are on the plan's clock. With
     ``limits.rotor_drag`` the limits are certified on the thrust ``a + g e3 + d v`` that the
     rotors make (:func:`drag_thrust_spline`), not on the drag-free ``a + g e3``."""
+    check_body_rate_degree(traj.degree, limits)
     drag = limits.rotor_drag
     report = certify_spline(
         drag_thrust_spline(traj.coefficients, drag) if drag else traj.coefficients, traj.knots_rel,

@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 
 from . import _validate as v
+from .bounds import check_body_rate_degree
 from .camera import Camera
 from .errors import ConfigError
 from .frames import GRAVITY
@@ -693,14 +694,8 @@ class PlannerConfig:
                            ("time_allocation", TimeAllocation), ("fov", FovConfig)):
             if not isinstance(getattr(self, name), kind):
                 raise ConfigError(f"config.{name}", f"must be an avp.{kind.__name__}, got {getattr(self, name)!r}")
-        if math.isfinite(self.limits.body_rate_max):
-            # the certificate's body-rate polynomial has degree 4 C - 10 for C coefficients per axis
-            # (one more with rotor drag, avp.bounds.drag_thrust_spline); the kernel takes degree 40
-            top = 10 if self.limits.rotor_drag else 11
-            if self.degree > top:
-                raise ConfigError("config.degree", f"{self.degree} is above {top}, the highest whose body-rate "
-                                  "certificate (limits.body_rate_max" + (" with limits.rotor_drag" if top == 10 else "")
-                                  + ") stays within the kernel's degree 40: lower the degree or set body_rate_max = inf")
+        if self.bounds.certify:  # the moving and line planners, which always certify, check it there
+            check_body_rate_degree(self.degree, self.limits)
         if self.alpha_range is not None:
             pair = v.sequence("config.alpha_range", self.alpha_range, "two thrusts (lo, hi), m/s^2")
             if len(pair) != 2:

@@ -197,8 +197,12 @@ def test_evaluation_is_the_time_zero_spline_within_the_clock_resolution(clock, d
     t = clock + tau  # rounded to the clock: within ulp(clock + tau) / 2 of the wanted time
     got, want = shifted.evaluate(t), at0.evaluate(tau)
     speed = np.abs(at0.evaluate(tau, 1)) + 1.0
-    tol = 2 * math.ulp(abs(clock) + at0.duration) * speed + 1e-12 * (np.abs(want) + 1.0)
-    assert np.all(np.abs(got - want) <= tol)
+    resolution = math.ulp(abs(clock) + at0.duration)
+    tol = 2 * resolution * speed + 1e-12 * (np.abs(want) + 1.0)
+    # the random segments do not join: within the clock's resolution of an interior knot the
+    # rounded time may fall in the neighbouring segment
+    away = np.all(np.abs(tau[:, None] - rel[None, 1:-1]) > 4 * resolution, axis=1) if rel.size > 2 else np.ones(tau.size, bool)
+    assert np.all((np.abs(got - want) <= tol)[away])
 
 
 @pytest.mark.parametrize("fmt", ["json", "npz"])

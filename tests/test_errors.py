@@ -474,3 +474,16 @@ def test_broken_export_files_are_typed_errors(tmp_path) -> None:
         with pytest.raises(avp.ConfigError) as exc:
             avp.Trajectory.from_npz(path)
         assert field_of(exc) == "path"
+
+
+def test_a_degree_beyond_the_body_rate_kernel_plans_when_nothing_is_certified() -> None:
+    """The degree refusal (a body-rate certificate past the kernel's degree 40) is about the
+    certificate: without one the static planner still plans; the moving planner, which always
+    certifies, says so at its certificate."""
+    cfg = avp.PlannerConfig(degree=12, limits=avp.VehicleLimits(body_rate_max=10.0),
+                            bounds=avp.BoundsPolicy(certify=False))
+    assert avp.plan_detailed(_S, _T, cfg).trajectory is not None
+    pad = avp.MovingTarget.on_platform([0.0, 0.0, 1.0], incline=0.5, speed=2.0)
+    with pytest.raises(avp.ConfigError) as exc:
+        avp.moving.plan_moving_detailed(avp.State(position=[-3.0, 0.0, 1.0], velocity=[2.0, 0.0, 0.0]), pad, cfg)
+    assert field_of(exc) == "config.degree"
