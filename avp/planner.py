@@ -333,12 +333,15 @@ def plan_detailed(
     if cfg.bounds.certify and is_overhang(target, cfg):
         stages.append(_WITHOUT_WAYPOINT)
     if cfg.bounds.certify:
-        # CONE_BAND changes nothing where the band is the cone already (CONE, or an overhang's
-        # PAPER band with OverhangFlip.cone_band): it would repeat the previous stage's solves
-        # and report a relaxation that did not happen
+        # The band relaxations that relax nothing are not run: CONE_BAND where the band is the
+        # cone already (CONE, or an overhang's PAPER band with OverhangFlip.cone_band), where it
+        # would repeat the previous stage's solves, or where there is no band (OFF), where it
+        # would add one; NO_BAND without a band. Each would report a relaxation that did not happen.
+        off = cfg.pre_impact is PreImpactMode.OFF
         cone = cfg.pre_impact is PreImpactMode.CONE or (
             cfg.pre_impact is PreImpactMode.PAPER and cfg.flip.cone_band and is_overhang(target, cfg))
-        stages += [r for r in cfg.bounds.relaxations if not (cone and r is Relaxation.CONE_BAND)]
+        moot = {Relaxation.CONE_BAND} if cone else {Relaxation.CONE_BAND, Relaxation.NO_BAND} if off else set()
+        stages += [r for r in cfg.bounds.relaxations if r not in moot]
     stage_cfg = cfg
     for stage in stages:
         if stage is _WITHOUT_WAYPOINT:

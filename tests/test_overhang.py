@@ -147,3 +147,13 @@ def test_the_cone_band_relaxation_is_not_tried_where_the_band_is_the_cone():
     assert any(line.startswith("relaxing") for line in res.log)  # the relaxations were reached
     assert avp.Relaxation.CONE_BAND not in res.relaxations
     assert not any("replaced by the tilt cone" in line for line in res.log)
+
+
+def test_band_relaxations_are_not_tried_without_a_band():
+    """With ``pre_impact=OFF`` CONE_BAND would add a band (a tighter problem labelled relaxed)
+    and NO_BAND would change nothing: neither runs, nor is reported."""
+    target = avp.PerchTarget.from_incline([1.9354943560314564, 0.0, 2.5], math.radians(171.14870853529328))
+    cfg = avp.PlannerConfig(limits=avp.VehicleLimits(tilt_rate_max=5.1166322448628785), pre_impact=avp.PreImpactMode.OFF)
+    res = avp.plan_detailed(avp.State.hover([0.0, 0.0, 2.0]), target, cfg)
+    assert any(line.startswith("relaxing") for line in res.log)  # the relaxations were reached
+    assert not {avp.Relaxation.CONE_BAND, avp.Relaxation.NO_BAND} & set(res.relaxations)
