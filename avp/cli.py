@@ -372,7 +372,7 @@ def demo(args: argparse.Namespace) -> int:
                     result.status.value)
     exported = None
     if args.export and traj is not None:
-        exported = _export(traj, Path(args.export), args.export_rate)
+        exported = _export(traj, Path(args.export), args.export_rate, config.limits.rotor_drag)
         log.info("  export          : %s", exported)
     plot = None
     if not args.no_plot and traj is not None:
@@ -401,14 +401,14 @@ def _workspace_certified(result: Any) -> bool | None:
     return None if safety is None else bool(getattr(safety, "certified", False))
 
 
-def _export(traj: Any, path: Path, rate: float | None) -> Path:
+def _export(traj: Any, path: Path, rate: float | None, rotor_drag: float = 0.0) -> Path:
     suffix = path.suffix.lower()
     if suffix == ".json":
-        traj.to_json(path, rate=rate, indent=1)
+        traj.to_json(path, rate=rate, indent=1, rotor_drag=rotor_drag)
     elif suffix == ".csv":
-        traj.to_csv(path, rate=rate)
+        traj.to_csv(path, rate=rate, rotor_drag=rotor_drag)
     elif suffix == ".npz":
-        traj.to_npz(path, rate=rate)
+        traj.to_npz(path, rate=rate, rotor_drag=rotor_drag)
     else:
         raise ConfigError("--export", f"unknown format {suffix!r}: use a .json, .csv or .npz file name")
     return path

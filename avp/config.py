@@ -91,7 +91,7 @@ class VehicleLimits:
     range, thrust rate, tilt rate and body rate on that thrust and its rate ``j + d a``
     (:func:`avp.bounds.certify_trajectory`), and the duration search, the failure message and
     the CLI's summary measure it (``Trajectory.attitude``, ``thrust`` and ``body_rates`` take
-    ``rotor_drag=d``). Without that argument, and in the exports' samples, they keep the
+    ``rotor_drag=d``, as do the sampled exports). Without that argument they keep the
     drag-free map (11), whose attitude differs by up to ``atan(d |v| / |a + g e3|)``.
     """
 

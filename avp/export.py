@@ -73,22 +73,26 @@ def _times(traj: Trajectory, rate: float) -> Array:
         raise ConfigError("rate", f"{rate:g} Hz: {exc.message}") from exc
 
 
-def sample_table(traj: Trajectory, rate: float) -> Array:
-    """``(n, len(SAMPLE_COLUMNS))`` samples at ``rate`` Hz from ``t0`` to ``tf`` (both included)."""
+def sample_table(traj: Trajectory, rate: float, rotor_drag: float = 0.0) -> Array:
+    """``(n, len(SAMPLE_COLUMNS))`` samples at ``rate`` Hz from ``t0`` to ``tf`` (both included);
+    thrust, attitude and body rates with the vehicle's ``rotor_drag`` (1/s,
+    ``VehicleLimits.rotor_drag``: the thrust ``a + g e3 + d v`` the planner certifies; 0: the
+    drag-free map (11))."""
     from scipy.spatial.transform import Rotation  # type: ignore[import-untyped]
 
     t = _times(traj, rate)
     d = traj.derivatives(t)  # (5, n, 4)
-    q_xyzw = Rotation.from_matrix(traj.attitude(t)).as_quat()
+    q_xyzw = Rotation.from_matrix(traj.attitude(t, rotor_drag=rotor_drag)).as_quat()
     return np.column_stack([
         t, d[0], d[1], d[2], d[3, :, :3], d[4, :, :3],
-        traj.thrust(t), q_xyzw[:, 3], q_xyzw[:, :3], traj.body_rates(t),
+        traj.thrust(t, rotor_drag=rotor_drag), q_xyzw[:, 3], q_xyzw[:, :3], traj.body_rates(t, rotor_drag=rotor_drag),
     ])
 
 
-def trajectory_to_dict(traj: Trajectory, rate: float | None = None) -> dict[str, Any]:
+def trajectory_to_dict(traj: Trajectory, rate: float | None = None, rotor_drag: float = 0.0) -> dict[str, Any]:
     """JSON-ready dict: format tag, ``g``, knots, coefficients, the provenance if the trajectory
-    has one, and with ``rate`` (Hz) a ``samples`` table ``{column: [values]}``."""
+    has one, and with ``rate`` (Hz) a ``samples`` table ``{column: [values]}`` and the
+    ``rotor_drag`` its thrust, attitude and body rates were computed with."""
     out: dict[str, Any] = {
         "format": FORMAT,
         "version": VERSION,
@@ -104,8 +108,9 @@ def trajectory_to_dict(traj: Trajectory, rate: float | None = None) -> dict[str,
 
         out["provenance"] = to_mapping(prov)
     if rate is not None:
-        table = sample_table(traj, rate)
+        table = sample_table(traj, rate, rotor_drag)
         out["samples"] = {name: table[:, k].tolist() for k, name in enumerate(SAMPLE_COLUMNS)}
+        out["samples_rotor_drag"] = float(rotor_drag)
     return out
 
 
@@ -148,8 +153,8 @@ def _restore_provenance(traj: Trajectory, data: Any) -> None:
 
 
 def write_json(traj: Trajectory, path: str | Path | None = None, rate: float | None = None,
-               indent: int | None = None) -> str:
-    text = json.dumps(trajectory_to_dict(traj, rate), indent=indent, allow_nan=False)
+               indent: int | None = None, rotor_drag: float = 0.0) -> str:
+    text = json.dumps(trajectory_to_dict(traj, rate, rotor_drag), indent=indent, allow_nan=False)
     if path is not None:
         Path(path).write_text(text + "\n")
     return text
@@ -173,7 +178,7 @@ def read_json(source: str | Path) -> Trajectory:
     return trajectory_from_dict(data)
 
 
-def write_npz(traj: Trajectory, path: str | Path, rate: float | None = None) -> Path:
+def write_npz(traj: Trajectory, path: str | Path, rate: float | None = None, rotor_drag: float = 0.0) -> Path:
     """``coefficients``, ``knots``, ``t0``, ``knots_rel``, ``g`` and, with ``rate``, ``samples`` plus ``columns``."""
     arrays: dict[str, Any] = {"format": np.array(FORMAT), "version": np.array(VERSION),
                               "coefficients": traj.coefficients, "knots": traj.knots, "t0": np.array(traj.t0),
@@ -184,8 +189,9 @@ def write_npz(traj: Trajectory, path: str | Path, rate: float | None = None) -> 
 
         arrays["provenance"] = np.array(json.dumps(to_mapping(prov)))
     if rate is not None:
-        arrays["samples"] = sample_table(traj, rate)
+        arrays["samples"] = sample_table(traj, rate, rotor_drag)
         arrays["columns"] = np.array(SAMPLE_COLUMNS)
+        arrays["samples_rotor_drag"] = np.array(float(rotor_drag))
     p = Path(path)
     with p.open("wb") as fh:  # a file object: numpy does not append ".npz" to the name
         np.savez(fh, **arrays)
@@ -214,7 +220,7 @@ def read_npz(path: str | Path) -> Trajectory:
 COEFFICIENT_HEADER = ("segment", "output", "t_start", "t_end", "g")
 
 
-def write_csv(traj: Trajectory, path: str | Path, rate: float | None = None) -> Path:
+def write_csv(traj: Trajectory, path: str | Path, rate: float | None = None, rotor_drag: float = 0.0) -> Path:
     """With ``rate`` (Hz): one row per sample, columns :data:`SAMPLE_COLUMNS`. Without: one row per
     segment and flat output (``x, y, z, yaw``) with ``t_start, t_end, g, c0 ... cN`` (ascending
     powers of ``t - t_start``), which :func:`read_csv` turns back into the trajectory."""
@@ -223,7 +229,7 @@ def write_csv(traj: Trajectory, path: str | Path, rate: float | None = None) -> 
         w = csv.writer(fh)
         if rate is not None:
             w.writerow(SAMPLE_COLUMNS)
-            for row in sample_table(traj, rate):
+            for row in sample_table(traj, rate, rotor_drag):
                 w.writerow([repr(float(x)) for x in row])
             return p
         w.writerow([*COEFFICIENT_HEADER, *(f"c{k}" for k in range(traj.degree + 1))])

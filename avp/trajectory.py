@@ -344,25 +344,27 @@ class Trajectory:
         return np.minimum(dt * np.arange(int(steps) + 1), self.duration)
 
     # -- exports (avp.export) ---------------------------------------------------------------
-    def to_json(self, path: Any = None, *, rate: float | None = None, indent: int | None = None) -> str:
-        """JSON text with the exact coefficients (and samples at ``rate`` Hz if given); also
-        written to ``path`` if given. :meth:`from_json` reads it back."""
+    def to_json(self, path: Any = None, *, rate: float | None = None, indent: int | None = None,
+                rotor_drag: float = 0.0) -> str:
+        """JSON text with the exact coefficients (and samples at ``rate`` Hz if given, their
+        thrust, attitude and body rates with ``rotor_drag``, :func:`avp.export.sample_table`);
+        also written to ``path`` if given. :meth:`from_json` reads it back."""
         from . import export
 
-        return export.write_json(self, path, rate=rate, indent=indent)
+        return export.write_json(self, path, rate=rate, indent=indent, rotor_drag=rotor_drag)
 
-    def to_npz(self, path: Any, *, rate: float | None = None) -> Any:
+    def to_npz(self, path: Any, *, rate: float | None = None, rotor_drag: float = 0.0) -> Any:
         """NumPy ``.npz`` with the exact coefficients (and samples at ``rate`` Hz if given)."""
         from . import export
 
-        return export.write_npz(self, path, rate=rate)
+        return export.write_npz(self, path, rate=rate, rotor_drag=rotor_drag)
 
-    def to_csv(self, path: Any, *, rate: float | None = None) -> Any:
+    def to_csv(self, path: Any, *, rate: float | None = None, rotor_drag: float = 0.0) -> Any:
         """CSV of samples at ``rate`` Hz (:data:`avp.export.SAMPLE_COLUMNS`), or without a rate
         one row of exact coefficients per segment and flat output (:meth:`from_csv` reads it)."""
         from . import export
 
-        return export.write_csv(self, path, rate=rate)
+        return export.write_csv(self, path, rate=rate, rotor_drag=rotor_drag)
 
     @classmethod
     def from_json(cls, source: Any) -> Trajectory:

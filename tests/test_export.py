@@ -130,3 +130,27 @@ def test_rotorpy_example_without_rotorpy_exits_cleanly(tmp_path: Path) -> None:
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, cwd=tmp_path)
     assert proc.returncode == 0, proc.stderr
     assert 'pip install "avp[rotorpy]"' in proc.stdout
+
+
+def test_sampled_exports_carry_the_drag_thrust_when_asked() -> None:
+    """With ``rotor_drag`` the exported thrust, attitude and body rates are those of the thrust
+    ``a + g e3 + d v`` the planner certifies: at contact ``b3`` is the pad normal (the drag-free
+    samples put it 16 deg off on this wall); without it nothing changes."""
+    target = avp.PerchTarget.from_incline([3.5, 0.0, 1.5], math.pi / 2)
+    res = avp.plan_detailed(avp.State.hover([0.0, 0.0, 1.5]), target,
+                            avp.PlannerConfig(limits=avp.VehicleLimits(rotor_drag=0.6)))
+    traj = res.trajectory
+    data = json.loads(traj.to_json(rate=100.0, rotor_drag=0.6))
+    assert data["samples_rotor_drag"] == 0.6
+    cols = {k: np.asarray(v) for k, v in data["samples"].items()}
+    t = cols["t"]
+    D = traj.derivatives(t, (1, 2))
+    f = D[1][:, :3] + 0.6 * D[0][:, :3] + [0.0, 0.0, traj.g]
+    np.testing.assert_allclose(cols["thrust"], np.linalg.norm(f, axis=1), rtol=1e-13)
+    q = np.column_stack([cols["qx"], cols["qy"], cols["qz"], cols["qw"]])
+    from scipy.spatial.transform import Rotation
+
+    b3 = Rotation.from_quat(q[-1]).as_matrix()[:, 2]
+    assert float(b3 @ target.s3) > 1 - 1e-12
+    plain = export.sample_table(traj, 100.0)
+    np.testing.assert_array_equal(plain[:, export.SAMPLE_COLUMNS.index("thrust")], traj.thrust(t))
