@@ -52,7 +52,7 @@ from .moving_clearance import ClearanceReport, certify_moving_clearance
 from .planner import STILL_SPEED, PlanStatus, planning_error
 from .platform import MovingTarget
 from .qp.moving import MovingQpBuilder, TerminalYaw, contact_point, objective
-from .replan import ReplanConfig, Replanner, ReplanStep, _target_change
+from .replan import ReplanConfig, Replanner, ReplanStep, _step_time, _target_change
 from .safety import RESIDUAL_TOL, SafetyReport, certify_workspace, refinement_blocks
 from .solve import solve_perching_qp
 from .trajectory import Trajectory
@@ -554,8 +554,7 @@ class MovingReplanner(Replanner):
         self._replan_config = self.config
 
     def step(self, t: float, odometry: State, target_estimate: PerchTarget | None = None) -> ReplanStep:
-        t = v.finite_float("t", t)
-        v.within("t", t, "time")
+        t = _step_time(t)
         if target_estimate is not None:
             if not isinstance(target_estimate, MovingTarget):
                 raise ConfigError("target_estimate", f"expected avp.platform.MovingTarget, got {type(target_estimate).__name__}")

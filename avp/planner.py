@@ -461,12 +461,11 @@ def _measured(traj: Trajectory, target: PerchTarget, cfg: PlannerConfig) -> str:
     tilt rate is ``|b3'| = |P f'| / |f|`` (``P = I - b3 b3^T``, ``f = a + g e3 + d v``, ``f' =
     j + d a``: the thrust the certificate bounds), which equals the roll-pitch part
     ``|(w_x, w_y)|`` of the body rates (22) without the attitude."""
-    drag = cfg.limits.rotor_drag
-    d = traj.derivatives(traj.sample(1e-3), (1, 2, 3))
-    f = thrust_vector(d[1, :, :3] + drag * d[0, :, :3], traj.g)
+    acc, j, _ = traj._thrust_terms(traj.sample(1e-3), cfg.limits.rotor_drag, jerk=True)
+    assert j is not None
+    f = thrust_vector(acc, traj.g)
     f_norm = np.linalg.norm(f, axis=1)
     b3 = f / f_norm[:, None]
-    j = d[2, :, :3] + drag * d[1, :, :3]
     tilt = float((np.linalg.norm(j - np.sum(j * b3, axis=1)[:, None] * b3, axis=1) / f_norm).max())
     lim = cfg.limits
     return (f"the last plan ({traj.duration:.2f} s, incline {np.degrees(target.incline):.0f} deg) measured "

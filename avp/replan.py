@@ -236,6 +236,14 @@ def _blend(a: PerchTarget, b: PerchTarget, f: float) -> PerchTarget:
 _TIME_LIMIT = LIMITS["time"][0]
 
 
+def _step_time(t: Any) -> float:
+    """A step's ``t`` as a float: finite and within the time limit (``ConfigError`` on ``t``)."""
+    t = v.finite_float("t", t)
+    if abs(t) > _TIME_LIMIT:
+        v.within("t", t, "time")  # raises, with the message
+    return t
+
+
 def _target_change(a: PerchTarget, b: PerchTarget) -> tuple[float, float]:
     """Distance (m) between the pad centres and angle (rad) between the normals. A turn of the
     pad about its normal is not a change: the committed contact yaw stays (on a level pad built
@@ -337,9 +345,7 @@ class Replanner:
         Raises only for bad input (:class:`~avp.errors.ConfigError`); planning failures of any
         kind are reported in the returned :class:`ReplanStep`.
         """
-        t = v.finite_float("t", t)
-        if abs(t) > _TIME_LIMIT:
-            v.within("t", t, "time")  # raises, with the message
+        t = _step_time(t)
         if self._last_t is not None and t < self._last_t:
             raise ConfigError("t", f"went back from {self._last_t:.6g} s to {t:.6g} s: steps must come in time "
                               "order on one clock (after a clock reset, build a new Replanner)")

@@ -307,8 +307,10 @@ class Trajectory:
         """``a + d v``, ``j + d a`` (if ``jerk``) and the yaw derivatives ``(psi, psi')``."""
         drag = v.nonnegative_float("rotor_drag", rotor_drag)
         d = self.derivatives(t, (0, 1, 2, 3) if jerk else (0, 1, 2))
-        acc = d[2, ..., :3] + drag * d[1, ..., :3] if drag else d[2, ..., :3]
-        j = (d[3, ..., :3] + drag * d[2, ..., :3] if drag else d[3, ..., :3]) if jerk else None
+        acc = frames.drag_acceleration(d[2, ..., :3], d[1, ..., :3], drag) if drag else d[2, ..., :3]
+        j = None
+        if jerk:  # (j + d a) is the derivative of (a + d v)
+            j = frames.drag_acceleration(d[3, ..., :3], d[2, ..., :3], drag) if drag else d[3, ..., :3]
         return acc, j, np.stack([d[0, ..., 3], d[1, ..., 3]])
 
     def attitude(self, t: Any, rotor_drag: float = 0.0) -> Array:
