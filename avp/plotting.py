@@ -11,6 +11,8 @@ core never imports this module, and this module imports matplotlib only when a f
   verdict and the sampled margin in the legend; roll, pitch and yaw; the height above the ground and
   the distance to the pad plane; knots as dotted lines, the pre-impact window ``[t_f - t_k, t_f]``
   (14) shaded, the visibility band along the time axis;
+- with a rotor drag (``VehicleLimits.rotor_drag``), the thrust ``a + g e3 + d v``, and the attitude,
+  body rates and camera view it sets, as the certificates have them;
 - a failed or relaxed plan stamped as such in the title and across the 3D view.
 """
 
@@ -22,7 +24,6 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from . import frames
 from .errors import ConfigError
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -150,17 +151,15 @@ def figure_plan(
     tt = t - traj.t0
     d = traj.derivatives(t, (0, 1, 2, 3))
     p = d[0, :, :3]
-    R = traj.attitude(t)
-    if cfg.limits.rotor_drag:  # the camera's attitude is the drag-aware thrust's (VehicleLimits.rotor_drag)
-        R_cam = frames.attitude(frames.drag_acceleration(d[2, :, :3], d[1, :, :3], cfg.limits.rotor_drag),
-                                d[0, :, 3], traj.g)
-    else:
-        R_cam = R
-    thrust = traj.thrust(t)
-    w = traj.body_rates(t)
+    # the thrust is the drag-aware a + g e3 + d v (VehicleLimits.rotor_drag), as certified: the
+    # attitude, the camera's view, the thrust and the body rates drawn are the vehicle's
+    drag = cfg.limits.rotor_drag
+    R = traj.attitude(t, rotor_drag=drag)
+    thrust = traj.thrust(t, rotor_drag=drag)
+    w = traj.body_rates(t, rotor_drag=drag)
     tilt_rate = np.hypot(w[:, 0], w[:, 1])
     body_rate = np.linalg.norm(w, axis=1)
-    visible = cfg.fov.camera.sees(p, R_cam, target.point)
+    visible = cfg.fov.camera.sees(p, R, target.point)
     lim = cfg.limits
 
     fig = plt.figure(figsize=(15, 9), layout="constrained")
@@ -188,9 +187,9 @@ def figure_plan(
     ax.quiver(*c, *s3, length=0.12 * span, color="tab:purple", lw=1.5)
     # thrust arrows along b3, length proportional to the thrust (m per m/s^2)
     ta = np.linspace(traj.t0, traj.tf, 16)
-    Ra = traj.attitude(ta)
+    Ra = traj.attitude(ta, rotor_drag=drag)
     pa = traj(ta)
-    fa = traj.thrust(ta)
+    fa = traj.thrust(ta, rotor_drag=drag)
     scale = 0.12 * span / max(float(fa.max()), 1e-9)
     ax.quiver(pa[:, 0], pa[:, 1], pa[:, 2], *(Ra[:, :, 2] * (scale * fa)[:, None]).T,
               color="tab:red", lw=1.2, arrow_length_ratio=0.25)
@@ -328,6 +327,7 @@ def animate_run(run: Any, path: str | Path, *, fps: int = 20, speed: float = 0.5
     ends = np.array([target.point - h * target.s1, target.point + h * target.s1])
     ax.plot(ends[:, 0], ends[:, 2], "-", color="tab:purple", lw=5, label="pad")
     plan = run.final_plan
+    drag = sc.vehicle.limits.rotor_drag  # the planner's (one vehicle description, avp.sim.run)
     if plan is not None:
         pp = plan(plan.sample(0.01))
         ax.plot(pp[:, 0], pp[:, 2], ":", color="0.5", lw=1, label="last committed plan")
@@ -353,7 +353,7 @@ def animate_run(run: Any, path: str | Path, *, fps: int = 20, speed: float = 0.5
         body.set_color("tab:green" if run.visible[i] else "k")
         # the run records positions only: draw the committed plan's b3 where it covers this time
         if plan is not None and plan.t0 <= run.path_t[i] <= plan.tf:
-            b3 = plan.attitude(run.path_t[i])[:, 2]
+            b3 = plan.attitude(run.path_t[i], rotor_drag=drag)[:, 2]
             axis.set_data([p[i, 0], p[i, 0] + 0.08 * span * b3[0]], [p[i, 2], p[i, 2] + 0.08 * span * b3[2]])
         else:
             axis.set_data([], [])

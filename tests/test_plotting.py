@@ -172,3 +172,29 @@ def test_plot_in_view_uses_the_drag_aware_camera():
     assert abs(with_drag - without) > 0.05  # the case tells them apart
     assert abs(share(cfg) - 100 * with_drag) <= 1.0
     assert abs(share(avp.PlannerConfig()) - 100 * without) <= 1.0
+
+
+def test_plot_draws_the_drag_aware_thrust_and_attitude():
+    """With VehicleLimits.rotor_drag the thrust, tilt-rate and attitude histories are those of
+    ``a + g e3 + d v`` (what the certificates bound), not of the drag-free ``a + g e3``: at the
+    wall's contact the drawn pitch is the pad's -90 deg."""
+    d = 0.6
+    cfg = avp.PlannerConfig()
+    cfg = dataclasses.replace(cfg, limits=dataclasses.replace(cfg.limits, rotor_drag=d))
+    target = avp.PerchTarget.from_incline([3.5, 0.0, 1.5], math.pi / 2)
+    result = avp.plan_detailed(avp.State.hover([0.0, 0.0, 1.5]), target, cfg)
+    traj = result.trajectory
+    assert traj is not None
+    fig = figure_plan(result, target, config=cfg)
+    try:
+        thrust_line = fig.axes[1].lines[0]
+        pitch_line = fig.axes[3].lines[1]
+        tt = np.asarray(thrust_line.get_xdata())
+        der = traj.derivatives(traj.t0 + tt, (1, 2))
+        drag_aware = np.linalg.norm(der[1, :, :3] + d * der[0, :, :3] + [0.0, 0.0, traj.g], axis=1)
+        drag_free = np.linalg.norm(der[1, :, :3] + [0.0, 0.0, traj.g], axis=1)
+        assert np.max(np.abs(drag_aware - drag_free)) > 0.5  # the case tells them apart
+        assert np.allclose(thrust_line.get_ydata(), drag_aware, rtol=1e-9, atol=1e-9)
+        assert float(np.asarray(pitch_line.get_ydata())[-1]) == pytest.approx(-90.0, abs=1e-6)
+    finally:
+        pyplot().close(fig)
