@@ -5,7 +5,8 @@ Two forms:
 - **coefficients** (exact): the knots and the ``(S, 4, N + 1)`` ascending-power coefficients of
   x, y, z, yaw per segment (local time ``t - t_i``), and ``g``. JSON and NPZ also store ``t0``
   and ``knots_rel`` (:attr:`~avp.trajectory.Trajectory.knots_rel`), which they read back in
-  place of the absolute knots: the segment durations stay exact at any clock value (CSV's
+  place of the absolute knots (which must agree with them to the clock's rounding: a document
+  edited in one place only is refused): the segment durations stay exact at any clock value (CSV's
   ``t_start``, ``t_end`` are absolute, so at a clock value ``c`` they round a duration by up
   to ``ulp(c)``, 2.4e-7 s at UNIX time). JSON and NPZ also keep the
   trajectory's provenance (status, relaxations, certificates) when the planner recorded one. JSON writes floats with Python's
@@ -137,7 +138,17 @@ def _from_knots(coefficients: Any, knots: Any, t0: Any, knots_rel: Any, g: Any) 
     gravity = v.finite_float("g", g)
     if t0 is None or knots_rel is None:
         return Trajectory(coefficients, knots, g=gravity)
-    return Trajectory.from_relative_knots(coefficients, knots_rel, t0=t0, g=gravity)
+    traj = Trajectory.from_relative_knots(coefficients, knots_rel, t0=t0, g=gravity)
+    # the absolute knots must be the same spline's (a document edited in one place only would
+    # otherwise load on knots it does not show): equal to t0 + knots_rel up to the clock's rounding
+    given = v.frozen_array("knots", knots, traj.knots.shape)
+    gap = float(np.max(np.abs(given - traj.knots)))
+    resolution = 4.0 * math.ulp(max(abs(traj.t0), abs(traj.tf), 1.0))
+    if not gap <= resolution:
+        raise ConfigError("knots", f"differ from t0 + knots_rel by up to {gap:.3g} s (the clock resolves "
+                                   f"{resolution:.1g} s): an edited document must change both, or drop "
+                                   "t0 and knots_rel to load on the knots alone")
+    return traj
 
 
 def _restore_provenance(traj: Trajectory, data: Any) -> None:

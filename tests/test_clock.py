@@ -353,3 +353,27 @@ def test_a_knot_rounded_to_the_clock_is_that_knot():
     for i in range(1, shifted.n_segments):
         _, inner = avp.replan._knots_after(shifted, float(shifted.knots[i]))
         np.testing.assert_array_equal(inner, shifted.knots_rel[i + 1:-1])
+
+
+@pytest.mark.parametrize("fmt", ["json", "npz"])
+def test_a_document_whose_knots_disagree_with_its_relative_knots_is_refused(tmp_path, fmt):
+    """JSON and NPZ read ``t0 + knots_rel``; a document whose absolute ``knots`` were edited
+    alone (another spline than the one loaded) is a typed error on ``knots``, while the knots
+    as written, rounded to the clock at UNIX time, load."""
+    traj = avp.plan(avp.State.hover([0.0, 0.0, 1.5], time=1.7e9), WALL)
+    doc = json.loads(traj.to_json())
+    assert avp.export.trajectory_from_dict(doc).knots_rel.tolist() == traj.knots_rel.tolist()
+    edited = list(doc["knots"])
+    edited[1] += 0.05
+    for bad in (edited, doc["knots"][:-1]):
+        if fmt == "json":
+            with pytest.raises(avp.ConfigError) as exc:
+                avp.export.trajectory_from_dict({**doc, "knots": bad})
+        else:
+            path = tmp_path / "edited.npz"
+            np.savez(path, format=np.array(avp.export.FORMAT), version=np.array(avp.export.VERSION),
+                     coefficients=traj.coefficients, knots=np.array(bad), t0=np.array(traj.t0),
+                     knots_rel=traj.knots_rel, g=np.array(traj.g))
+            with pytest.raises(avp.ConfigError) as exc:
+                avp.Trajectory.from_npz(path)
+        assert exc.value.field == "knots"
