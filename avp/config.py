@@ -881,13 +881,15 @@ class ReplanConfig:
         Distance (m) between the committed contact point and the latest estimate above which a
         step without a full correction reports ``CANNOT_REACH``. 0.05 m: half the in-plane
         success radius. For a moving pad, the distance to the pad the estimate predicts at the
-        committed contact time; not for a line (:mod:`avp.line_replan`).
+        committed contact time; for a line, from the committed grasp point to the estimated
+        line (:mod:`avp.line_replan`).
     reach_angle_tolerance:
         Angle (rad) between the committed pad's normal and the latest estimate's above which a
         step without a full correction reports ``CANNOT_REACH`` as for ``reach_tolerance``:
         the plan would touch the surface that far from square. 10 deg: the simulator's perch
         criterion (``b3`` within 10 deg of ``s3``); its estimates turn by at most 6.3 deg
-        (wall and slope at 4.5 and 7.5 m, seeds 0-2).
+        (wall and slope at 4.5 and 7.5 m, seeds 0-2). For a line, the angle between the
+        committed grasped piece and the estimate's piece at the grasp point.
     snap_max, snap_thrust_max:
         Trackability limits certified on every committed replan (:mod:`avp.trackability`;
         ``inf`` skips one): ``|s| < snap_max`` (m/s^4) and ``|s| < snap_thrust_max |a + g e3|``

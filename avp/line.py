@@ -208,14 +208,21 @@ class LineTarget:
 
     def distance(self, point: Any) -> float:
         """Distance (m) from ``point`` to the polyline (closest piece, end points included)."""
+        return self.closest(point)[1]
+
+    def closest(self, point: Any) -> tuple[int, float]:
+        """The piece closest to ``point`` (the first of equals) and its distance (m), end points
+        included."""
         p = np.asarray(point, dtype=float)
-        best = math.inf
+        best, index = math.inf, 0
         for k in range(self.n_pieces):
             A, B = self.piece(k)
             ab = B - A
             lam = min(1.0, max(0.0, float((p - A) @ ab / (ab @ ab))))
-            best = min(best, float(np.linalg.norm(p - A - lam * ab)))
-        return best
+            dist = float(np.linalg.norm(p - A - lam * ab))
+            if dist < best:
+                best, index = dist, k
+        return index, best
 
     def contact(self, start: Any, yaw_near: float = 0.0) -> LineContact:
         """The resolved contact geometry for a vehicle starting at ``start``."""

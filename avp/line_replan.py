@@ -8,8 +8,14 @@ keeps the committed contact time (``duration = t_f - t_ex``, no duration search)
 line estimate changes. A plan is committed only when every certificate of
 :func:`~avp.line_planner.plan_line` holds (clearance, height, corridor, flip, actuator bounds,
 recovery) and the trackability certificate of :mod:`avp.trackability` holds too. Corrections are
-full ones: the partial corrections and ``CANNOT_REACH`` of the pad policy blend two pad frames and
-do not apply to a line. The recovery of the last committed plan is :attr:`LineReplanner.recovery`.
+full ones: the partial corrections of the pad policy blend two pad frames and do not apply to a
+line. A step that keeps a plan whose grasp point (the contact CoM less ``gripper_offset`` along
+its thrust axis) is farther than ``ReplanConfig.reach_tolerance`` from the estimated line, or
+whose grasped piece turned from the estimate's piece there by more than
+``reach_angle_tolerance``, says ``CANNOT_REACH`` (``ReplanStep.target_error``,
+``target_angle``): the gripper would close beside the line. A line moved along itself keeps a
+plan that still grasps it. The recovery of the last committed plan is
+:attr:`LineReplanner.recovery`.
 """
 
 from __future__ import annotations
@@ -101,6 +107,24 @@ class LineReplanner(Replanner):
 
     def _change(self, a: Any, b: Any) -> tuple[float, float]:
         return line_change(a, b)
+
+    def _reach_error(self, shift: float, turn: float) -> tuple[float, float]:
+        """The committed grasp point's distance (m) to the estimated line, and the angle (rad,
+        unsigned) between the committed grasped piece and the estimate's piece closest to that
+        point (module docstring)."""
+        traj, committed, estimate = self.trajectory, self.committed_target, self.target
+        assert traj is not None and isinstance(committed, LineTarget) and isinstance(estimate, LineTarget)
+        b3 = traj.attitude(traj.tf, rotor_drag=self.config.limits.rotor_drag)[:, 2]
+        grasp = traj(traj.tf) - committed.gripper_offset * b3
+        k, distance = estimate.closest(grasp)
+        d_committed = np.diff(committed.vertices[committed.grasp_piece:committed.grasp_piece + 2], axis=0)[0]
+        d_estimate = np.diff(estimate.vertices[k:k + 2], axis=0)[0]
+        c = abs(float(d_committed @ d_estimate)) / (float(np.linalg.norm(d_committed)) * float(np.linalg.norm(d_estimate)))
+        return distance, math.acos(min(1.0, c))
+
+    @property
+    def _reach_cue(self) -> bool:
+        return True
 
     @property
     def _can_hold(self) -> bool:

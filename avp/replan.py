@@ -138,7 +138,9 @@ class ReplanStep:
 
     ``target_error`` (m) is the distance from the committed plan's contact point to the latest
     estimate after the step (for a moving pad, to the pad the estimate predicts at the contact
-    time); ``target_angle`` (rad) the angle between the committed pad's normal and the estimate's;
+    time; for a line, from the committed plan's grasp point to the estimated line);
+    ``target_angle`` (rad) the angle between the committed pad's normal and the estimate's (for
+    a line, the largest angle between matching pieces of the two estimates);
     ``reach_budget`` (m) how far the contact point could move in the time left (``inf``
     where no budget applies: a moving pad, a line); ``fraction`` the share of the requested correction committed (0 when nothing
     was); ``anchored`` whether the plan started from the committed reference (True) or from
@@ -423,8 +425,8 @@ class Replanner:
         budget = 0.5 * rc.reach_acceleration * max(remaining, 0.0) ** 2
 
         def record(action: ReplanAction, reason: str, **kw: object) -> ReplanStep:
-            err, ang = ((shift, turn) if self.committed_target is committed_target
-                        else self._change(self.committed_target, self.target))
+            err, ang = self._reach_error(*((shift, turn) if self.committed_target is committed_target
+                                           else self._change(self.committed_target, self.target)))
             if action in (ReplanAction.KEPT_PREVIOUS, ReplanAction.FROZEN_NEAR_CONTACT, ReplanAction.PARTIAL) \
                     and (err > rc.reach_tolerance or ang > rc.reach_angle_tolerance) and self._reach_cue:
                 limit = (f"budget {budget:.3f} m in {max(remaining, 0.0):.2f} s" if self._static_pad
@@ -697,12 +699,18 @@ class Replanner:
         A function of its two arguments only: a step computes it once for an unchanged pair."""
         return _target_change(a, b)
 
+    def _reach_error(self, shift: float, turn: float) -> tuple[float, float]:
+        """``target_error`` (m) and ``target_angle`` (rad) of a step, from :meth:`_change` of the
+        committed target and the estimate (``shift``, ``turn``): for a pad they are those; a
+        target model whose contact is not its estimate's centre (a line) overrides it."""
+        return shift, turn
+
     @property
     def _reach_cue(self) -> bool:
         """Whether a step that leaves the committed contact point farther than
         ``reach_tolerance`` from the estimate, or its normal turned by more than
-        ``reach_angle_tolerance`` (:meth:`_change`), says ``CANNOT_REACH`` (a static or moving
-        pad; not a line, :mod:`avp.line_replan`)."""
+        ``reach_angle_tolerance`` (:meth:`_reach_error`), says ``CANNOT_REACH`` (a static pad;
+        a moving pad and a line set it too)."""
         return self._static_pad
 
     @property

@@ -86,7 +86,11 @@ def test_line_replanner_never_raises_and_commits_only_certified_plans() -> None:
         else:
             assert rp.trajectory is before
     actions = {s.action for s in rp.history}
-    assert ReplanAction.REPLANNED in actions and ReplanAction.KEPT_PREVIOUS in actions
+    assert ReplanAction.REPLANNED in actions
+    # the line 2 m up and the one through the vehicle: nothing certified, the plan kept, the
+    # committed grasp point metres from the estimate (CANNOT_REACH)
+    assert [s.action for s in rp.history[-2:]] == [ReplanAction.CANNOT_REACH] * 2
+    assert min(s.target_error for s in rp.history[-2:]) > 1.0
     assert "ConfigError" in rp.history[-1].reason  # the line through the vehicle, reported
 
 
@@ -139,3 +143,53 @@ def test_cli_demo_and_simulate_on_a_line(capsys) -> None:
     assert rows[1]["success"] and rows[1]["gripper_error_m"] < 0.03
 
     assert main(["demo", "--line-pitch-deg", "200", "--no-plot"]) == EXIT_USAGE
+
+
+def _line_distance(line: avp.LineTarget, p: np.ndarray) -> float:
+    """Distance from ``p`` to the polyline, written here from the geometry (not LineTarget's)."""
+    best = math.inf
+    for A, B in zip(line.vertices[:-1], line.vertices[1:], strict=True):
+        lam = float(np.clip((p - A) @ (B - A) / ((B - A) @ (B - A)), 0.0, 1.0))
+        best = min(best, float(np.linalg.norm(p - (A + lam * (B - A)))))
+    return best
+
+
+def test_line_replanner_says_cannot_reach_when_the_gripper_would_miss_the_line() -> None:
+    """Late in the flight an estimate 0.3 m beside the committed line cannot be reached: the step
+    keeps the plan and says CANNOT_REACH, with target_error the committed grasp point's distance
+    to the estimated line. The same line moved 0.3 m along itself is still grasped by the
+    committed plan: whatever the step does, it is no CANNOT_REACH."""
+    cfg = PlannerConfig(limits=LIM)
+    rc = ReplanConfig()
+
+    def first_plan() -> tuple[LineReplanner, avp.LinePlanResult]:
+        rp = LineReplanner(LINE80, cfg, rc)
+        rp.step(0.0, avp.State.hover(START), LINE80)
+        assert rp.last_result is not None
+        return rp, rp.last_result
+
+    rp, _ = first_plan()
+    t_late = rp.trajectory.tf - max(rc.freeze_horizon, cfg.t_k) - 0.1
+    d = LINE80.vertices[1] - LINE80.vertices[0]
+    d = d / np.linalg.norm(d)
+    across = np.cross(d, [0.0, 0.0, 1.0])
+    for offset, missed in ((0.3 * across, True), (0.3 * d, False)):
+        rp, first = first_plan()
+        t = t_late
+        committed = rp.trajectory
+        ref = committed.flat_output(t)
+        odo = avp.State(position=ref.position, velocity=ref.velocity, acceleration=ref.acceleration,
+                        yaw=float(ref.yaw), time=t)
+        estimate = _shifted(LINE80, offset)
+        step = rp.step(t, odo, estimate)
+        if not step.committed:
+            grasp = committed(committed.tf) - LINE80.gripper_offset * first.contact.n
+            assert step.target_error == pytest.approx(_line_distance(estimate, grasp), abs=1e-6)
+            assert step.target_angle == pytest.approx(0.0, abs=1e-9)  # a translated line
+        if missed:
+            assert step.action is ReplanAction.CANNOT_REACH and rp.cannot_reach, step.reason
+            assert step.target_error == pytest.approx(0.3, abs=0.01)
+            assert "from the estimate" in step.reason
+        else:
+            assert step.action is not ReplanAction.CANNOT_REACH, step.reason
+            assert step.target_error < 0.01
