@@ -235,9 +235,17 @@ def certify_workspace(traj: Trajectory, target: PerchTarget, workspace: Workspac
 def _sample_times(knots_rel: Array, per_segment: int) -> Array:
     """``per_segment`` interior-and-end samples per segment, without the start (fixed by the
     initial state) and without ``t_f`` (fixed by the contact equalities)."""
-    u = np.arange(1, per_segment + 1) / per_segment
-    t = (knots_rel[:-1, None] + np.diff(knots_rel)[:, None] * u[None, :]).ravel()
+    start = knots_rel[:-1]
+    t = (start[:, None] + (knots_rel[1:] - start)[:, None] * _grid_fractions(per_segment)[None, :]).ravel()
     return np.asarray(t[t < knots_rel[-1] - 1e-12], dtype=np.float64)
+
+
+@lru_cache(maxsize=32)
+def _grid_fractions(per_segment: int) -> Array:
+    """``u = 1/per_segment, ..., 1`` of :func:`_sample_times`, read-only."""
+    u = np.arange(1, per_segment + 1) / per_segment
+    u.setflags(write=False)
+    return u
 
 
 @lru_cache(maxsize=32)
@@ -269,8 +277,33 @@ def _position_rows(layout: DecisionLayout, knots_rel: Array, times: Array, per_s
     return vector_rows(layout, knots_rel, 0, times)
 
 
+_PLANE_BLOCKS: dict[tuple[object, ...], tuple[Array, ConstraintBlock]] = {}
+"""Plane blocks on read-only position rows that own their data (the cached grid rows,
+:func:`_grid_position_rows`), by the rows' identity and the plane's exact bits; each entry keeps
+its rows alive, so an id is not reused while it is here. The grid rows do not depend on the
+durations: a plane that stays put (the ground) has the same block at every replan."""
+
+
 def _plane_block(name: str, P: Array, normal: Array, offset: Array | float) -> ConstraintBlock:
-    """``normal . p(t_j) >= offset`` with ``P`` the position rows at the ``t_j``."""
+    """``normal . p(t_j) >= offset`` with ``P`` the position rows at the ``t_j``; shared
+    (read-only) for the cached grid rows and a constant offset (:data:`_PLANE_BLOCKS`)."""
+    if not (isinstance(offset, float) and not P.flags.writeable and P.base is None):
+        return _new_plane_block(name, P, normal, offset)
+    key = (name, id(P), normal.tobytes(), offset)
+    hit = _PLANE_BLOCKS.get(key)
+    if hit is not None and hit[0] is P:
+        return hit[1]
+    block = _new_plane_block(name, P, normal, offset)
+    for arr in (block.matrix, block.lower, block.upper):
+        arr.setflags(write=False)
+    if len(_PLANE_BLOCKS) >= 64:
+        _PLANE_BLOCKS.clear()
+    _PLANE_BLOCKS[key] = (P, block)
+    return block
+
+
+def _new_plane_block(name: str, P: Array, normal: Array, offset: Array | float) -> ConstraintBlock:
+    """:func:`_plane_block`, built."""
     # one product and sum per axis (a position row has one axis's columns: the same values as
     # the contraction over the axes, without einsum's dispatch)
     G = normal[0] * P[:, 0, :] + normal[1] * P[:, 1, :] + normal[2] * P[:, 2, :]
@@ -295,13 +328,14 @@ def workspace_blocks(
         return ()
     blocks = []
     P = _position_rows(layout, knots_rel, times, ws.samples_per_segment)
-    p0, p_c = state.position, contact_position(target, ws)
-    frac = times / knots_rel[-1]
-    line = p0[None, :] + frac[:, None] * (p_c - p0)[None, :]
+    line: Array | None = None  # the straight line from the start to the contact point at the samples
     for r in regions_for(target, ws):
         if r.kind == "half-space":
             blocks.append(_plane_block(f"workspace: {r.name}", P, r.normal, r.offset))
         elif r.kind == "sphere":
+            if line is None:
+                p0, p_c = state.position, contact_position(target, ws)
+                line = p0[None, :] + (times / knots_rel[-1])[:, None] * (p_c - p0)[None, :]
             blocks.append(_sphere_block(f"workspace: {r.name}", P, r, line, 0.0))
     return tuple(blocks)
 
