@@ -64,11 +64,12 @@ def linearise_on(
     start = max(qp.t0, reference.t0)
     t_ref = (qp.t0 + times * (reference.tf - start) / tf).clip(reference.t0, reference.tf)
     drag = cfg.limits.rotor_drag
+    tau = reference._relative(t_ref)  # within the reference (clipped): Trajectory.derivatives' times, unchecked
     if drag:  # the attitude of the thrust a + g e3 + d v (VehicleLimits.rotor_drag)
-        d = reference.derivatives(t_ref, (0, 1, 2))
+        d = reference._derivatives_rel(tau, [0, 1, 2])
         a0 = drag_acceleration(d[2, :, :3], d[1, :, :3], drag)
     else:
-        d = reference.derivatives(t_ref, (0, 2))
+        d = reference._derivatives_rel(tau, [0, 2])
         a0 = d[1, :, :3]
     return fov_blocks(qp.layout, knots, times, d[0, :, :3], d[0, :, 3], a0,
                       target.point, cfg.fov, cfg.g, rotor_drag=drag)

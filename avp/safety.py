@@ -208,7 +208,7 @@ class SafetyReport:
 def _touch_order(traj: Trajectory, normal: Array) -> int:
     """Multiplicity of the root at ``t_f`` to divide out: 1 when the contact velocity goes into
     the plane, 2 when it is tangential (the acceleration must then point out of the plane)."""
-    v_n = float(normal @ traj(traj.tf, 1))
+    v_n = float(normal @ traj._derivatives_rel(np.array([traj.duration]), [1])[0, 0, :3])  # traj(traj.tf, 1)
     return 1 if v_n < -TOUCH_TOL else 2
 
 

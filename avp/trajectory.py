@@ -256,10 +256,15 @@ class Trajectory:
                 raise ConfigError("t", "contains NaN or inf")
             if lo < t0 - tol or hi > tf + tol:
                 raise ConfigError("t", f"times must lie in [{t0}, {tf}] s, got [{lo}, {hi}]")
-        flat = arr.reshape(-1) - t0  # a new contiguous array
-        if t0 != 0.0:  # tf (rounded to the clock) is the end of the spline
-            flat[arr.reshape(-1) >= tf] = self.duration
-        return flat.clip(0.0, self.duration), arr.shape
+        return self._relative(arr), arr.shape
+
+    def _relative(self, arr: Array) -> Array:
+        """Float times ``arr`` (checked: finite, within the spline up to its tolerance) relative
+        to :attr:`t0`, flat, clipped to ``[0, duration]`` (``tf`` itself at the end)."""
+        flat = arr.reshape(-1) - self._t0  # a new contiguous array
+        if self._t0 != 0.0:  # tf (rounded to the clock) is the end of the spline
+            flat[arr.reshape(-1) >= self._tf] = self.duration
+        return flat.clip(0.0, self.duration)
 
     def derivatives(self, t: Any, orders: Any = (0, 1, 2, 3, 4)) -> Array:
         """All four flat outputs for each order: shape ``(len(orders), *shape(t), 4)``."""
