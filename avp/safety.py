@@ -289,7 +289,7 @@ def _plane_block(name: str, P: Array, normal: Array, offset: Array | float) -> C
     (read-only) for the cached grid rows and a constant offset (:data:`_PLANE_BLOCKS`)."""
     if not (isinstance(offset, float) and not P.flags.writeable and P.base is None):
         return _new_plane_block(name, P, normal, offset)
-    key = (name, id(P), normal.tobytes(), offset)
+    key = (name, id(P), normal.tobytes(), offset.hex())  # exact bits (-0.0 is not 0.0)
     hit = _PLANE_BLOCKS.get(key)
     if hit is not None and hit[0] is P:
         return hit[1]
