@@ -10,6 +10,7 @@ from __future__ import annotations
 import dataclasses
 import itertools
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from enum import Enum
 from functools import cached_property, lru_cache
@@ -63,6 +64,23 @@ MAX_SEGMENTS = 32
 
 ALPHA_NOMINAL = 4.0
 """Nominal mass-normalised contact thrust (m/s^2) on steep pads, as in the paper's experiments."""
+
+
+def _solver_options(value: Any) -> tuple[tuple[str, Any], ...]:
+    """``PlannerConfig.solver_options`` as ``((name, value), ...)``, from a mapping or from
+    pairs, names being Python identifiers (the back-end's keyword arguments)."""
+    hint = "must be the back-end's keyword arguments: a dict {name: value} or pairs ((name, value), ...)"
+    if isinstance(value, Mapping):
+        pairs: Any = tuple(value.items())
+    elif isinstance(value, (list, tuple)):
+        pairs = tuple(value)
+    else:
+        raise ConfigError("config.solver_options", f"{hint}, got {value!r}")
+    for pair in pairs:
+        if not (isinstance(pair, (list, tuple)) and len(pair) == 2 and isinstance(pair[0], str)
+                and pair[0].isidentifier()):
+            raise ConfigError("config.solver_options", f"{hint}, got {pair!r} in {value!r}")
+    return tuple((str(k), val) for k, val in pairs)
 
 
 @dataclass(frozen=True)
@@ -580,7 +598,11 @@ class PlannerConfig:
     position_cost_order, yaw_cost_order:
         ``j`` of the cost (4): 4 (snap) for position, 2 or 3 for yaw.
     continuity_order:
-        Highest derivative continuous at interior knots (4 = snap).
+        Highest derivative continuous at interior knots (4 = snap); at least 3 (jerk). The
+        certificates bound the thrust, tilt and body rates within each segment; below 3 the
+        attitude (an acceleration jump) or the body rates (a jerk jump) jump at a knot, which no
+        vehicle flies (with 0, a wall plan jumped 8.4 m/s and 161 deg at a knot and was
+        reported certified).
     alpha:
         Mass-normalised thrust at contact (m/s^2) in (12): ``a(t_f) = alpha s3 - g e3``.
         ``None`` (default): ``alpha_nominal`` on steep pads, raised to ``g cos(incline)`` on
@@ -657,7 +679,9 @@ class PlannerConfig:
         for name, lo, hi, hint in (
             ("n_segments", 1, MAX_SEGMENTS, ""),
             ("degree", 3, 20, "(the initial state fixes position to jerk)"),
-            ("position_cost_order", 1, None, ""), ("yaw_cost_order", 1, None, ""), ("continuity_order", 0, None, ""),
+            ("position_cost_order", 1, None, ""), ("yaw_cost_order", 1, None, ""), ("continuity_order", 3, None,
+             "(position to jerk continuous at the knots: the attitude (11) and body rates (22) the "
+             "certificates bound within each segment do not jump between them)"),
             ("cone_facets", 3, 64, ""),
         ):
             v.integer(f"config.{name}", getattr(self, name), lo, hi, hint)
@@ -690,10 +714,17 @@ class PlannerConfig:
             raise ConfigError("config.qp_form", f"must be a QpForm, got {self.qp_form!r}")
         if not isinstance(self.solver, str):
             raise ConfigError("config.solver", f"must be a qpsolvers solver name, got {self.solver!r}")
+        object.__setattr__(self, "solver_options", _solver_options(self.solver_options))
         for name, kind in (("contact_velocity", ContactVelocity), ("limits", VehicleLimits),
                            ("time_allocation", TimeAllocation), ("fov", FovConfig)):
             if not isinstance(getattr(self, name), kind):
                 raise ConfigError(f"config.{name}", f"must be an avp.{kind.__name__}, got {getattr(self, name)!r}")
+        if not self.limits.accel_max > self.g:  # the hover the planner starts from and the band need it
+            raise ConfigError(
+                "limits.thrust_max",
+                f"thrust_max / mass = {self.limits.accel_max:.3g} m/s^2 is not above g = {self.g:g} m/s^2: this "
+                "vehicle cannot hover or climb; check limits.thrust_max (N) and limits.mass (kg)",
+            )
         if self.bounds.certify:  # the moving and line planners, which always certify, check it there
             check_body_rate_degree(self.degree, self.limits)
         if self.alpha_range is not None:

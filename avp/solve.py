@@ -24,7 +24,7 @@ import scipy.sparse
 
 from ._typing import Array
 from .config import PlannerConfig, QpForm
-from .errors import SolverError
+from .errors import AvpError, ConfigError, SolverError
 from .qp.assemble import PerchingQp, ReducedQp
 
 __all__ = [
@@ -219,6 +219,17 @@ def _solve_two_sided(H: Array, g: Array, G: Array, lower: Array, upper: Array,
     return solution
 
 
+def _backend_error(config: PlannerConfig, exc: Exception) -> AvpError:
+    """The typed error of a back-end call that raised: a keyword the back-end does not take is
+    the user's ``config.solver_options`` (a ``ConfigError`` naming it), anything else a
+    ``SolverError``."""
+    if isinstance(exc, TypeError) and config.solver_options and "argument" in str(exc):
+        names = ", ".join(k for k, _ in config.solver_options)
+        return ConfigError("config.solver_options", f"back-end '{config.solver}' refused the settings ({names}): {exc}; "
+                                                    "check its documentation for their names and types")
+    return SolverError(f"QP back-end '{config.solver}' failed: {exc}")
+
+
 def _one_sided(G: Array, lower: Array, upper: Array) -> tuple[Array | None, Array | None]:
     up = np.isfinite(upper)
     lo = np.isfinite(lower)
@@ -285,7 +296,7 @@ def solve_perching_qp(qp: PerchingQp, config: PlannerConfig, initvals: Array | N
         try:
             solution: qpsolvers.Solution = _solve_two_sided(two.H, two.g, two.G, two.lower, two.upper, _options(config))
         except Exception as exc:  # back-end errors must not leak (one hierarchy)
-            raise SolverError(f"QP back-end '{config.solver}' failed: {exc}") from exc
+            raise _backend_error(config, exc) from exc
         solve_time = time.perf_counter() - t_solve
         return _outcome(qp, config, two, solution, G_full, lo_full, hi_full, build_time, solve_time)
     red: ReducedQp | None = None
@@ -312,7 +323,7 @@ def solve_perching_qp(qp: PerchingQp, config: PlannerConfig, initvals: Array | N
     try:
         solution = qpsolvers.solve_problem(problem, solver=config.solver, initvals=init, **_options(config))
     except Exception as exc:  # qpsolvers/back-end errors must not leak (one hierarchy)
-        raise SolverError(f"QP back-end '{config.solver}' failed: {exc}") from exc
+        raise _backend_error(config, exc) from exc
     solve_time = time.perf_counter() - t_solve
     return _outcome(qp, config, red, solution, G_full, lo_full, hi_full, build_time, solve_time)
 

@@ -346,6 +346,12 @@ _T = avp.PerchTarget.from_incline([3.5, 0.0, 1.5], math.pi / 2)
         (lambda: avp.LineOptions(recovery_distance=1e300), "options.recovery_distance"),
         (lambda: avp.PlannerConfig(degree=2, position_cost_order=1, yaw_cost_order=1, continuity_order=1),
          "config.degree"),  # was IndexError when planning
+        (lambda: avp.PlannerConfig(continuity_order=0), "config.continuity_order"),  # jumps at knots, "certified"
+        (lambda: avp.PlannerConfig(limits=avp.VehicleLimits(thrust_max=3.0)), "limits.thrust_max"),  # cannot hover
+        (lambda: avp.PlannerConfig(solver_options=3), "config.solver_options"),  # was SolverError when planning
+        (lambda: avp.PlannerConfig(solver_options=(("eps",),)), "config.solver_options"),
+        (lambda: avp.plan(_S, _T, avp.PlannerConfig(solver_options={"no_such_setting": 1})),
+         "config.solver_options"),  # was SolverError "unexpected keyword argument"
         # wrong types and sizes that raised raw TypeError / AttributeError / KernelError / OSError
         (lambda: avp.metrics.visibility(avp.plan(_S, _T), avp.LineTarget.segment([0, 0, 1], [1, 0, 1])), "target"),
         (lambda: avp.metrics.visibility(avp.plan(_S, _T), _T, camera="x"), "camera"),

@@ -321,3 +321,41 @@ def test_plan_result_repr_is_one_readable_line() -> None:
     assert relaxed.relaxations and relaxed.duration_scale_steps > 0
     assert "\n" not in text and len(text) < 400 and text.count("FREE_SLIDE") == 1
     assert f"attempts={relaxed.duration_scale_steps + 1}" in text
+
+
+@pytest.mark.parametrize("order", [0, 1, 2])
+def test_a_continuity_below_jerk_is_refused(order: int) -> None:
+    """Below jerk, the attitude or the body rates jump at a knot while the certificates, which
+    bound them within each segment, hold: continuity_order 0 gave a wall plan a velocity jump of
+    8.4 m/s and an attitude jump of 161 deg, reported SOLVED with certified bounds."""
+    with pytest.raises(avp.ConfigError) as exc:
+        avp.PlannerConfig(continuity_order=order)
+    assert exc.value.field == "config.continuity_order"
+
+
+def test_the_lowest_continuity_keeps_attitude_and_body_rates_continuous() -> None:
+    """With the smallest continuity allowed (jerk) the plan is continuous to jerk at every knot
+    (left limits from the coefficients, numpy's polynomials) and so are its attitude and body
+    rates, (11) and (22)."""
+    config = avp.PlannerConfig(continuity_order=3)
+    target = avp.PerchTarget.from_incline([3.5, 0.0, 1.5], math.pi / 2)
+    result = avp.plan_detailed(avp.State.hover([0.0, 0.0, 1.5]), target, config)
+    assert result.status is avp.PlanStatus.SOLVED and result.bounds.certified
+    traj = result.trajectory
+    check_continuity(traj, max_order=3)
+    for k in traj.knots[1:-1]:
+        eps = 1e-7
+        R = traj.attitude(np.array([k - eps, k + eps]))
+        w = traj.body_rates(np.array([k - eps, k + eps]))
+        assert np.degrees(np.arccos(np.clip((np.trace(R[0].T @ R[1]) - 1) / 2, -1, 1))) < 1e-3
+        assert np.linalg.norm(w[1] - w[0]) < 1e-3
+
+
+@pytest.mark.parametrize("thrust_max", [3.0, 0.5 * avp.PlannerConfig().g])
+def test_a_vehicle_that_cannot_hover_is_refused(thrust_max: float) -> None:
+    """Thrust at most the weight (0.5 kg): no hover, no climb; it was planned, searched and
+    reported as uncertified bounds instead of refused."""
+    with pytest.raises(avp.ConfigError) as exc:
+        avp.PlannerConfig(limits=avp.VehicleLimits(thrust_max=thrust_max))
+    assert exc.value.field == "limits.thrust_max"
+    assert avp.PlannerConfig(limits=avp.VehicleLimits(thrust_max=0.5 * avp.PlannerConfig().g * 1.01)).limits.thrust_max > 0
