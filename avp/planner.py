@@ -237,7 +237,9 @@ def plan_detailed(
         :class:`PlannerConfig` (paper defaults when ``None``).
     durations:
         Segment durations (s) overriding the allocation rule. The time search still scales them
-        when a bound fails; pass ``BoundsPolicy(factors=(), relaxations=())`` to keep them.
+        when a bound fails; pass ``BoundsPolicy(factors=(), max_steps=0, relaxations=())`` to keep
+        them (``max_steps=0`` for :attr:`TimeSearch.PAPER <avp.TimeSearch.PAPER>`, which grows
+        them by ``growth`` otherwise).
     previous:
         The committed plan when replanning. It marks the call as a replan: the FoV stage then
         takes one SQP step on the new plan's FoV-free solution and keeps it without a visibility

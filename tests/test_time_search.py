@@ -106,3 +106,16 @@ def test_scaling_search_certifies_what_the_fixed_list_does_in_fewer_solves(incli
     assert scaling.status is fixed.status and scaling.ok
     assert scaling.bounds is not None and scaling.bounds.certified
     assert scaling.duration_scale_steps <= fixed.duration_scale_steps
+
+
+@pytest.mark.parametrize("search", list(avp.TimeSearch))
+def test_the_documented_policy_keeps_given_durations(search) -> None:
+    """``plan_detailed``'s docstring: ``BoundsPolicy(factors=(), max_steps=0, relaxations=())``
+    keeps the given durations with every time search (PAPER grew them by ``growth`` with
+    ``max_steps`` left at its default) even where a bound fails at them."""
+    state = avp.State.hover([0.0, 0.0, 1.5])
+    target = avp.PerchTarget.from_incline([3.5, 0.0, 1.5], math.pi / 2)
+    cfg = avp.PlannerConfig(bounds=avp.BoundsPolicy(time_search=search, factors=(), max_steps=0, relaxations=()))
+    result = avp.plan_detailed(state, target, cfg, durations=[0.4] * 3)
+    assert result.trajectory is not None and not result.bounds.certified
+    np.testing.assert_allclose(result.trajectory.durations, [0.4] * 3, rtol=0, atol=1e-12)
