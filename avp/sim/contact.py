@@ -10,10 +10,17 @@ Reported at contact: the point in S coordinates, the angle between ``b3`` and ``
 the paper requires ``b3 = s3``, (12)), the normal speed ``-v . s3`` (positive into the pad) and
 the tangential velocity ``(v . s1, v . s2)``.
 
-Success (our choice; the paper gives no numbers): the point is inside the pad, the attitude error
-is at most 15 deg, the normal speed is in ``[0.05, 1.0] m/s`` (the plan asks for 0.3 m/s: enough to
-engage Velcro, slow enough not to bounce) and the tangential speed is at most 3 m/s (the plan
-slides 2 m/s down the slope).
+Two judgements, our choice (the paper gives no numbers):
+
+- :class:`SuccessCriteria` judges a touch, when there is one (:attr:`Contact.success`): the
+  point is inside the pad, the attitude error is at most 15 deg, the normal speed is in
+  ``[0.05, 1.0] m/s`` (the plan asks for 0.3 m/s: enough to engage Velcro, slow enough not to
+  bounce) and the tangential speed is at most 3 m/s (the plan slides 2 m/s down the slope).
+- :class:`PerchCriteria` judges the pose at the plan's contact time (:func:`judge_perch`); it is
+  the simulator's outcome (``SimResult.outcome``, the success rates of ``docs/simulation.md``).
+  Its plane tolerance (3 cm) is on either side: a vehicle that stops up to 3 cm short of the
+  plane counts as perched without touching it (``SimResult.contact`` is then ``None``), as a
+  gripper or landing gear reaching 3 cm beyond the centre of mass would touch.
 """
 
 from __future__ import annotations
