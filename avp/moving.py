@@ -53,7 +53,7 @@ from .planner import STILL_SPEED, PlanStatus, planning_error
 from .platform import MovingTarget
 from .qp.moving import MovingQpBuilder, TerminalYaw, contact_point, objective
 from .replan import ReplanConfig, Replanner, ReplanStep, _step_time, _target_change
-from .safety import RESIDUAL_TOL, SafetyReport, certify_workspace, refinement_blocks
+from .safety import RESIDUAL_TOL, TOUCH_TOL, SafetyReport, certify_workspace, refinement_blocks
 from .solve import solve_perching_qp
 from .trajectory import Trajectory
 from .types import PerchTarget, State
@@ -339,6 +339,12 @@ def plan_moving_detailed(
     if gap < cfg.min_distance and float(np.linalg.norm(state.velocity - pad_now.velocity)) < STILL_SPEED:
         raise ConfigError("target.point", f"is {gap:.3f} m from a start at rest relative to the pad (config.min_distance "
                           f"= {cfg.min_distance} m); a perch needs a pad away from the vehicle")
+    if cfg.workspace.perch_clearance:  # the clearance h(t) > 0 (avp.moving_clearance) at its first instant
+        h0 = float(pad_now.s3 @ (state.position - contact_point(pad_now, cfg.workspace.body_offset)))
+        if h0 <= TOUCH_TOL:
+            raise ConfigError("state.position", f"lies on or behind the moving pad's plane at the start (margin {h0:.4g} m "
+                              f"to the pad predicted at t = {state.time:.6g} s): no plan keeps its clearance; start "
+                              "on the side the pad's normal s3 points to (or check the normal's sign and the pad's motion)")
     evals: list[_Eval] = []
     solve_time = 0.0
     builder = MovingQpBuilder(state, cfg, mcfg.normal_speed, mcfg.slip_max, mcfg.slip_weight, mcfg.zero_jerk,

@@ -5,6 +5,7 @@ clearance certificate, the arrival-time search and bad input."""
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -13,6 +14,7 @@ from hypothesis import strategies as st
 from scipy.integrate import solve_ivp
 
 import avp
+from avp.errors import ConfigError
 from avp.moving import MovingConfig, contact_errors, plan_moving, plan_moving_detailed
 from avp.moving_clearance import certify_moving_clearance, clearance
 from avp.platform import MotionModel, MovingTarget
@@ -207,12 +209,17 @@ def test_clearance_certificate_is_sound(shift, tilt):
         assert not rep.certified
 
 
-def test_clearance_failure_is_reported():
-    """A start below the moving roof cannot be certified: honest status, not a crash."""
+def test_a_start_below_the_moving_roof_is_bad_input():
+    """A start below the moving roof cannot keep the clearance from its first instant: a typed
+    error on the start, as for a static pad (it was a clearance failure after the search);
+    without the perch-plane clearance it is planned."""
     tgt = platform(0.0, 4.0, model=MotionModel.CONSTANT_VELOCITY)
-    res = plan_moving_detailed(behind(tgt, 3.0, -0.5), tgt, CONFIG)
-    assert not res.ok and res.trajectory is None
-    assert res.clearance is not None and not res.clearance.certified
+    with pytest.raises(ConfigError) as exc:
+        plan_moving_detailed(behind(tgt, 3.0, -0.5), tgt, CONFIG)
+    assert exc.value.field == "state.position" and "behind the moving pad" in str(exc.value)
+    free = replace(CONFIG, workspace=replace(CONFIG.workspace, perch_clearance=False))
+    res = plan_moving_detailed(behind(tgt, 3.0, -0.5), tgt, free)
+    assert res.clearance is None
 
 
 # -- the search on Gao et al.'s grid --------------------------------------------------------
