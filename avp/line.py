@@ -21,7 +21,7 @@ vehicle arrives from.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from enum import Enum
 from typing import Any
 
@@ -159,12 +159,16 @@ class LineTarget:
     @classmethod
     def segment(cls, start: Any, end: Any, **kwargs: Any) -> LineTarget:
         """A straight segment from ``start`` to ``end``."""
-        return cls(vertices=np.array([start, end], dtype=float), **kwargs)
+        _check_settings(kwargs)
+        p0 = v.frozen_array("line.start", start, (3,))
+        p1 = v.frozen_array("line.end", end, (3,))
+        return cls(vertices=np.array([p0, p1]), **kwargs)
 
     @classmethod
     def catenary(cls, start: Any, end: Any, sag: float, pieces: int = 8, **kwargs: Any) -> LineTarget:
         """A cable hanging between ``start`` and ``end`` with ``sag`` (m, below the chord's
         midpoint), approximated by ``pieces`` chords of the catenary ``z = a cosh(x/a) + c``."""
+        _check_settings(kwargs)
         p0 = v.frozen_array("line.start", start, (3,))
         p1 = v.frozen_array("line.end", end, (3,))
         sag_ = v.positive_float("line.sag", sag)
@@ -240,6 +244,15 @@ class LineTarget:
         n = n / np.linalg.norm(n)
         psi = _contact_yaw(self.yaw, d, n, yaw_near)
         return LineContact(A=A, B=B, d=d, up=up, w=w_side, n=n, yaw=psi)
+
+
+def _check_settings(kwargs: dict[str, Any]) -> None:
+    """The keyword arguments of a :class:`LineTarget` constructor are its fields (not
+    ``vertices``, which the constructor builds)."""
+    names = {f.name for f in fields(LineTarget)} - {"vertices"}
+    unknown = sorted(set(kwargs) - names)
+    if unknown:
+        raise ConfigError(f"line.{unknown[0]}", f"is not a LineTarget setting; use one of {sorted(names)}")
 
 
 @dataclass(frozen=True)

@@ -124,7 +124,11 @@ def figure_plan(
     its exit code)."""
     from .config import PlannerConfig
     from .trajectory import Trajectory
+    from .types import PerchTarget
 
+    if not isinstance(target, PerchTarget):
+        raise ConfigError("target", f"the figure draws a pad perch (avp.PerchTarget), got {type(target).__name__}; "
+                                    "a line or a moving pad has no figure here")
     plt = pyplot()
     from matplotlib.lines import Line2D
     from matplotlib.patches import Patch

@@ -247,9 +247,12 @@ class Trajectory:
         if isinstance(t, float) and t0 - tol <= t <= tf + tol:  # one time, in range
             return np.array([self.duration if t >= tf else max(t - t0, 0.0)]), ()
         try:
-            arr = np.asarray(t, dtype=float)
+            raw = t if isinstance(t, np.ndarray) else np.asarray(t)
         except (TypeError, ValueError) as exc:
             raise ConfigError("t", f"expected times in s, got {t!r}") from exc
+        if raw.dtype.kind not in "fiu":  # strings, None, booleans, objects: no time
+            raise ConfigError("t", f"expected times in s (numbers), got {t!r}")
+        arr = raw.astype(float, copy=False)
         if arr.size:
             lo, hi = float(arr.min()), float(arr.max())  # NaN propagates to both
             if not (math.isfinite(lo) and math.isfinite(hi)):

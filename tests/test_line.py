@@ -446,3 +446,14 @@ def test_a_line_perch_logs_the_pad_settings_it_does_not_use() -> None:
         assert name in notes[0]
     assert "contact_velocity" not in notes[0]
     assert np.array_equal(res.perch.coefficients, plain.perch.coefficients)
+
+
+def test_an_unknown_line_setting_is_a_typed_error() -> None:
+    """A misspelt keyword of ``LineTarget.segment`` / ``catenary`` names itself (it was a raw
+    TypeError)."""
+    for make in (lambda **kw: avp.LineTarget.segment([0, 0, 1], [1, 0, 1], **kw),
+                 lambda **kw: avp.LineTarget.catenary([0, 0, 3], [10, 0, 3], 1.0, **kw)):
+        with pytest.raises(avp.ConfigError) as exc:
+            make(pitchh=1.0)
+        assert exc.value.field == "line.pitchh" and "'pitch'" in str(exc.value)
+        assert make(pitch=1.0).pitch == 1.0

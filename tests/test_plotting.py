@@ -198,3 +198,11 @@ def test_plot_draws_the_drag_aware_thrust_and_attitude():
         assert float(np.asarray(pitch_line.get_ydata())[-1]) == pytest.approx(-90.0, abs=1e-6)
     finally:
         pyplot().close(fig)
+
+
+def test_a_figure_of_another_target_model_is_a_typed_error(wall) -> None:
+    _, _, result = wall
+    line = avp.LineTarget.segment([2.0, -1.0, 2.0], [2.0, 1.0, 2.0])
+    with pytest.raises(avp.ConfigError) as exc:
+        figure_plan(result, line)
+    assert exc.value.field == "target"
