@@ -17,7 +17,9 @@ Two forms:
   and the body rates (22) in B. :func:`read_samples` loads them back as named arrays.
 
 Every writer takes a path and returns it; :meth:`Trajectory.to_json` without a path returns the
-text. The ``Trajectory`` methods ``to_csv``, ``to_json``, ``to_npz``, ``from_csv``, ``from_json``,
+text. A path that cannot be written or read (a missing directory, a file where a directory
+should be, no permission) is a :class:`~avp.errors.ConfigError` on ``path`` (``source`` for
+:func:`read_json`) that carries the operating system's message. The ``Trajectory`` methods ``to_csv``, ``to_json``, ``to_npz``, ``from_csv``, ``from_json``,
 ``from_npz`` call these functions.
 """
 
@@ -27,7 +29,8 @@ import csv
 import json
 import math
 import zipfile
-from collections.abc import Mapping
+from collections.abc import Iterator, Mapping
+from contextlib import contextmanager
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -63,6 +66,20 @@ SAMPLE_COLUMNS = (
 """Columns of a sampled export: time (s); position (m), yaw (rad); velocity (m/s), yaw rate
 (rad/s); acceleration (m/s^2), yaw acceleration (rad/s^2); jerk (m/s^3); snap (m/s^4);
 mass-normalised thrust (m/s^2); attitude quaternion ``R_WB`` (scalar first); body rates (rad/s, B)."""
+
+
+_WRITE_HINT = "give a file name in an existing directory you can write to"
+_READ_HINT = "give the path of an existing, readable file"
+
+
+@contextmanager
+def _file_errors(field: str, path: Any, verb: str, hint: str) -> Iterator[None]:
+    """An :class:`OSError` of the block (``path`` missing, its directory missing or a file, no
+    permission) as a :class:`ConfigError` on ``field`` that says what to do."""
+    try:
+        yield
+    except OSError as exc:
+        raise ConfigError(field, f"cannot {verb} {str(path)!r}: {exc.strerror or exc}; {hint}") from exc
 
 
 def _times(traj: Trajectory, rate: float) -> Array:
@@ -167,7 +184,8 @@ def write_json(traj: Trajectory, path: str | Path | None = None, rate: float | N
                indent: int | None = None, rotor_drag: float = 0.0) -> str:
     text = json.dumps(trajectory_to_dict(traj, rate, rotor_drag), indent=indent, allow_nan=False)
     if path is not None:
-        Path(path).write_text(text + "\n")
+        with _file_errors("path", path, "write", _WRITE_HINT):
+            Path(path).write_text(text + "\n")
     return text
 
 
@@ -176,10 +194,8 @@ def read_json(source: str | Path) -> Trajectory:
     if not isinstance(source, (str, Path)):
         raise ConfigError("source", f"expected a path or JSON text, got {type(source).__name__}")
     is_text = isinstance(source, str) and source.lstrip().startswith("{")
-    try:
+    with _file_errors("source", source, "read", _READ_HINT):
         text = str(source) if is_text else Path(source).read_text()
-    except OSError as exc:
-        raise ConfigError("source", f"cannot read {str(source)!r}: {exc.strerror or exc}") from exc
     try:
         data = json.loads(text)
     except json.JSONDecodeError as exc:
@@ -204,8 +220,8 @@ def write_npz(traj: Trajectory, path: str | Path, rate: float | None = None, rot
         arrays["columns"] = np.array(SAMPLE_COLUMNS)
         arrays["samples_rotor_drag"] = np.array(float(rotor_drag))
     p = Path(path)
-    with p.open("wb") as fh:  # a file object: numpy does not append ".npz" to the name
-        np.savez(fh, **arrays)
+    with _file_errors("path", path, "write", _WRITE_HINT), p.open("wb") as fh:
+        np.savez(fh, **arrays)  # a file object: numpy does not append ".npz" to the name
     return p
 
 
@@ -236,7 +252,7 @@ def write_csv(traj: Trajectory, path: str | Path, rate: float | None = None, rot
     segment and flat output (``x, y, z, yaw``) with ``t_start, t_end, g, c0 ... cN`` (ascending
     powers of ``t - t_start``), which :func:`read_csv` turns back into the trajectory."""
     p = Path(path)
-    with p.open("w", newline="") as fh:
+    with _file_errors("path", path, "write", _WRITE_HINT), p.open("w", newline="") as fh:
         w = csv.writer(fh)
         if rate is not None:
             w.writerow(SAMPLE_COLUMNS)
@@ -254,7 +270,7 @@ def write_csv(traj: Trajectory, path: str | Path, rate: float | None = None, rot
 def read_csv(path: str | Path) -> Trajectory:
     from .trajectory import Trajectory
 
-    with Path(path).open(newline="") as fh:
+    with _file_errors("path", path, "read", _READ_HINT), Path(path).open(newline="") as fh:
         rows = list(csv.reader(fh))
     if not rows or tuple(rows[0][: len(COEFFICIENT_HEADER)]) != COEFFICIENT_HEADER:
         raise ConfigError("path", f"{str(path)!r} is not a coefficient CSV (header {COEFFICIENT_HEADER}...); "
@@ -280,16 +296,20 @@ def read_samples(path: str | Path) -> dict[str, Array]:
     """Sampled data of a CSV, JSON or NPZ export as ``{column: array}`` (:data:`SAMPLE_COLUMNS`)."""
     p = Path(path)
     if p.suffix == ".npz":
-        with np.load(p, allow_pickle=False) as z:
+        with _file_errors("path", p, "read", _READ_HINT):
+            z = np.load(p, allow_pickle=False)
+        with z:
             if "samples" not in z.files:
                 raise ConfigError("path", f"{str(p)!r} holds no samples (written without a rate)")
             return {str(c): z["samples"][:, k].copy() for k, c in enumerate(z["columns"])}
     if p.suffix == ".json":
-        data = json.loads(p.read_text())
+        with _file_errors("path", p, "read", _READ_HINT):
+            text = p.read_text()
+        data = json.loads(text)
         if "samples" not in data:
             raise ConfigError("path", f"{str(p)!r} holds no samples (written without a rate)")
         return {k: np.asarray(v, dtype=float) for k, v in data["samples"].items()}
-    with p.open(newline="") as fh:
+    with _file_errors("path", p, "read", _READ_HINT), p.open(newline="") as fh:
         rows = list(csv.reader(fh))
     if not rows or tuple(rows[0]) != SAMPLE_COLUMNS:
         raise ConfigError("path", f"{str(p)!r} is not a sampled CSV (header {SAMPLE_COLUMNS[:3]}...)")

@@ -103,6 +103,28 @@ def test_bad_rate_is_a_config_error(traj: avp.Trajectory, tmp_path: Path, bad: f
         traj.to_npz(tmp_path / "x.npz", rate=bad)
 
 
+@pytest.mark.parametrize("fmt", ["json", "npz", "csv"])
+def test_unwritable_path_is_a_config_error(traj: avp.Trajectory, tmp_path: Path, fmt: str) -> None:
+    """A missing directory or a file where a directory should be: a ConfigError on ``path`` with
+    the operating system's reason, not a raw OSError."""
+    (tmp_path / "afile").write_text("")
+    for where, reason in ((tmp_path / "missing" / f"x.{fmt}", "No such file"),
+                          (tmp_path / "afile" / f"x.{fmt}", "Not a directory")):
+        with pytest.raises(ConfigError, match=f"cannot write .*{reason}") as exc:
+            getattr(traj, f"to_{fmt}")(where)
+        assert exc.value.field == "path" and isinstance(exc.value.__cause__, OSError)
+
+
+@pytest.mark.parametrize(("fmt", "field"), [("json", "source"), ("npz", "path"), ("csv", "path")])
+def test_missing_file_is_a_config_error(tmp_path: Path, fmt: str, field: str) -> None:
+    with pytest.raises(ConfigError, match="No such file") as exc:
+        getattr(avp.Trajectory, f"from_{fmt}")(tmp_path / f"missing.{fmt}")
+    assert exc.value.field == field
+    with pytest.raises(ConfigError, match="cannot read") as exc:
+        export.read_samples(tmp_path / f"missing.{fmt}")
+    assert exc.value.field == "path"
+
+
 def test_foreign_json_is_rejected() -> None:
     with pytest.raises(ConfigError, match="format"):
         avp.Trajectory.from_json('{"knots": [0, 1], "coefficients": [[[0], [0], [0], [0]]]}')
