@@ -8,7 +8,8 @@ vehicle, camera, replanner and line-perch knob can be set from a TOML file (``--
 appear only here (``--incline-deg``, ``--camera-half-fov-deg``); everything else is SI.
 
 Exit codes (:data:`EXIT_CODES`): 0 a plan that meets every constraint and certificate, 3 a plan
-that needed a relaxation, 1 no certified plan, 2 bad input (usage or configuration).
+that needed a relaxation, 1 no certified plan, 2 bad input (usage, configuration, or a path of
+:data:`PATH_FLAGS` that cannot be written or read; :func:`main` reports each as one error line).
 """
 
 from __future__ import annotations
@@ -17,6 +18,7 @@ import argparse
 import json
 import logging
 import math
+import os
 import re
 import signal
 import sys
@@ -41,7 +43,7 @@ EXIT_RELAXED = 3
 EXIT_CODES = {
     EXIT_SOLVED: "solved: every constraint and certificate met",
     EXIT_FAILED: "no certified plan (infeasible, solver failure, or a certificate failed)",
-    EXIT_USAGE: "bad input: usage or configuration error",
+    EXIT_USAGE: "bad input: usage or configuration error, or a path that cannot be written or read",
     EXIT_RELAXED: "solved after relaxing a soft constraint (slide, band or alpha)",
 }
 
@@ -546,10 +548,7 @@ def simulate(args: argparse.Namespace) -> int:
     paper = "platform" not in settings.data.get("scenario", {}) and all(
         abs(c.incline - math.pi / 2) < 1e-9 and c.lateral == 0 and c.height is None for c in comp.conditions)
     report = comp.report() if paper else without_paper_notes(comp.report())
-    if args.json:
-        _emit_json({"command": "simulate", "rows": sorted(rows, key=lambda r: r["trial_id"]),
-                    "summary": campaign.summarize(rows), "wall_time_s": comp.wall_time})
-    else:
+    if not args.json:
         log.info("%s", report)
     if not args.no_plot:
         try:
@@ -567,6 +566,9 @@ def simulate(args: argparse.Namespace) -> int:
             log.info("animation: %s", animate_run(runs[0], args.gif))
         except ImportError:
             log.warning(PLOT_HINT)
+    if args.json:  # after the plots: an unusable --output-dir or --gif leaves only the error's document
+        _emit_json({"command": "simulate", "rows": sorted(rows, key=lambda r: r["trial_id"]),
+                    "summary": campaign.summarize(rows), "wall_time_s": comp.wall_time})
     return EXIT_SOLVED
 
 
@@ -629,6 +631,42 @@ def run_campaign(args: argparse.Namespace) -> int:
 
 # -- entry point ------------------------------------------------------------------------------
 
+PATH_FLAGS = ("config", "export", "output", "output_dir", "gif", "results", "summary_plot")
+"""The flags (``args`` attributes) that name a file or directory the command reads or writes."""
+
+
+def _path_error(args: argparse.Namespace, exc: Exception) -> AvpError | None:
+    """The usage error :func:`main` reports for ``exc``: an :class:`AvpError` as it is, except that
+    a :class:`ConfigError` raised from an :class:`OSError` (the export writers') and a bare
+    ``OSError`` on a file (a plot, the results file, the animation) name the flag whose path it
+    is; ``None`` for an ``OSError`` that is not about a file (not bad input: re-raised)."""
+    os_error = exc if isinstance(exc, OSError) else exc.__cause__
+    if not isinstance(os_error, OSError) or os_error.filename is None:
+        return exc if isinstance(exc, AvpError) else None
+    flag = _path_flag(args, os_error.filename)
+    if isinstance(exc, ConfigError):
+        return ConfigError(flag, exc.message) if flag is not None else exc
+    reason = os_error.strerror or str(os_error)
+    if isinstance(os_error, FileExistsError) and not os.path.isdir(os_error.filename):
+        reason = "a file is in the way of a directory"  # mkdir of a path's parent that is a file
+    return ConfigError(flag or "path", f"cannot open or create {str(os_error.filename)!r}: {reason}; give a "
+                                       "path whose directories exist (or can be created) and that you can write to")
+
+
+def _path_flag(args: argparse.Namespace, filename: Any) -> str | None:
+    """The flag of :data:`PATH_FLAGS` whose path is ``filename``, lies below it (a directory the
+    command creates on the way), or is it without the suffix the command adds (``--output plot``)."""
+    failed = Path(os.fsdecode(filename)).absolute()
+    for name in PATH_FLAGS:
+        value = getattr(args, name, None)
+        if value is None:
+            continue
+        given = Path(value).absolute()
+        if failed == given or failed in given.parents or failed.with_suffix("") == given:
+            return "--" + name.replace("_", "-")
+    return None
+
+
 def _version() -> str:
     try:
         from . import __version__
@@ -667,11 +705,14 @@ def main(argv: Sequence[str] | None = None) -> int:
             return simulate(args)
         if args.command == "campaign":
             return run_campaign(args)
-    except AvpError as exc:
-        log.error("%s", exc)
+    except (AvpError, OSError) as exc:
+        error = _path_error(args, exc)
+        if error is None:
+            raise
+        log.error("%s", error)
         if args.json:
-            _emit_json({"command": args.command, "exit_code": EXIT_USAGE, "error": str(exc),
-                        "field": getattr(exc, "field", None)})
+            _emit_json({"command": args.command, "exit_code": EXIT_USAGE, "error": str(error),
+                        "field": getattr(error, "field", None)})
         return EXIT_USAGE
     except KeyboardInterrupt:  # pragma: no cover - interactive
         log.error("interrupted")

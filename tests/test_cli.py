@@ -364,6 +364,40 @@ def test_bad_cli_arguments_are_clean_errors(argv, field, capsys) -> None:
     assert f"{field}:" in capsys.readouterr().err
 
 
+@pytest.mark.parametrize("argv, field", [
+    (["demo", "--no-plot", "--export", "{missing}/p.json"], "--export"),
+    (["demo", "--no-plot", "--export", "{file}/p.npz"], "--export"),
+    (["demo", "--output", "{file}/x.png"], "--output"),
+    (["demo", "--output", "{file}/x"], "--output"),
+    (["simulate", "--trials", "1", "--distance", "4.5", "--output-dir", "{file}/sub"], "--output-dir"),
+    (["campaign", "--seeds", "1", "--distance", "4.5", "--modes", "avp", "--backend", "serial", "--no-plot",
+      "--results", "{file}/r.csv"], "--results"),
+])
+def test_unusable_paths_are_usage_errors(argv, field, tmp_path: Path, capsys) -> None:
+    """A path under a missing directory or under a regular file: exit 2 with one line naming the
+    flag and the operating system's reason (was a traceback and exit 1)."""
+    (tmp_path / "afile").write_text("")
+    argv = [a.format(missing=tmp_path / "missing", file=tmp_path / "afile") for a in argv]
+    assert main(argv) == EXIT_USAGE
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith(f"avp: ERROR: {field}: cannot ") and "Traceback" not in err
+    assert main([*argv, "--json"]) == EXIT_USAGE
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["exit_code"] == EXIT_USAGE and doc["field"] == field
+
+
+def test_an_os_error_that_names_no_file_is_not_bad_input(monkeypatch) -> None:
+    """Only file-system errors on a path become usage errors; others propagate."""
+    from avp import cli
+
+    def broken(args):
+        raise ConnectionError("the cluster went away")
+
+    monkeypatch.setattr(cli, "demo", broken)
+    with pytest.raises(ConnectionError):
+        main(["demo"])
+
+
 def test_demo_output_without_suffix_reports_the_png_it_writes(tmp_path: Path, capsys) -> None:
     assert main(["demo", "--output", str(tmp_path / "plot")]) == EXIT_SOLVED
     assert (tmp_path / "plot.png").is_file()
