@@ -270,24 +270,56 @@ def demo_geometry(incline_deg: float, distance: float, lateral: float, height: f
     return State.hover(start), target, height
 
 
+DEMO_DEFAULTS: dict[str, Any] = {"incline_deg": 90.0, "distance": 3.5, "lateral": 0.0, "output": "perch_demo.png"}
+"""The pad demo's geometry and plot path when their flags are not given."""
+
+PAD_FLAGS = ("incline_deg", "distance", "lateral", "height", "output")
+"""``avp demo`` flags (``args`` attributes) of a pad perch only: a line perch refuses them."""
+
+
 def _demo_parser(sub: Any, common: argparse.ArgumentParser) -> None:
     p = sub.add_parser("demo", parents=[common], formatter_class=_HelpFormatter,
                        help="plan one perch, print a summary, write a PNG",
                        description="Plan one perch from hover, print a summary (or --json), plot it. "
                                    "A ground plane at z = 0 is passed to the planner when it supports "
                                    "workspace limits (unless the config file sets one).")
-    p.add_argument("--incline-deg", type=float, default=90.0, help="pad incline: 0 floor, 90 wall, 180 ceiling")
-    p.add_argument("--distance", type=float, default=3.5, help="horizontal stand-off from the pad, m")
-    p.add_argument("--lateral", type=float, default=0.0, help="lateral offset of the start along s2, m")
+    # the pad flags default to None so that a line perch can tell them given (PAD_FLAGS); the
+    # pad demo fills in DEMO_DEFAULTS, which the help shows
+    d = DEMO_DEFAULTS
+    p.add_argument("--incline-deg", type=float, default=None,
+                   help=f"pad incline: 0 floor, 90 wall, 180 ceiling (default: {d['incline_deg']})")
+    p.add_argument("--distance", type=float, default=None,
+                   help=f"horizontal stand-off from the pad, m (default: {d['distance']})")
+    p.add_argument("--lateral", type=float, default=None,
+                   help=f"lateral offset of the start along s2, m (default: {d['lateral']})")
     p.add_argument("--height", type=float, default=None,
                    help="start height above the pad, m (default: 1 below 45 deg, 0 up to 90 deg, "
                         "-1 i.e. below the pad above 90 deg)")
-    p.add_argument("--output", default="perch_demo.png", help="PNG path for the plot")
-    p.add_argument("--no-plot", action="store_true", help="skip the plot")
-    p.add_argument("--export", metavar="FILE", help="write the plan to FILE (.json, .csv or .npz by suffix)")
+    p.add_argument("--output", default=None, help=f"PNG path for the plot of a pad perch (default: {d['output']})")
+    p.add_argument("--no-plot", action="store_true", help="skip the plot (a line perch has none)")
+    p.add_argument("--export", metavar="FILE", help="write the plan (a line's perch) to FILE (.json, .csv or .npz by suffix)")
     p.add_argument("--export-rate", type=float, metavar="HZ",
-                   help="sample the export at HZ (default: exact coefficients only)")
+                   help="with --export: sample the export at HZ (default: exact coefficients only)")
     add_line_flags(p)
+
+
+def _check_demo_flags(args: argparse.Namespace) -> None:
+    """Refuse flags the demo would ignore; fill in :data:`DEMO_DEFAULTS` for a pad perch."""
+    if args.export_rate is not None and args.export is None:
+        raise ConfigError("--export-rate", "samples the --export file: give --export FILE too, or drop it")
+    if args.line_pitch_deg is None:
+        for name, value in DEMO_DEFAULTS.items():
+            if getattr(args, name) is None:
+                setattr(args, name, value)
+        return
+    given = ["--" + name.replace("_", "-") for name in PAD_FLAGS if getattr(args, name) is not None]
+    if "--output" in given:
+        raise ConfigError("--output", "avp.plotting draws pad perches only, a line perch has no plot: drop --output "
+                                      "(--export FILE writes the plan, --json prints it)")
+    if given:
+        also = f" (and {', '.join(given[1:])})" if len(given) > 1 else ""
+        raise ConfigError(given[0], f"places the pad demo's start, which a line perch does not use: drop it{also}; "
+                                    "--line-distance, --line-rise, --line-incline-deg place the line")
 
 
 def _ground_default(planner_cls: type) -> dict[str, Any]:
@@ -303,12 +335,14 @@ def demo(args: argparse.Namespace) -> int:
     from .frames import rotation_error_angle
     from .planner import plan_detailed
 
+    _check_demo_flags(args)
     settings = _settings(args, defaults=_ground_default(PlannerConfig))
     config = settings.planner
     if args.line_pitch_deg is not None:  # a line perch (avp/cli_line.py)
-        code, doc = line_demo(args, config, settings.line)
+        code, doc, perch = line_demo(args, config, settings.line)
+        exported = _export_plan(args, perch, config)
         if args.json:
-            _emit_json(doc)
+            _emit_json({**doc, "export": None if exported is None else str(exported)})
         return code
     state, target, height = demo_geometry(args.incline_deg, args.distance, args.lateral, args.height)
     t0 = time.perf_counter()
@@ -372,10 +406,7 @@ def demo(args: argparse.Namespace) -> int:
     elif code == EXIT_RELAXED:
         log.warning("the plan needed relaxations: %s", ", ".join(r.name.lower() for r in result.relaxations) or
                     result.status.value)
-    exported = None
-    if args.export and traj is not None:
-        exported = _export(traj, Path(args.export), args.export_rate, config.limits.rotor_drag)
-        log.info("  export          : %s", exported)
+    exported = _export_plan(args, traj, config)
     plot = None
     if not args.no_plot and traj is not None:
         plot = _plot_demo(result, target, config, args, 0.0 if ground is None else ground)
@@ -401,6 +432,17 @@ def demo(args: argparse.Namespace) -> int:
 def _workspace_certified(result: Any) -> bool | None:
     safety = getattr(result, "safety", None)
     return None if safety is None else bool(getattr(safety, "certified", False))
+
+
+def _export_plan(args: argparse.Namespace, traj: Any, config: Any) -> Path | None:
+    """``--export``: write the demo's trajectory (a pad perch, or a line's perch) sampled at
+    ``--export-rate`` with the vehicle's rotor drag, log the path and return it (``None`` without
+    the flag or a trajectory)."""
+    if not args.export or traj is None:
+        return None
+    exported = _export(traj, Path(args.export), args.export_rate, config.limits.rotor_drag)
+    log.info("  export          : %s", exported)
+    return exported
 
 
 def _export(traj: Any, path: Path, rate: float | None, rotor_drag: float = 0.0) -> Path:

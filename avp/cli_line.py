@@ -62,9 +62,11 @@ def _line_doc(line: Any) -> dict[str, Any]:
             "grasp": line.grasp, "gripper_offset": line.gripper_offset}
 
 
-def line_demo(args: argparse.Namespace, config: Any, options: Any = None) -> tuple[int, dict[str, Any]]:
+def line_demo(args: argparse.Namespace, config: Any, options: Any = None) -> tuple[int, dict[str, Any], Any]:
     """Plan one line perch and its recovery (``options``: the ``[line]`` table's
-    :class:`~avp.line_planner.LineOptions`); log a summary. Returns the exit code and the JSON document."""
+    :class:`~avp.line_planner.LineOptions`); log a summary. Returns the exit code, the JSON
+    document (with the perch's and the recovery's coefficients, as the pad demo's has its
+    trajectory's) and the perch trajectory (``None`` without one), which ``--export`` writes."""
     from .line_planner import plan_line
 
     state, line = line_geometry(args)
@@ -100,12 +102,16 @@ def line_demo(args: argparse.Namespace, config: Any, options: Any = None) -> tup
     if not result.ok:
         log.warning("no certified line perch: %s", result.status.value)
     from .configfile import to_mapping
+    from .export import trajectory_to_dict
     from .line_planner import LineOptions
 
     used = options if options is not None else LineOptions()
-    return code, {"command": "demo", "exit_code": code, "status": result.status.name, "line": _line_doc(line),
-                  "start": state.position.tolist(), "summary": summary, "log": list(result.log),
-                  "config": {"planner": to_mapping(config), "line": to_mapping(used)}}
+    doc = {"command": "demo", "exit_code": code, "status": result.status.name, "line": _line_doc(line),
+           "start": state.position.tolist(), "summary": summary, "log": list(result.log),
+           "config": {"planner": to_mapping(config), "line": to_mapping(used)},
+           "trajectory": None if perch is None else trajectory_to_dict(perch),
+           "recovery_trajectory": None if result.recovery is None else trajectory_to_dict(result.recovery)}
+    return code, doc, perch
 
 
 def line_simulate(args: argparse.Namespace, config: Any, replan: Any = None, options: Any = None) -> dict[str, Any]:

@@ -273,6 +273,11 @@ def test_export_flag_writes_a_loadable_plan(tmp_path: Path) -> None:
     assert np.allclose(traj(traj.t0), state.position, atol=1e-9)
 
 
+def test_export_rate_needs_export(capsys) -> None:
+    assert main(["demo", "--no-plot", "--export-rate", "50"]) == EXIT_USAGE
+    assert "--export-rate:" in capsys.readouterr().err
+
+
 # -- simulate ---------------------------------------------------------------------------------
 
 def test_progress_bar_only_on_a_terminal(monkeypatch, caplog) -> None:

@@ -145,6 +145,39 @@ def test_cli_demo_and_simulate_on_a_line(capsys) -> None:
     assert main(["demo", "--line-pitch-deg", "200", "--no-plot"]) == EXIT_USAGE
 
 
+def test_cli_line_demo_exports_and_prints_its_trajectory(tmp_path, capsys) -> None:
+    """``--export`` / ``--export-rate`` write the line's perch as the pad demo writes its plan (with
+    the configured rotor drag), and ``--json`` carries its coefficients (both were ignored)."""
+    config = tmp_path / "drag.toml"
+    config.write_text("[planner.limits]\nrotor_drag = 0.2\n")
+    out = tmp_path / "perch.json"
+    argv = ["demo", "--line-pitch-deg", "60", "--config", str(config), "--export", str(out), "--export-rate", "50"]
+    code = main([*argv, "--json"])
+    doc = json.loads(capsys.readouterr().out)
+    assert code == doc["exit_code"] and doc["export"] == str(out)
+    perch = avp.export.trajectory_from_dict(doc["trajectory"])
+    assert perch.duration == pytest.approx(doc["summary"]["duration_s"], rel=1e-12)
+    assert avp.export.trajectory_from_dict(doc["recovery_trajectory"]).duration == pytest.approx(
+        doc["summary"]["recovery_s"], rel=1e-12)
+    written = json.loads(out.read_text())
+    assert written["coefficients"] == doc["trajectory"]["coefficients"] and written["samples_rotor_drag"] == 0.2
+    table = avp.export.sample_table(perch, 50, rotor_drag=0.2)  # the drag-aware thrust of the certificates
+    assert written["samples"]["thrust"] == table[:, avp.export.SAMPLE_COLUMNS.index("thrust")].tolist()
+
+
+@pytest.mark.parametrize("extra, field", [
+    (["--output", "line.png"], "--output"),  # avp.plotting needs a pad
+    (["--incline-deg", "90"], "--incline-deg"),  # the pad's geometry, even at its default value
+    (["--distance", "3.5"], "--distance"),
+    (["--lateral", "0.2"], "--lateral"),
+    (["--height", "1"], "--height"),
+    (["--export-rate", "50"], "--export-rate"),  # without --export
+])
+def test_cli_line_demo_refuses_flags_it_would_ignore(extra, field, capsys) -> None:
+    assert main(["demo", "--line-pitch-deg", "60", "--json", *extra]) == EXIT_USAGE
+    assert json.loads(capsys.readouterr().out)["field"] == field
+
+
 def _line_distance(line: avp.LineTarget, p: np.ndarray) -> float:
     """Distance from ``p`` to the polyline, written here from the geometry (not LineTarget's)."""
     best = math.inf
