@@ -62,6 +62,24 @@ def _line_doc(line: Any) -> dict[str, Any]:
             "grasp": line.grasp, "gripper_offset": line.gripper_offset}
 
 
+def _bounds_doc(report: Any) -> dict[str, Any] | None:
+    """A :class:`~avp.bounds.BoundReport` for the JSON: ``certified``, the bounds proven
+    ``violated`` and those left ``undecided`` (:class:`~avp.bounds.Bound` values); ``None`` for no report."""
+    if report is None:
+        return None
+    return {"certified": bool(report.certified),
+            "violated": list(dict.fromkeys(v.bound.value for v in report.violations)),
+            "undecided": list(dict.fromkeys(b.value for b, _ in report.unknown))}
+
+
+def _bounds_line(name: str, doc: dict[str, Any]) -> str:
+    """``"perch certified"`` or ``"recovery NOT certified (thrust_max violated)"``."""
+    if doc["certified"]:
+        return f"{name} certified"
+    why = [f"{b} violated" for b in doc["violated"]] + [f"{b} undecided" for b in doc["undecided"]]
+    return f"{name} NOT certified" + (f" ({', '.join(why)})" if why else "")
+
+
 def line_demo(args: argparse.Namespace, config: Any, options: Any = None) -> tuple[int, dict[str, Any], Any]:
     """Plan one line perch and its recovery (``options``: the ``[line]`` table's
     :class:`~avp.line_planner.LineOptions`); log a summary. Returns the exit code, the JSON
@@ -78,6 +96,8 @@ def line_demo(args: argparse.Namespace, config: Any, options: Any = None) -> tup
     for entry in result.log:
         log.debug("    - %s", entry)
     summary: dict[str, Any] = {}
+    bounds = {"perch": _bounds_doc(result.bounds), "recovery": _bounds_doc(result.recovery_bounds)}
+    bounds_text = ", ".join(_bounds_line(name, doc) for name, doc in bounds.items() if doc is not None)
     perch = result.perch
     if perch is not None:
         tf, r, n = perch.tf, line.gripper_offset, result.contact.n
@@ -96,17 +116,23 @@ def line_demo(args: argparse.Namespace, config: Any, options: Any = None) -> tup
         if result.recovery is not None:
             log.info("  recovery        : %.3f s to a hover", result.recovery.duration)
         bad = [c.name for c in result.violations]
+        log.info("  actuator bounds : %s", bounds_text)
         log.info("  certificates    : %d/%d hold%s", len(result.certificates) - len(bad), len(result.certificates),
                  f" (failing: {', '.join(bad)})" if bad else "")
     log.info("  planning time   : %.1f ms (perch + recovery)", 1e3 * result.timings.get("total", math.nan))
     if not result.ok:
-        log.warning("no certified line perch: %s", result.status.value)
+        failing = [_bounds_line(name, doc) for name, doc in bounds.items() if doc is not None and not doc["certified"]]
+        log.warning("no certified line perch: %s%s", result.status.value,
+                    f" (actuator bounds: {', '.join(failing)})" if failing else "")
     from .configfile import to_mapping
     from .export import trajectory_to_dict
     from .line_planner import LineOptions
 
     used = options if options is not None else LineOptions()
-    doc = {"command": "demo", "exit_code": code, "status": result.status.name, "line": _line_doc(line),
+    reports = [b for b in bounds.values() if b is not None]
+    doc = {"command": "demo", "exit_code": code, "status": result.status.name,
+           "bounds_certified": all(b["certified"] for b in reports) if reports else None, "bounds": bounds,
+           "line": _line_doc(line),
            "start": state.position.tolist(), "summary": summary, "log": list(result.log),
            "config": {"planner": to_mapping(config), "line": to_mapping(used)},
            "trajectory": None if perch is None else trajectory_to_dict(perch),

@@ -13,7 +13,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import avp
-from avp.cli import EXIT_SOLVED, EXIT_USAGE, main
+from avp.cli import EXIT_FAILED, EXIT_SOLVED, EXIT_USAGE, main
 from avp.config import PlannerConfig, ReplanConfig, VehicleLimits, Workspace
 from avp.errors import ConfigError
 from avp.line_replan import LineReplanner, line_change
@@ -176,6 +176,23 @@ def test_cli_line_demo_exports_and_prints_its_trajectory(tmp_path, capsys) -> No
 def test_cli_line_demo_refuses_flags_it_would_ignore(extra, field, capsys) -> None:
     assert main(["demo", "--line-pitch-deg", "60", "--json", *extra]) == EXIT_USAGE
     assert json.loads(capsys.readouterr().out)["field"] == field
+
+
+def test_cli_line_demo_reports_the_actuator_bounds(capsys) -> None:
+    """Hanging below the line at the default thrust limit, neither the perch nor its recovery
+    keeps thrust_max certified: the summary and the JSON say so (the summary said the line
+    certificates hold and nothing of the bounds; the JSON had no bounds_certified)."""
+    assert main(["demo", "--line-pitch-deg", "180"]) == EXIT_FAILED
+    captured = capsys.readouterr()
+    assert "actuator bounds : perch NOT certified (thrust_max violated), recovery NOT certified" in captured.out
+    assert "thrust_max violated" in captured.err  # the warning -q keeps
+    assert main(["demo", "--line-pitch-deg", "180", "--json"]) == EXIT_FAILED
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["bounds_certified"] is False
+    assert doc["bounds"]["perch"] == {"certified": False, "violated": ["thrust_max"], "undecided": []}
+    assert main(["demo", "--line-pitch-deg", "60", "--json"]) == EXIT_SOLVED
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["bounds_certified"] is True and doc["bounds"]["recovery"]["certified"] is True
 
 
 def _line_distance(line: avp.LineTarget, p: np.ndarray) -> float:
