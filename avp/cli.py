@@ -30,6 +30,7 @@ from typing import Any
 import numpy as np
 
 from .cli_line import add_line_flags, line_demo, line_simulate
+from .config import GROUND_CLEARANCE
 from .configfile import Settings, load_settings, merge, to_mapping
 from .errors import AvpError, ConfigError
 from .export import trajectory_to_dict
@@ -249,6 +250,9 @@ def _json_default(obj: Any) -> Any:
 # -- avp demo ---------------------------------------------------------------------------------
 
 DEMO_PAD_HEIGHT = 1.5
+DEMO_GROUND_Z = 0.0
+"""Height (m) of the demo's ground; the planner keeps the centre of mass
+:data:`avp.config.GROUND_CLEARANCE` above it (:func:`_ground_default`)."""
 """Height (m) of the demo's pad centre, or of its start when the start is below the pad."""
 
 
@@ -281,8 +285,10 @@ def _demo_parser(sub: Any, common: argparse.ArgumentParser) -> None:
     p = sub.add_parser("demo", parents=[common], formatter_class=_HelpFormatter,
                        help="plan one perch, print a summary, write a PNG",
                        description="Plan one perch from hover, print a summary (or --json), plot it. "
-                                   "A ground plane at z = 0 is passed to the planner when it supports "
-                                   "workspace limits (unless the config file sets one).")
+                                   f"The ground is at z = {DEMO_GROUND_Z:g}: the planner keeps the centre of mass "
+                                   f"{GROUND_CLEARANCE:g} m above it (the simulator's margin for the airframe and "
+                                   "tracking) when it supports "
+                                   "workspace limits (unless the config file sets workspace.ground_z).")
     # the pad flags default to None so that a line perch can tell them given (PAD_FLAGS); the
     # pad demo fills in DEMO_DEFAULTS, which the help shows
     d = DEMO_DEFAULTS
@@ -323,11 +329,14 @@ def _check_demo_flags(args: argparse.Namespace) -> None:
 
 
 def _ground_default(planner_cls: type) -> dict[str, Any]:
-    """``{"planner": {"workspace": {"ground_z": 0.0}}}`` when the planner has workspace limits."""
+    """``{"planner": {"workspace": {"ground_z": GROUND_CLEARANCE}}}`` when the planner has
+    workspace limits: the demo's ground is at z = 0, and its centre of mass is kept
+    :data:`avp.config.GROUND_CLEARANCE` above it, as the simulator keeps it (a limit at the
+    ground itself let plans pass 5 mm above it, with the airframe below)."""
     import dataclasses
 
     names = {f.name for f in dataclasses.fields(planner_cls)}
-    return {"planner": {"workspace": {"ground_z": 0.0}}} if "workspace" in names else {}
+    return {"planner": {"workspace": {"ground_z": DEMO_GROUND_Z + GROUND_CLEARANCE}}} if "workspace" in names else {}
 
 
 def demo(args: argparse.Namespace) -> int:
@@ -354,7 +363,7 @@ def demo(args: argparse.Namespace) -> int:
     ground = getattr(getattr(config, "workspace", None), "ground_z", None)
     log.info("avp demo: perch on a %g deg pad, %g m away (lateral %g m, height %g m), solver %s%s",
              args.incline_deg, args.distance, args.lateral, height, config.solver,
-             "" if ground is None else f", ground at z = {ground:g} m")
+             "" if ground is None else f", centre of mass kept above z = {ground:g} m")
     log.info("  status          : %s (%s)", result.status.value, label)
     if result.relaxations:
         log.info("  relaxations     : %s", ", ".join(r.name.lower() for r in result.relaxations))
@@ -409,7 +418,9 @@ def demo(args: argparse.Namespace) -> int:
     exported = _export_plan(args, traj, config)
     plot = None
     if not args.no_plot and traj is not None:
-        plot = _plot_demo(result, target, config, args, 0.0 if ground is None else ground)
+        # the ground drawn is the world's (z = 0) under the default limit GROUND_CLEARANCE above it
+        world = DEMO_GROUND_Z if ground is None or ground == DEMO_GROUND_Z + GROUND_CLEARANCE else ground
+        plot = _plot_demo(result, target, config, args, world)
     if args.json:
         _emit_json({
             "command": "demo", "exit_code": code, "label": label, "status": result.status.name,
@@ -518,7 +529,7 @@ def _simulate_parser(sub: Any, common: argparse.ArgumentParser) -> None:
                        description="Seeded closed-loop trials of every condition in both modes, with "
                                    "the paired tables of success, interception and anticipation error. "
                                    "The simulated world has a ground at z = 0 (a run below it ends as "
-                                   "'crash: ground'); the planner keeps avp.sim.run.GROUND_CLEARANCE above it unless the config "
+                                   "'crash: ground'); the planner keeps avp.config.GROUND_CLEARANCE above it unless the config "
                                    "file sets [planner.workspace] ground_z (line perches: no ground unless set).")
     p.add_argument("--trials", type=int, default=5, help="seeded trials per condition and mode")
     _sweep_flags(p, (4.5, 7.5))

@@ -66,6 +66,16 @@ ALPHA_NOMINAL = 4.0
 """Nominal mass-normalised contact thrust (m/s^2) on steep pads, as in the paper's experiments."""
 
 
+GROUND_CLEARANCE = 0.3
+"""Height (m) above a world's ground below which ``avp demo`` and the simulator's default planner
+configuration (``avp.sim.run``, the campaign runner's unless it sets a ground; the ground is
+``SimScenario.ground_z``) do not let the centre of mass go (``Workspace.ground_z``): the
+vehicle's size and its tracking error. With the limit at the ground itself, moving-platform
+plans grazed it and crashed (docs/moving.md), and demo plans passed 5 mm above it. A start or
+pad closer to the ground than this gets no plan from those configurations (a typed
+``ConfigError`` naming the ground): pass a configuration with its own ``workspace.ground_z``."""
+
+
 def _solver_options(value: Any) -> tuple[tuple[str, Any], ...]:
     """``PlannerConfig.solver_options`` as ``((name, value), ...)``, from a mapping or from
     pairs, names being Python identifiers (the back-end's keyword arguments)."""
@@ -411,7 +421,7 @@ class Workspace:
         body within ``body_offset`` of the centre of mass out of the plane at any attitude.
     ground_z:
         Minimum height of the centre of mass (m), or ``None`` for no ground (``avp demo``
-        passes 0).
+        passes :data:`GROUND_CLEARANCE` above its ground at z = 0).
     max_speed:
         Limit on ``|v|`` (m/s); ``inf`` to skip.
     half_spaces, spheres:

@@ -18,6 +18,7 @@ from avp.cli import (
     EXIT_RELAXED,
     EXIT_SOLVED,
     EXIT_USAGE,
+    _ground_default,
     build_parser,
     demo_geometry,
     main,
@@ -127,8 +128,7 @@ def test_config_file_to_plan_to_json_round_trip(tmp_path: Path, capsys) -> None:
     # the same plan in-process from the same file matches the JSON's trajectory (an iterative
     # back-end does not repeat itself to the last bit between calls, hence the tolerance)
     settings = load_settings(path, {"planner": {"limits": {"mass": 0.55}}},
-                             defaults={"planner": {"workspace": {"ground_z": 0.0}}}
-                             if "workspace" in avp.PlannerConfig.__dataclass_fields__ else None)
+                             defaults=_ground_default(avp.PlannerConfig))
     # the configuration echoed in the JSON builds the same configuration again
     from avp.configfile import from_mapping
 
@@ -408,3 +408,17 @@ def test_demo_output_without_suffix_reports_the_png_it_writes(tmp_path: Path, ca
     assert (tmp_path / "plot.png").is_file()
     captured = capsys.readouterr()
     assert str(tmp_path / "plot.png") in captured.out + captured.err
+
+
+def test_demo_keeps_the_airframe_off_its_ground(capsys) -> None:
+    """The demo's ground is z = 0 and its plans keep the centre of mass GROUND_CLEARANCE above it
+    (with the limit at the ground itself a 150 deg overhang passed 5 mm above the floor)."""
+    from avp.config import GROUND_CLEARANCE
+
+    code = main(["demo", "--incline-deg", "150", "--json", "--no-plot"])
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["config"]["planner"]["workspace"]["ground_z"] == GROUND_CLEARANCE
+    if doc.get("trajectory") is not None:
+        traj = avp.Trajectory.from_json(json.dumps(doc["trajectory"]))
+        z = traj(traj.sample(1e-3))[:, 2]
+        assert z.min() >= GROUND_CLEARANCE - 1e-6, (code, z.min())

@@ -52,7 +52,7 @@ import numpy as np
 
 from .. import _validate as v
 from ..camera import Camera
-from ..config import ContactVelocity, PlannerConfig, VehicleLimits
+from ..config import GROUND_CLEARANCE, ContactVelocity, PlannerConfig, VehicleLimits
 from ..errors import AvpError, ConfigError
 from ..frames import Array, yaw_from_b2
 from ..moving import MovingConfig, MovingReplanner, plan_moving_detailed
@@ -90,13 +90,6 @@ _step_clock = time.perf_counter
 ``deadline`` and the simulated step are measured alike (tests replace it)."""
 
 
-GROUND_CLEARANCE = 0.3
-"""Height (m) above the simulated world's ground (``SimScenario.ground_z``) below which the
-default planner configuration (and the campaign runner's, unless it sets a ground) does not let
-the centre of mass go: the vehicle's size and its tracking error. With the limit at the ground
-itself, moving-platform plans grazed it and crashed (docs/moving.md). A start or pad closer to
-the ground than this gets no plan from that configuration (a typed ``ConfigError`` naming the
-ground): pass a configuration with its own ``workspace.ground_z``."""
 
 
 def sim_config(
