@@ -561,6 +561,20 @@ def without_paper_notes(text: str) -> str:
     return PAPER_NOTE.sub("", text)
 
 
+SWEEP_KEYS = {"incline": "--incline-deg", "distance": "--distance", "lateral": "--lateral", "height": "--height"}
+"""``[scenario]`` keys that ``avp simulate`` and ``avp campaign`` set from their flags (the sweep)."""
+
+
+def _refuse_swept_keys(settings: Settings) -> None:
+    """A ``--config`` whose ``[scenario]`` table sets a key the command sweeps by its flags is a
+    ``ConfigError`` (the flags' values, defaults included, would override it silently)."""
+    table = settings.data.get("scenario", {})
+    for key, flag in SWEEP_KEYS.items():
+        if key in table:
+            raise ConfigError(f"scenario.{key}", f"is set by the flag {flag} in this command (its default "
+                                                 "included); remove it from the --config file and pass the flag")
+
+
 def simulate(args: argparse.Namespace) -> int:
     from . import campaign
     from .sim.evaluate import Comparison, Condition
@@ -573,6 +587,7 @@ def simulate(args: argparse.Namespace) -> int:
         raise ConfigError("--gif", f"the animation is a GIF: give a path ending in .gif, got {args.gif!r}")
     settings = load_settings(args.config, merge(_flag_overrides(args), _platform_overrides(args)),
                              _simulator_settings(args))
+    _refuse_swept_keys(settings)
     if args.line_pitch_deg is not None:  # closed-loop line perches (avp/cli_line.py)
         if args.simulator not in (None, "avp"):
             raise ConfigError("--simulator", "line perches fly on avp's simulator only; drop --simulator/--backend rotorpy")
@@ -656,6 +671,7 @@ def run_campaign(args: argparse.Namespace) -> int:
     if args.seed < 0:
         raise ConfigError("--seed", f"must be >= 0 (a random generator seed), got {args.seed}")
     settings = _settings(args, _simulator_settings(args))
+    _refuse_swept_keys(settings)
     trials = campaign.grid(args.incline_deg, args.distance, args.lateral, _heights(args.height), args.modes,
                            range(args.seed, args.seed + args.seeds))
     stats = campaign.run(trials, settings.data, args.results, backend=args.backend, workers=args.workers,

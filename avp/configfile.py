@@ -430,7 +430,8 @@ def configuration_markdown() -> str:
             summary = (cls.__doc__ or "").strip().split("\n\n")[0].replace("\n", " ")
             out += ["", f"## `[{table}]`: `{cls.__module__}.{cls.__name__}` (avp simulate, avp campaign)", "",
                     summary + " `avp simulate` and `avp campaign` set `incline`, `distance`, `lateral` and"
-                    " `height` from their flags.", "", "| key | unit | default | meaning |", "| --- | --- | --- | --- |"]
+                    " `height` from their flags (`--incline-deg`, `--distance`, `--lateral`, `--height`; a file that sets"
+                    " them is refused: the flags, defaults included, would override it).", "", "| key | unit | default | meaning |", "| --- | --- | --- | --- |"]
             out += rows
             out += ["", "Sub-tables " + ", ".join(f"`[{t}]` (`{c.__module__}.{c.__name__}`)" for t, c in nested)
                     + " take the fields of those classes (see their docstrings)."]

@@ -141,6 +141,20 @@ def test_unknown_scenario_key_fails_before_any_trial(tmp_path: Path, capsys) -> 
     assert not (tmp_path / "r.csv").exists()
 
 
+@pytest.mark.parametrize("command", ["campaign", "simulate"])
+@pytest.mark.parametrize("key,flag", [("distance = 2.0", "--distance"), ("incline = 0.5", "--incline-deg")])
+def test_scenario_keys_the_flags_sweep_are_refused_before_any_trial(tmp_path: Path, capsys, command, key, flag) -> None:
+    """A ``[scenario]`` key that the command's flags set (defaults included) would be overridden
+    silently: it is a usage error naming the key and the flag, before any trial."""
+    cfg = tmp_path / "c.toml"
+    cfg.write_text(f"[scenario]\n{key}\n")
+    out = ["--results", str(tmp_path / "r.csv")] if command == "campaign" else ["--output-dir", str(tmp_path / "o")]
+    assert main([command, "--config", str(cfg), "--no-plot", *out]) == 2
+    err = capsys.readouterr().err
+    assert f"scenario.{key.split()[0]}" in err and flag in err
+    assert not (tmp_path / "r.csv").exists() and not (tmp_path / "o").exists()
+
+
 def test_wilson_interval_against_the_closed_form() -> None:
     """Against an exact rational evaluation of the Wilson formula (z = 2 for exact squares)."""
     from fractions import Fraction
