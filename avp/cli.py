@@ -45,7 +45,7 @@ EXIT_CODES = {
     EXIT_SOLVED: "solved: every constraint and certificate met",
     EXIT_FAILED: "no certified plan (infeasible, solver failure, or a certificate failed)",
     EXIT_USAGE: "bad input: usage or configuration error, or a path that cannot be written or read",
-    EXIT_RELAXED: "solved after relaxing a soft constraint (slide, band or alpha)",
+    EXIT_RELAXED: "solved after relaxing a soft constraint (slide, band or contact thrust range)",
 }
 
 EXECUTION_BACKENDS = ("auto", "serial", "pool", "ray")

@@ -252,11 +252,12 @@ def write_csv(traj: Trajectory, path: str | Path, rate: float | None = None, rot
     segment and flat output (``x, y, z, yaw``) with ``t_start, t_end, g, c0 ... cN`` (ascending
     powers of ``t - t_start``), which :func:`read_csv` turns back into the trajectory."""
     p = Path(path)
+    table = sample_table(traj, rate, rotor_drag) if rate is not None else None  # a bad rate writes no file
     with _file_errors("path", path, "write", _WRITE_HINT), p.open("w", newline="") as fh:
         w = csv.writer(fh)
-        if rate is not None:
+        if table is not None:
             w.writerow(SAMPLE_COLUMNS)
-            for row in sample_table(traj, rate, rotor_drag):
+            for row in table:
                 w.writerow([repr(float(x)) for x in row])
             return p
         w.writerow([*COEFFICIENT_HEADER, *(f"c{k}" for k in range(traj.degree + 1))])

@@ -101,6 +101,9 @@ def test_sampled_csv_is_not_a_polynomial(traj: avp.Trajectory, tmp_path: Path) -
 def test_bad_rate_is_a_config_error(traj: avp.Trajectory, tmp_path: Path, bad: float) -> None:
     with pytest.raises(ConfigError, match="rate"):
         traj.to_npz(tmp_path / "x.npz", rate=bad)
+    with pytest.raises(ConfigError, match="rate"):
+        traj.to_csv(tmp_path / "x.csv", rate=bad)
+    assert not (tmp_path / "x.csv").exists()  # no empty file left behind
 
 
 @pytest.mark.parametrize("fmt", ["json", "npz", "csv"])
