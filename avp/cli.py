@@ -704,6 +704,37 @@ PATH_FLAGS = ("config", "export", "output", "output_dir", "gif", "results", "sum
 """The flags (``args`` attributes) that name a file or directory the command reads or writes."""
 
 
+FIELD_FLAGS = {
+    "fov.camera.half_fov": "camera_half_fov_deg", "alpha": "alpha", "solver": "solver",
+    **{f"limits.{k}": k for k in ("mass", "thrust_min", "thrust_max", "thrust_rate_max", "tilt_rate_max",
+                                  "body_rate_max")},
+    **{f"contact_velocity.{k}": f"contact_{k}" for k in ("normal", "slope", "lateral")},
+}
+"""Configuration fields (without the ``planner.`` table) and the flag (``args`` attribute) that sets
+each: an error on the field names the flag the user typed (:func:`_with_flag`)."""
+
+GEOMETRY_FIELDS = ("state.position", "target.point")
+"""Fields of the demo's start and pad, which its geometry flags place (:func:`demo_geometry`)."""
+
+
+def _with_flag(args: argparse.Namespace, error: AvpError) -> AvpError:
+    """``error`` on a field set by a flag the user gave, as an error on that flag that keeps the
+    field's message (``--camera-half-fov-deg 95`` is checked as ``half_fov`` in rad); a demo's
+    start or pad error names the geometry flags. Any other error as it is."""
+    if not isinstance(error, ConfigError):
+        return error
+    field = error.field.removeprefix("planner.")
+    name = FIELD_FLAGS.get(field)
+    if name is not None and getattr(args, name, None) is not None:
+        flag = "--" + name.replace("_", "-")
+        return ConfigError(flag, f"{getattr(args, name)!r} gives {error.field}: {error.message}")
+    if field in GEOMETRY_FIELDS and args.command == "demo" and getattr(args, "line_pitch_deg", None) is None:
+        place = " ".join(f"--{n.replace('_', '-')} {getattr(args, n):g}" for n in ("incline_deg", "distance", "lateral", "height")
+                         if getattr(args, n, None) is not None)
+        return ConfigError(error.field, f"{error.message} (the demo's geometry: {place})")
+    return error
+
+
 def _path_error(args: argparse.Namespace, exc: Exception) -> AvpError | None:
     """The usage error :func:`main` reports for ``exc``: an :class:`AvpError` as it is, except that
     a :class:`ConfigError` raised from an :class:`OSError` (the export writers') and a bare
@@ -778,6 +809,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         error = _path_error(args, exc)
         if error is None:
             raise
+        error = _with_flag(args, error)
         log.error("%s", error)
         if args.json:
             _emit_json({"command": args.command, "exit_code": EXIT_USAGE, "error": str(error),

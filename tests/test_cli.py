@@ -422,3 +422,21 @@ def test_demo_keeps_the_airframe_off_its_ground(capsys) -> None:
         traj = avp.Trajectory.from_json(json.dumps(doc["trajectory"]))
         z = traj(traj.sample(1e-3))[:, 2]
         assert z.min() >= GROUND_CLEARANCE - 1e-6, (code, z.min())
+
+
+@pytest.mark.parametrize("argv,flag,field", [
+    (["--camera-half-fov-deg", "95"], "--camera-half-fov-deg", "half_fov"),
+    (["--mass", "-1"], "--mass", "limits.mass"),
+    (["--contact-normal", "0.5"], "--contact-normal", "contact_velocity.normal"),
+])
+def test_an_error_on_a_flag_names_the_flag(capsys, argv, flag, field) -> None:
+    """A value given by a flag and refused as a configuration field is reported on the flag the
+    user typed, with the field's message (``half_fov`` is checked in rad, the flag is in deg)."""
+    assert main(["demo", "--no-plot", "--json", *argv]) == EXIT_USAGE
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["field"] == flag and field in doc["error"] and argv[1] in doc["error"]
+
+
+def test_an_error_on_the_demo_geometry_names_its_flags(capsys) -> None:
+    assert main(["demo", "--no-plot", "--distance", "-3"]) == EXIT_USAGE
+    assert "--distance -3" in capsys.readouterr().err
