@@ -19,6 +19,7 @@ from typing import Any
 import numpy as np
 
 from . import _validate as v
+from ._values import fields_equal, fields_hash
 from .bounds import check_body_rate_degree
 from .camera import Camera
 from .errors import ConfigError
@@ -365,7 +366,7 @@ class BoundsPolicy:
         return self.factors
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class HalfSpace:
     """The allowed side of a plane: positions ``p`` with ``(p - point) . normal > 0`` (W, m).
 
@@ -374,6 +375,9 @@ class HalfSpace:
 
     point: Any
     normal: Any
+
+    __eq__ = fields_equal  # values, not identity (module _values)
+    __hash__ = fields_hash
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "point", v.frozen_array("workspace.half_spaces.point", self.point, (3,)))
@@ -386,12 +390,15 @@ class HalfSpace:
         return float(self.normal @ self.point)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class Sphere:
     """A keep-out ball: positions with ``|p - center| > radius`` (W, m)."""
 
     center: Any
     radius: float
+
+    __eq__ = fields_equal  # values, not identity (module _values)
+    __hash__ = fields_hash
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "center", v.frozen_array("workspace.spheres.center", self.center, (3,)))

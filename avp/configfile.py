@@ -99,8 +99,8 @@ def _bad(where: str, tp: Any, value: Any) -> ConfigError:
 def _convert(tp: Any, value: Any, where: str) -> Any:
     """``value`` (as parsed from TOML) converted to the annotated type ``tp``."""
     origin, args = typing.get_origin(tp), typing.get_args(tp)
-    if tp is Any:
-        return value
+    if tp is Any:  # checked by the class itself; "none" is how a file writes None
+        return None if isinstance(value, str) and value.lower() in NONE_STRINGS else value
     if origin in (typing.Union, types.UnionType):
         options = [a for a in args if a is not type(None)]
         if type(None) in args and (value is None or (isinstance(value, str) and value.lower() in NONE_STRINGS)):
@@ -276,6 +276,11 @@ UNITS: dict[str, str] = {
     # ReplanConfig
     "ReplanConfig.latency": "s", "ReplanConfig.freeze_horizon": "s", "ReplanConfig.deadline": "s",
     "ReplanConfig.reach_tolerance": "m", "ReplanConfig.reach_angle_tolerance": "rad",
+    "ReplanConfig.anchor_position": "m", "ReplanConfig.anchor_velocity": "m/s",
+    "ReplanConfig.target_tolerance": "m (rad for the normal)", "ReplanConfig.reach_acceleration": "m/s^2",
+    "ReplanConfig.snap_max": "m/s^4", "ReplanConfig.snap_thrust_max": "1/s^2", "ReplanConfig.retime_min_time": "s",
+    # OverhangFlip
+    "OverhangFlip.min_incline": "rad", "OverhangFlip.thrust": "m/s^2", "OverhangFlip.turn_rate": "rad/s",
     # LineOptions
     "LineOptions.approach_deceleration": "m/s^2", "LineOptions.guide_dt": "s", "LineOptions.wedge_angle": "rad",
     "LineOptions.wedge_window": "s", "LineOptions.takeoff_snap": "m/s^4", "LineOptions.recovery_point": "m",

@@ -424,10 +424,12 @@ class Replanner:
         shift, turn = self._change(committed_target, self.target)
         budget = 0.5 * rc.reach_acceleration * max(remaining, 0.0) ** 2
 
-        def record(action: ReplanAction, reason: str, **kw: object) -> ReplanStep:
+        def record(action: ReplanAction, reason: str, cue: bool = True, **kw: object) -> ReplanStep:
+            """The step's record; ``cue=False``: a step that tried nothing (the committed plan has
+            not started) is never ``CANNOT_REACH``, whatever the estimate says."""
             err, ang = self._reach_error(*((shift, turn) if self.committed_target is committed_target
                                            else self._change(self.committed_target, self.target)))
-            if action in (ReplanAction.KEPT_PREVIOUS, ReplanAction.FROZEN_NEAR_CONTACT, ReplanAction.PARTIAL) \
+            if cue and action in (ReplanAction.KEPT_PREVIOUS, ReplanAction.FROZEN_NEAR_CONTACT, ReplanAction.PARTIAL) \
                     and (err > rc.reach_tolerance or ang > rc.reach_angle_tolerance) and self._reach_cue:
                 limit = (f"budget {budget:.3f} m in {max(remaining, 0.0):.2f} s" if self._static_pad
                          else f"{max(remaining, 0.0):.2f} s left")
@@ -440,7 +442,7 @@ class Replanner:
         if remaining < max(rc.freeze_horizon, self.config.t_k):
             return record(ReplanAction.FROZEN_NEAR_CONTACT, f"{max(remaining, 0.0):.3f} s to contact")
         if t < committed.t0:
-            return record(ReplanAction.KEPT_PREVIOUS, "the committed plan has not started yet")
+            return record(ReplanAction.KEPT_PREVIOUS, "the committed plan has not started yet", cue=False)
 
         ref = committed.derivatives(t)
         e_p = float(np.linalg.norm(odometry.position - ref[0, :3]))

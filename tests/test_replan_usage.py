@@ -223,3 +223,25 @@ def test_bad_clocks_of_a_moving_replanner_are_typed_errors():
     with pytest.raises(avp.ConfigError) as exc:
         rp.reference(10**400)  # OverflowError before
     assert exc.value.field == "t"
+
+
+def test_a_step_before_the_committed_plan_starts_is_never_cannot_reach() -> None:
+    """With a latency longer than the step period, a step before the new plan's switch time
+    keeps it without trying anything: no CANNOT_REACH (no plan was tried), whatever the estimate
+    (it was relabelled CANNOT_REACH with n_solves 0 and a 10 m budget); the next step replans."""
+    pad = avp.PerchTarget.from_incline([3.5, 0.0, 1.5], math.pi / 2)
+
+    def shifted(dy: float) -> avp.PerchTarget:
+        return avp.PerchTarget(point=pad.point + [0.0, dy, 0.0], R_WS=pad.R_WS)
+
+    rp = avp.Replanner(pad, replan=avp.ReplanConfig(latency=0.1))
+    steps = []
+    for t, est in [(0.0, None), (1 / 30, shifted(0.01)), (2 / 30, shifted(0.10)), (3 / 30, None), (4 / 30, None)]:
+        ref = rp.reference(t) if t > 0 else None
+        odo = avp.State.hover([0.0, 0.0, 1.5]) if ref is None else avp.State(
+            position=ref.position, velocity=ref.velocity, acceleration=ref.acceleration, time=t)
+        steps.append(rp.step(t, odo, est))
+    waiting = [s for s in steps if "has not started" in s.reason]
+    assert waiting and all(s.action is ReplanAction.KEPT_PREVIOUS and s.n_solves == 0 for s in waiting)
+    assert any(s.target_error > 0.05 for s in waiting)  # the estimate was beyond reach_tolerance
+    assert steps[-1].action in (ReplanAction.REPLANNED, ReplanAction.PARTIAL)

@@ -303,3 +303,19 @@ def test_regions_leave_the_callers_arrays_writable() -> None:
     assert regions_for(target, ws) is regions  # the last call's regions, by identity
     assert all(not r.normal.flags.writeable for r in regions)
     assert [ws.half_spaces[0].normal.flags.writeable, ws.spheres[0].center.flags.writeable] == before
+
+
+def test_workspace_limits_compare_by_value_and_survive_a_config_file() -> None:
+    """HalfSpace and Sphere hold arrays: the generated == raised ("truth value of an array is
+    ambiguous") and hash failed, so a configuration with a ceiling could not be compared with
+    itself loaded back from its mapping."""
+    from avp.configfile import from_mapping, to_mapping
+
+    def config(radius: float) -> avp.PlannerConfig:
+        return avp.PlannerConfig(workspace=avp.Workspace(
+            half_spaces=(avp.HalfSpace(point=[0.0, 0.0, 4.0], normal=[0.0, 0.0, -1.0]),),
+            spheres=(avp.Sphere(center=[1.5, 0.8, 1.5], radius=radius),)))
+
+    a = config(0.3)
+    assert a == config(0.3) and hash(a) == hash(config(0.3)) and a != config(0.4)
+    assert from_mapping(avp.PlannerConfig, to_mapping(a), "planner") == a

@@ -7,6 +7,7 @@ import pytest
 from numpy.polynomial import polynomial as P
 
 from avp import frames
+from avp.errors import ConfigError
 from avp.frames import expm_so3
 from avp.sim import (
     ControllerGains,
@@ -164,3 +165,26 @@ def test_a_wall_perch_is_flown_to_millimetres_only_with_feedforward():
     np.testing.assert_allclose(c.v_tangential_S, [-2.0, 0.0], atol=0.05)
     c = contact(False)  # measured: 24 cm off, 12 deg, 1.65 m/s: a failed perch
     assert not c.success and np.rad2deg(c.attitude_error) > 5
+
+
+@pytest.mark.parametrize("kwargs,field", [
+    ({"k_x": -5.0}, "gains.k_x"), ({"k_x": "abc"}, "gains.k_x"), ({"k_v": [1.0, 2.0]}, "gains.k_v"),
+    ({"k_R": [1.0, 0.0, 1.0]}, "gains.k_R"), ({"rotor_drag": [0.1]}, "gains.rotor_drag"),
+    ({"rotor_drag": (-1e-3, -1e-3, 0.0)}, "gains.rotor_drag"), ({"k_omega": True}, "gains.k_omega"),
+])
+def test_bad_gains_are_typed_errors(kwargs, field) -> None:
+    """Gains were taken as given: a negative one flew, a string crashed mid-run."""
+    with pytest.raises(ConfigError) as exc:
+        ControllerGains(**kwargs)
+    assert exc.value.field == field
+
+
+def test_gains_from_a_file_accept_none_and_diagonals(tmp_path) -> None:
+    """``rotor_drag = "none"`` is None (the file's way to write it; it stayed a string and
+    crashed the controller), and a diagonal gain comes back as a tuple."""
+    from avp.configfile import load_settings
+
+    path = tmp_path / "g.toml"
+    path.write_text('[scenario.gains]\nrotor_drag = "none"\nk_v = [8.0, 8.0, 10.0]\n')
+    gains = load_settings(path).scenario().gains
+    assert gains.rotor_drag is None and gains.k_v == (8.0, 8.0, 10.0)

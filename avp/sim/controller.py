@@ -134,6 +134,26 @@ class ControllerGains:
 
     def __post_init__(self) -> None:
         v.flags("gains", self)
+        for name in ("k_x", "k_v", "k_R", "k_omega"):
+            object.__setattr__(self, name, _gain(f"gains.{name}", getattr(self, name)))
+        if self.rotor_drag is not None:
+            k = v.frozen_array("gains.rotor_drag", self.rotor_drag, (3,))
+            if np.any(k < 0.0):
+                raise ConfigError("gains.rotor_drag", f"drag coefficients are >= 0 (N per rad/s per m/s), got {k.tolist()}")
+            object.__setattr__(self, "rotor_drag", tuple(float(x) for x in k))
+
+
+def _gain(field: str, value: Any) -> float | tuple[float, float, float]:
+    """A positive finite gain: a scalar, or a 3-vector (a diagonal) as a tuple."""
+    if isinstance(value, (int, float, np.floating, np.integer)) and not isinstance(value, (bool, np.bool_)):
+        return v.positive_float(field, value)
+    try:
+        k = v.frozen_array(field, value, (3,))
+    except ConfigError as exc:
+        raise ConfigError(field, f"expected a positive gain or three (a diagonal), got {value!r}") from exc
+    if not np.all(k > 0.0):
+        raise ConfigError(field, f"gains are > 0, got {k.tolist()}")
+    return (float(k[0]), float(k[1]), float(k[2]))
 
 
 @dataclass(frozen=True, eq=False)
