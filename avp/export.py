@@ -296,23 +296,30 @@ def read_csv(path: str | Path) -> Trajectory:
 def read_samples(path: str | Path) -> dict[str, Array]:
     """Sampled data of a CSV, JSON or NPZ export as ``{column: array}`` (:data:`SAMPLE_COLUMNS`)."""
     p = Path(path)
-    if p.suffix == ".npz":
-        with _file_errors("path", p, "read", _READ_HINT):
-            z = np.load(p, allow_pickle=False)
-        with z:
-            if "samples" not in z.files:
+    suffix = p.suffix.lower()
+    try:
+        if suffix == ".npz":
+            with _file_errors("path", p, "read", _READ_HINT):
+                z = np.load(p, allow_pickle=False)
+            with z:
+                if "samples" not in z.files:
+                    raise ConfigError("path", f"{str(p)!r} holds no samples (written without a rate)")
+                return {str(c): z["samples"][:, k].copy() for k, c in enumerate(z["columns"])}
+        if suffix == ".json":
+            with _file_errors("path", p, "read", _READ_HINT):
+                text = p.read_text()
+            data = json.loads(text)
+            if not isinstance(data, dict) or "samples" not in data:
                 raise ConfigError("path", f"{str(p)!r} holds no samples (written without a rate)")
-            return {str(c): z["samples"][:, k].copy() for k, c in enumerate(z["columns"])}
-    if p.suffix == ".json":
-        with _file_errors("path", p, "read", _READ_HINT):
-            text = p.read_text()
-        data = json.loads(text)
-        if "samples" not in data:
-            raise ConfigError("path", f"{str(p)!r} holds no samples (written without a rate)")
-        return {k: np.asarray(v, dtype=float) for k, v in data["samples"].items()}
-    with _file_errors("path", p, "read", _READ_HINT), p.open(newline="") as fh:
-        rows = list(csv.reader(fh))
-    if not rows or tuple(rows[0]) != SAMPLE_COLUMNS:
-        raise ConfigError("path", f"{str(p)!r} is not a sampled CSV (header {SAMPLE_COLUMNS[:3]}...)")
-    table = np.array([[float(x) for x in r] for r in rows[1:]], dtype=float).reshape(-1, len(SAMPLE_COLUMNS))
-    return {name: table[:, k] for k, name in enumerate(SAMPLE_COLUMNS)}
+            return {k: np.asarray(val, dtype=float) for k, val in data["samples"].items()}
+        with _file_errors("path", p, "read", _READ_HINT), p.open(newline="") as fh:
+            rows = list(csv.reader(fh))
+        if not rows or tuple(rows[0]) != SAMPLE_COLUMNS:
+            raise ConfigError("path", f"{str(p)!r} is not a sampled CSV (header {SAMPLE_COLUMNS[:3]}...)")
+        table = np.array([[float(x) for x in r] for r in rows[1:]], dtype=float).reshape(-1, len(SAMPLE_COLUMNS))
+        return {name: table[:, k] for k, name in enumerate(SAMPLE_COLUMNS)}
+    except (ValueError, KeyError, AttributeError, TypeError, zipfile.BadZipFile) as exc:  # a damaged file
+        if isinstance(exc, ConfigError):
+            raise
+        raise ConfigError("path", f"{str(p)!r} is not a readable sample export ({type(exc).__name__}: {exc}); "
+                                  "give a file written by to_csv/to_json/to_npz with a rate") from exc

@@ -6,8 +6,8 @@ script says how to install it and exits 0. Run: ``python examples/fly_in_rotorpy
 
 rotorpy has no pad to hit: the vehicle flies through the pad's position, and we compare its state
 at the plan's contact time with the plan (position, thrust axis ``b3`` against the pad normal
-``s3``, velocity). Measured at 3 m: 45 deg 1.0 cm / 8.5 deg, 60 deg 2.5 cm / 15.7 deg, 90 deg
-7.5 cm / 23 deg. rotorpy's ``SE3Control`` tracks the attitude without body-rate feed-forward, so
+``s3``, velocity). Measured at 3 m (2026-12-05): 45 deg 2.6 cm / 6.7 deg, 60 deg 2.4 cm / 14.8 deg,
+90 deg 6.5 cm / 23.4 deg. rotorpy's ``SE3Control`` tracks the attitude without body-rate feed-forward, so
 ``b3`` lags the fast pitch-up before contact, and it builds the attitude from the heading
 ``b1 = (cos yaw, sin yaw, 0)``, which is singular when the thrust axis is horizontal along the
 heading, as on a wall (avp's own construction (11), (13) uses ``b2`` and is regular there).

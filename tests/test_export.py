@@ -179,3 +179,27 @@ def test_sampled_exports_carry_the_drag_thrust_when_asked() -> None:
     assert float(b3 @ target.s3) > 1 - 1e-12
     plain = export.sample_table(traj, 100.0)
     np.testing.assert_array_equal(plain[:, export.SAMPLE_COLUMNS.index("thrust")], traj.thrust(t))
+
+
+@pytest.mark.parametrize("name,content", [("bad.json", "{not json"), ("bad.csv", None), ("bad.npz", "not a zip"),
+                                          ("list.json", "[1, 2]")])
+def test_a_damaged_sample_file_is_a_config_error(traj: avp.Trajectory, tmp_path: Path, name, content) -> None:
+    """Invalid JSON, a non-numeric CSV cell or a corrupt NPZ raised raw JSONDecodeError /
+    ValueError; each is a ConfigError on ``path`` now."""
+    from avp.export import SAMPLE_COLUMNS, read_samples
+
+    path = tmp_path / name
+    if content is None:  # the right header, a cell that is no number
+        path.write_text(",".join(SAMPLE_COLUMNS) + "\n" + ",".join(["x"] * len(SAMPLE_COLUMNS)) + "\n")
+    else:
+        path.write_text(content)
+    with pytest.raises(ConfigError) as exc:
+        read_samples(path)
+    assert exc.value.field == "path"
+
+
+def test_an_upper_case_suffix_reads_as_its_format(traj: avp.Trajectory, tmp_path: Path) -> None:
+    from avp.export import read_samples
+
+    traj.to_npz(tmp_path / "s.NPZ", rate=50.0)
+    assert read_samples(tmp_path / "s.NPZ")["t"].size > 2
