@@ -250,10 +250,10 @@ def _json_default(obj: Any) -> Any:
 # -- avp demo ---------------------------------------------------------------------------------
 
 DEMO_PAD_HEIGHT = 1.5
+"""Height (m) of the demo's pad centre, or of its start when the start is below the pad."""
 DEMO_GROUND_Z = 0.0
 """Height (m) of the demo's ground; the planner keeps the centre of mass
 :data:`avp.config.GROUND_CLEARANCE` above it (:func:`_ground_default`)."""
-"""Height (m) of the demo's pad centre, or of its start when the start is below the pad."""
 
 
 def demo_geometry(incline_deg: float, distance: float, lateral: float, height: float | None) -> tuple[Any, Any, float]:
@@ -585,6 +585,8 @@ def simulate(args: argparse.Namespace) -> int:
         raise ConfigError("--seed", f"must be >= 0 (a random generator seed), got {args.seed}")
     if args.gif and not str(args.gif).lower().endswith(".gif"):
         raise ConfigError("--gif", f"the animation is a GIF: give a path ending in .gif, got {args.gif!r}")
+    if args.gif and args.no_plot:
+        raise ConfigError("--gif", "the animation is drawn with the plots, which --no-plot skips: drop one of them")
     settings = load_settings(args.config, merge(_flag_overrides(args), _platform_overrides(args)),
                              _simulator_settings(args))
     _refuse_swept_keys(settings)
@@ -705,7 +707,7 @@ PATH_FLAGS = ("config", "export", "output", "output_dir", "gif", "results", "sum
 
 
 FIELD_FLAGS = {
-    "fov.camera.half_fov": "camera_half_fov_deg", "alpha": "alpha", "solver": "solver",
+    "fov.camera.half_fov": "camera_half_fov_deg", "alpha": "alpha", "solver": "solver", "rate": "export_rate",
     **{f"limits.{k}": k for k in ("mass", "thrust_min", "thrust_max", "thrust_rate_max", "tilt_rate_max",
                                   "body_rate_max")},
     **{f"contact_velocity.{k}": f"contact_{k}" for k in ("normal", "slope", "lateral")},
@@ -741,28 +743,31 @@ def _path_error(args: argparse.Namespace, exc: Exception) -> AvpError | None:
     ``OSError`` on a file (a plot, the results file, the animation) name the flag whose path it
     is; ``None`` for an ``OSError`` that is not about a file (not bad input: re-raised)."""
     os_error = exc if isinstance(exc, OSError) else exc.__cause__
-    if not isinstance(os_error, OSError) or os_error.filename is None:
+    if not isinstance(os_error, OSError) or not isinstance(os_error.filename, (str, bytes, os.PathLike)):
         return exc if isinstance(exc, AvpError) else None
     flag = _path_flag(args, os_error.filename)
     if isinstance(exc, ConfigError):
         return ConfigError(flag, exc.message) if flag is not None else exc
+    if flag is None:  # a file the user did not name (a cache, a library's): not bad input
+        return None
     reason = os_error.strerror or str(os_error)
     if isinstance(os_error, FileExistsError) and not os.path.isdir(os_error.filename):
         reason = "a file is in the way of a directory"  # mkdir of a path's parent that is a file
-    return ConfigError(flag or "path", f"cannot open or create {str(os_error.filename)!r}: {reason}; give a "
+    return ConfigError(flag, f"cannot open or create {str(os_error.filename)!r}: {reason}; give a "
                                        "path whose directories exist (or can be created) and that you can write to")
 
 
 def _path_flag(args: argparse.Namespace, filename: Any) -> str | None:
     """The flag of :data:`PATH_FLAGS` whose path is ``filename``, lies below it (a directory the
-    command creates on the way), or is it without the suffix the command adds (``--output plot``)."""
+    command creates on the way), is it without the suffix the command adds (``--output plot``),
+    or holds it (a file the command writes in ``--output-dir``)."""
     failed = Path(os.fsdecode(filename)).absolute()
     for name in PATH_FLAGS:
         value = getattr(args, name, None)
         if value is None:
             continue
         given = Path(value).absolute()
-        if failed == given or failed in given.parents or failed.with_suffix("") == given:
+        if failed == given or failed in given.parents or failed.with_suffix("") == given or given in failed.parents:
             return "--" + name.replace("_", "-")
     return None
 

@@ -168,7 +168,7 @@ class LineTarget:
     def catenary(cls, start: Any, end: Any, sag: float, pieces: int = 8, **kwargs: Any) -> LineTarget:
         """A cable hanging between ``start`` and ``end`` with ``sag`` (m, below the chord's
         midpoint), approximated by ``pieces`` chords of the catenary ``z = a cosh(x/a) + c``."""
-        _check_settings(kwargs)
+        _check_settings(kwargs, ("start", "end", "sag", "pieces"))
         p0 = v.frozen_array("line.start", start, (3,))
         p1 = v.frozen_array("line.end", end, (3,))
         sag_ = v.positive_float("line.sag", sag)
@@ -246,13 +246,14 @@ class LineTarget:
         return LineContact(A=A, B=B, d=d, up=up, w=w_side, n=n, yaw=psi)
 
 
-def _check_settings(kwargs: dict[str, Any]) -> None:
+def _check_settings(kwargs: dict[str, Any], own: tuple[str, ...] = ("start", "end")) -> None:
     """The keyword arguments of a :class:`LineTarget` constructor are its fields (not
-    ``vertices``, which the constructor builds)."""
+    ``vertices``, which the constructor builds) besides the constructor's ``own`` arguments."""
     names = {f.name for f in fields(LineTarget)} - {"vertices"}
     unknown = sorted(set(kwargs) - names)
     if unknown:
-        raise ConfigError(f"line.{unknown[0]}", f"is not a LineTarget setting; use one of {sorted(names)}")
+        raise ConfigError(f"line.{unknown[0]}", f"is not a LineTarget setting; use one of {sorted(names)} "
+                                                f"(and the constructor's {', '.join(own)})")
 
 
 @dataclass(frozen=True)

@@ -140,7 +140,8 @@ class ReplanStep:
     estimate after the step (for a moving pad, to the pad the estimate predicts at the contact
     time; for a line, from the committed plan's grasp point to the estimated line);
     ``target_angle`` (rad) the angle between the committed pad's normal and the estimate's (for
-    a line, the largest angle between matching pieces of the two estimates);
+    a line, between the committed grasped piece and the estimate's piece closest to the grasp
+    point, unsigned);
     ``reach_budget`` (m) how far the contact point could move in the time left (``inf``
     where no budget applies: a moving pad, a line); ``fraction`` the share of the requested correction committed (0 when nothing
     was); ``anchored`` whether the plan started from the committed reference (True) or from

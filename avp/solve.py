@@ -220,14 +220,16 @@ def _solve_two_sided(H: Array, g: Array, G: Array, lower: Array, upper: Array,
 
 
 def _backend_error(config: PlannerConfig, exc: Exception) -> AvpError:
-    """The typed error of a back-end call that raised: a keyword the back-end does not take is
-    the user's ``config.solver_options`` (a ``ConfigError`` naming it), anything else a
-    ``SolverError``."""
-    if isinstance(exc, TypeError) and config.solver_options and "argument" in str(exc):
-        names = ", ".join(k for k, _ in config.solver_options)
-        return ConfigError("config.solver_options", f"back-end '{config.solver}' refused the settings ({names}): {exc}; "
-                                                    "check its documentation for their names and types")
-    return SolverError(f"QP back-end '{config.solver}' failed: {exc}")
+    """The typed error of a back-end call that raised: one whose message names a setting of the
+    user's ``config.solver_options`` ("unexpected keyword argument 'x'", "Unrecognized settings
+    ['x']") is a ``ConfigError`` naming it; anything else a ``SolverError`` (a refusal that does
+    not name the setting cannot be told from a back-end failure)."""
+    text = str(exc)
+    named = [k for k, _ in config.solver_options if f"'{k}'" in text or f'"{k}"' in text]
+    if named:
+        return ConfigError("config.solver_options", f"back-end '{config.solver}' refused {', '.join(named)}: {text}; "
+                                                    "check its documentation for the names and types of its settings")
+    return SolverError(f"QP back-end '{config.solver}' failed: {text}")
 
 
 def _one_sided(G: Array, lower: Array, upper: Array) -> tuple[Array | None, Array | None]:

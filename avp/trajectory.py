@@ -250,7 +250,13 @@ class Trajectory:
             raw = t if isinstance(t, np.ndarray) else np.asarray(t)
         except (TypeError, ValueError) as exc:
             raise ConfigError("t", f"expected times in s, got {t!r}") from exc
-        if raw.dtype.kind not in "fiu":  # strings, None, booleans, objects: no time
+        if raw.dtype.kind == "O" and not any(isinstance(x, (str, bytes, bool, np.bool_)) or x is None
+                                             for x in raw.ravel().tolist()):
+            try:  # numbers held as objects (Fraction, Decimal): their float values
+                raw = raw.astype(float)
+            except (TypeError, ValueError) as exc:
+                raise ConfigError("t", f"expected times in s (numbers), got {t!r}") from exc
+        if raw.dtype.kind not in "fiu":  # strings, None, booleans: no time
             raise ConfigError("t", f"expected times in s (numbers), got {t!r}")
         arr = raw.astype(float, copy=False)
         if arr.size:

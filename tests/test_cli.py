@@ -440,3 +440,26 @@ def test_an_error_on_a_flag_names_the_flag(capsys, argv, flag, field) -> None:
 def test_an_error_on_the_demo_geometry_names_its_flags(capsys) -> None:
     assert main(["demo", "--no-plot", "--distance", "-3"]) == EXIT_USAGE
     assert "--distance -3" in capsys.readouterr().err
+
+
+def test_a_file_in_the_output_dir_names_the_flag_and_other_files_are_not_bad_input(tmp_path, capsys, monkeypatch) -> None:
+    """A file the command writes inside ``--output-dir`` that cannot be written is reported on
+    ``--output-dir``; an ``OSError`` on a file no flag names is not bad input (re-raised)."""
+    import avp.cli as cli
+
+    out = tmp_path / "od"
+    (out / "visibility.png").mkdir(parents=True)  # a directory where a plot goes
+    assert main(["simulate", "--trials", "1", "--distance", "4.5", "--output-dir", str(out), "--json"]) == EXIT_USAGE
+    assert json.loads(capsys.readouterr().out)["field"] == "--output-dir"
+
+    def denied(args):
+        raise PermissionError(13, "Permission denied", str(tmp_path / "cache" / "x.json"))
+
+    monkeypatch.setattr(cli, "demo", denied)
+    with pytest.raises(PermissionError):
+        main(["demo", "--no-plot"])
+
+
+def test_gif_needs_the_plots(tmp_path, capsys) -> None:
+    assert main(["simulate", "--trials", "1", "--gif", str(tmp_path / "a.gif"), "--no-plot"]) == EXIT_USAGE
+    assert "--gif" in capsys.readouterr().err

@@ -150,3 +150,8 @@ def test_times_that_are_not_numbers_are_typed_errors(bad) -> None:
         traj(bad)
     assert exc.value.field == "t" and "numbers" in str(exc.value)
     assert traj(np.array([0, 1])).shape == (2, 3) and traj(1).shape == (3,)  # integers are times
+    from decimal import Decimal
+    from fractions import Fraction
+
+    for exact in (Fraction(1, 2), Decimal("0.5"), np.array([Fraction(1, 2)], dtype=object)):  # numbers as objects
+        np.testing.assert_array_equal(np.reshape(traj(exact), 3), traj(0.5))
