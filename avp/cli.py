@@ -575,6 +575,17 @@ def _refuse_swept_keys(settings: Settings) -> None:
                                                  "included); remove it from the --config file and pass the flag")
 
 
+LINE_UNUSED = ("incline_deg", "distance", "lateral", "height", "output_dir", "gif", "platform_speed",
+               "platform_heading_deg", "platform_turn_rate")
+"""``avp simulate`` flags (``args`` attributes) of the pad trials, which line trials do not use."""
+
+
+def _given(args: argparse.Namespace, names: Sequence[str]) -> list[str]:
+    """The flags among ``names`` given with a value other than their default."""
+    defaults = build_parser().parse_args([args.command])
+    return ["--" + n.replace("_", "-") for n in names if getattr(args, n, None) != getattr(defaults, n, None)]
+
+
 def simulate(args: argparse.Namespace) -> int:
     from . import campaign
     from .sim.evaluate import Comparison, Condition
@@ -589,14 +600,19 @@ def simulate(args: argparse.Namespace) -> int:
         raise ConfigError("--gif", "the animation is drawn with the plots, which --no-plot skips: drop one of them")
     settings = load_settings(args.config, merge(_flag_overrides(args), _platform_overrides(args)),
                              _simulator_settings(args))
-    _refuse_swept_keys(settings)
     if args.line_pitch_deg is not None:  # closed-loop line perches (avp/cli_line.py)
         if args.simulator not in (None, "avp"):
             raise ConfigError("--simulator", "line perches fly on avp's simulator only; drop --simulator/--backend rotorpy")
+        given = _given(args, LINE_UNUSED)
+        if given:
+            also = f" (and {', '.join(given[1:])})" if len(given) > 1 else ""
+            raise ConfigError(given[0], f"sets up the pad trials, which a line perch does not use: drop it{also}; "
+                                        "--line-distance, --line-rise, --line-incline-deg place the line")
         doc = line_simulate(args, settings.planner, settings.replan, settings.line)
         if args.json:
             _emit_json(doc)
         return EXIT_SOLVED
+    _refuse_swept_keys(settings)
     trials = campaign.grid(args.incline_deg, args.distance, args.lateral, _heights(args.height),
                            ("one_shot", "avp"), range(args.seed, args.seed + args.trials))
     runner = campaign.Runner(settings.data, keep_result=True)

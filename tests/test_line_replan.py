@@ -243,3 +243,11 @@ def test_line_replanner_says_cannot_reach_when_the_gripper_would_miss_the_line()
         else:
             assert step.action is not ReplanAction.CANNOT_REACH, step.reason
             assert step.target_error < 0.01
+
+
+@pytest.mark.parametrize("flag", [["--distance", "3"], ["--incline-deg", "45"], ["--platform-speed", "1"]])
+def test_cli_line_simulate_refuses_the_pad_trials_flags(capsys, flag) -> None:
+    """``avp simulate --line-pitch-deg`` flew the line whatever the pad flags said; one given
+    with another value than its default is a usage error naming it."""
+    assert main(["simulate", "--line-pitch-deg", "20", "--trials", "1", "--no-plot", *flag]) == EXIT_USAGE
+    assert flag[0] in capsys.readouterr().err
