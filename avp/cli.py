@@ -576,7 +576,7 @@ def _refuse_swept_keys(settings: Settings) -> None:
 
 
 LINE_UNUSED = ("incline_deg", "distance", "lateral", "height", "output_dir", "gif", "platform_speed",
-               "platform_heading_deg", "platform_turn_rate")
+               "platform_heading_deg", "platform_turn_rate", "backend", "workers", "address")
 """``avp simulate`` flags (``args`` attributes) of the pad trials, which line trials do not use."""
 
 
@@ -594,24 +594,26 @@ def simulate(args: argparse.Namespace) -> int:
         raise ConfigError("--trials", f"must be >= 1, got {args.trials}")
     if args.seed < 0:
         raise ConfigError("--seed", f"must be >= 0 (a random generator seed), got {args.seed}")
-    if args.gif and not str(args.gif).lower().endswith(".gif"):
-        raise ConfigError("--gif", f"the animation is a GIF: give a path ending in .gif, got {args.gif!r}")
-    if args.gif and args.no_plot:
-        raise ConfigError("--gif", "the animation is drawn with the plots, which --no-plot skips: drop one of them")
     settings = load_settings(args.config, merge(_flag_overrides(args), _platform_overrides(args)),
                              _simulator_settings(args))
     if args.line_pitch_deg is not None:  # closed-loop line perches (avp/cli_line.py)
         if args.simulator not in (None, "avp"):
             raise ConfigError("--simulator", "line perches fly on avp's simulator only; drop --simulator/--backend rotorpy")
-        given = _given(args, LINE_UNUSED)
+        given = _given(args, LINE_UNUSED)  # after _simulator_settings: --backend avp is the default back-end
         if given:
             also = f" (and {', '.join(given[1:])})" if len(given) > 1 else ""
             raise ConfigError(given[0], f"sets up the pad trials, which a line perch does not use: drop it{also}; "
                                         "--line-distance, --line-rise, --line-incline-deg place the line")
+        unused = sorted(k for k in settings.data.get("scenario", {}) if k != "backend")
+        if unused:
+            raise ConfigError(f"scenario.{unused[0]}", "the line trials do not read the --config file's [scenario] "
+                                                      "table (the pad trials' world): remove it for a line run")
         doc = line_simulate(args, settings.planner, settings.replan, settings.line)
         if args.json:
             _emit_json(doc)
         return EXIT_SOLVED
+    if args.gif and not str(args.gif).lower().endswith(".gif"):
+        raise ConfigError("--gif", f"the animation is a GIF: give a path ending in .gif, got {args.gif!r}")
     _refuse_swept_keys(settings)
     trials = campaign.grid(args.incline_deg, args.distance, args.lateral, _heights(args.height),
                            ("one_shot", "avp"), range(args.seed, args.seed + args.trials))
@@ -719,6 +721,8 @@ def run_campaign(args: argparse.Namespace) -> int:
 # -- entry point ------------------------------------------------------------------------------
 
 PATH_FLAGS = ("config", "export", "output", "output_dir", "gif", "results", "summary_plot")
+DIRECTORY_FLAGS = ("output_dir",)
+"""The flags of :data:`PATH_FLAGS` that name a directory the command writes its files in."""
 """The flags (``args`` attributes) that name a file or directory the command reads or writes."""
 
 
@@ -778,12 +782,12 @@ def _path_flag(args: argparse.Namespace, filename: Any) -> str | None:
     command creates on the way), is it without the suffix the command adds (``--output plot``),
     or holds it (a file the command writes in ``--output-dir``)."""
     failed = Path(os.fsdecode(filename)).absolute()
-    for name in PATH_FLAGS:
-        value = getattr(args, name, None)
-        if value is None:
-            continue
-        given = Path(value).absolute()
-        if failed == given or failed in given.parents or failed.with_suffix("") == given or given in failed.parents:
+    paths = [(name, Path(getattr(args, name)).absolute()) for name in PATH_FLAGS if getattr(args, name, None) is not None]
+    for name, given in paths:  # a flag's own path first
+        if failed == given or failed in given.parents or failed.with_suffix("") == given:
+            return "--" + name.replace("_", "-")
+    for name, given in paths:  # then a file the command writes directly in a directory flag's path
+        if name in DIRECTORY_FLAGS and failed.parent == given:
             return "--" + name.replace("_", "-")
     return None
 

@@ -695,8 +695,8 @@ class PlannerConfig:
     def __post_init__(self) -> None:
         for name, lo, hi, hint in (
             ("n_segments", 1, MAX_SEGMENTS, ""),
-            ("degree", 4, 20, "(position to jerk are fixed at the start and continuous at the knots, "
-                              "continuity_order >= 3 < degree)"),
+            ("degree", 4, 20, "(position to jerk are fixed at the start and continuous at the knots: "
+                              "continuity_order is at least 3 and below the degree)"),
             ("position_cost_order", 1, None, ""), ("yaw_cost_order", 1, None, ""), ("continuity_order", 3, None,
              "(position to jerk continuous at the knots: the attitude (11) and body rates (22) the "
              "certificates bound within each segment do not jump between them)"),

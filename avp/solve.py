@@ -12,6 +12,7 @@ check :data:`FEASIBILITY_TOL` and the KKT compatibility check (16), :func:`incom
 from __future__ import annotations
 
 import math
+import re
 import time
 from dataclasses import dataclass, field
 from enum import Enum
@@ -221,11 +222,12 @@ def _solve_two_sided(H: Array, g: Array, G: Array, lower: Array, upper: Array,
 
 def _backend_error(config: PlannerConfig, exc: Exception) -> AvpError:
     """The typed error of a back-end call that raised: one whose message names a setting of the
-    user's ``config.solver_options`` ("unexpected keyword argument 'x'", "Unrecognized settings
-    ['x']") is a ``ConfigError`` naming it; anything else a ``SolverError`` (a refusal that does
-    not name the setting cannot be told from a back-end failure)."""
+    user's ``config.solver_options`` as a word ("unexpected keyword argument 'x'", OSQP's
+    "Unrecognized settings ['x']", ProxQP's "kwargs = { x: int }") is a ``ConfigError`` naming it;
+    anything else a ``SolverError`` (a refusal that does not name the setting cannot be told from
+    a back-end failure)."""
     text = str(exc)
-    named = [k for k, _ in config.solver_options if f"'{k}'" in text or f'"{k}"' in text]
+    named = [k for k, _ in config.solver_options if re.search(rf"(?<![\w.]){re.escape(k)}(?!\w)", text)]
     if named:
         return ConfigError("config.solver_options", f"back-end '{config.solver}' refused {', '.join(named)}: {text}; "
                                                     "check its documentation for the names and types of its settings")

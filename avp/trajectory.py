@@ -246,15 +246,17 @@ class Trajectory:
         t0, tf, tol = self._t0, self._tf, self._tol
         if isinstance(t, float) and t0 - tol <= t <= tf + tol:  # one time, in range
             return np.array([self.duration if t >= tf else max(t - t0, 0.0)]), ()
+        if isinstance(t, (list, tuple)) and any(isinstance(x, (bool, np.bool_)) for x in t):
+            raise ConfigError("t", f"expected times in s (numbers), got booleans in {t!r}")  # NumPy reads 1.0
         try:
             raw = t if isinstance(t, np.ndarray) else np.asarray(t)
-        except (TypeError, ValueError) as exc:
+        except (TypeError, ValueError, OverflowError) as exc:
             raise ConfigError("t", f"expected times in s, got {t!r}") from exc
         if raw.dtype.kind == "O" and not any(isinstance(x, (str, bytes, bool, np.bool_)) or x is None
                                              for x in raw.ravel().tolist()):
             try:  # numbers held as objects (Fraction, Decimal): their float values
                 raw = raw.astype(float)
-            except (TypeError, ValueError) as exc:
+            except (TypeError, ValueError, OverflowError) as exc:
                 raise ConfigError("t", f"expected times in s (numbers), got {t!r}") from exc
         if raw.dtype.kind not in "fiu":  # strings, None, booleans: no time
             raise ConfigError("t", f"expected times in s (numbers), got {t!r}")

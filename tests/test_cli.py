@@ -460,6 +460,28 @@ def test_a_file_in_the_output_dir_names_the_flag_and_other_files_are_not_bad_inp
         main(["demo", "--no-plot"])
 
 
-def test_gif_needs_the_plots(tmp_path, capsys) -> None:
-    assert main(["simulate", "--trials", "1", "--gif", str(tmp_path / "a.gif"), "--no-plot"]) == EXIT_USAGE
-    assert "--gif" in capsys.readouterr().err
+def test_an_exact_path_flag_wins_over_the_directory_that_holds_it(tmp_path, capsys, monkeypatch) -> None:
+    """A failing file that is one flag's own path names that flag, not the directory flag
+    whose directory holds it; and a file deeper below ``--output-dir`` (a cache, not a file the
+    command writes there) is not bad input."""
+    import avp.cli as cli
+
+    runs = tmp_path / "runs"
+    (runs / "anim.gif").mkdir(parents=True)  # a directory where the animation goes
+    argv = ["simulate", "--trials", "1", "--distance", "4.5", "--output-dir", str(runs), "--gif", str(runs / "anim.gif"),
+            "--json", "--no-plot"]
+    assert main(argv) == EXIT_USAGE
+    assert json.loads(capsys.readouterr().out)["field"] == "--gif"
+
+    def denied(args):
+        raise PermissionError(13, "Permission denied", str(tmp_path / ".cache" / "matplotlib" / "x.json"))
+
+    monkeypatch.setattr(cli, "simulate", denied)
+    with pytest.raises(PermissionError):
+        main(["simulate", "--output-dir", str(tmp_path)])
+
+
+def test_an_export_rate_error_names_the_flag(tmp_path, capsys) -> None:
+    out = tmp_path / "x.json"
+    assert main(["demo", "--no-plot", "--json", "--export", str(out), "--export-rate", "0"]) == EXIT_USAGE
+    assert json.loads(capsys.readouterr().out)["field"] == "--export-rate" and not out.exists()

@@ -251,3 +251,12 @@ def test_cli_line_simulate_refuses_the_pad_trials_flags(capsys, flag) -> None:
     with another value than its default is a usage error naming it."""
     assert main(["simulate", "--line-pitch-deg", "20", "--trials", "1", "--no-plot", *flag]) == EXIT_USAGE
     assert flag[0] in capsys.readouterr().err
+
+
+def test_cli_line_simulate_refuses_a_scenario_table_it_does_not_read(tmp_path, capsys) -> None:
+    cfg = tmp_path / "s.toml"
+    cfg.write_text("[scenario]\nincline = 0.5\n")
+    assert main(["simulate", "--line-pitch-deg", "20", "--trials", "1", "--no-plot", "--config", str(cfg)]) == EXIT_USAGE
+    assert "scenario.incline" in capsys.readouterr().err
+    assert main(["simulate", "--line-pitch-deg", "20", "--trials", "1", "--backend", "pool"]) == EXIT_USAGE
+    assert "--backend" in capsys.readouterr().err
