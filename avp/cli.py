@@ -15,6 +15,7 @@ that needed a relaxation, 1 no certified plan, 2 bad input (usage, configuration
 from __future__ import annotations
 
 import argparse
+import errno
 import json
 import logging
 import math
@@ -580,6 +581,24 @@ LINE_UNUSED = ("incline_deg", "distance", "lateral", "height", "output_dir", "gi
 """``avp simulate`` flags (``args`` attributes) of the pad trials, which line trials do not use."""
 
 
+def _prepare_outputs(args: argparse.Namespace, names: Sequence[str]) -> None:
+    """Before any trial: the directories of the output flags ``names`` (``args`` attributes)
+    exist (created as the writers would create them) and can be written, and a file flag does not
+    name a directory, so that an unusable path is a usage error now, not after the trials (an
+    ``OSError`` naming the path, which :func:`main` reports on its flag)."""
+    for name in names:
+        value = getattr(args, name, None)
+        if value is None:
+            continue
+        path = Path(value)
+        directory = path if name in DIRECTORY_FLAGS else path.parent
+        directory.mkdir(parents=True, exist_ok=True)
+        if not os.access(directory, os.W_OK):
+            raise PermissionError(errno.EACCES, "Permission denied", str(directory))
+        if name not in DIRECTORY_FLAGS and path.is_dir():
+            raise IsADirectoryError(errno.EISDIR, "Is a directory", str(path))
+
+
 def _given(args: argparse.Namespace, names: Sequence[str]) -> list[str]:
     """The flags among ``names`` given with a value other than their default."""
     defaults = build_parser().parse_args([args.command])
@@ -615,6 +634,7 @@ def simulate(args: argparse.Namespace) -> int:
     if args.gif and not str(args.gif).lower().endswith(".gif"):
         raise ConfigError("--gif", f"the animation is a GIF: give a path ending in .gif, got {args.gif!r}")
     _refuse_swept_keys(settings)
+    _prepare_outputs(args, ("gif",) if args.no_plot else ("output_dir", "gif"))
     trials = campaign.grid(args.incline_deg, args.distance, args.lateral, _heights(args.height),
                            ("one_shot", "avp"), range(args.seed, args.seed + args.trials))
     runner = campaign.Runner(settings.data, keep_result=True)
@@ -692,6 +712,7 @@ def run_campaign(args: argparse.Namespace) -> int:
         raise ConfigError("--seed", f"must be >= 0 (a random generator seed), got {args.seed}")
     settings = _settings(args, _simulator_settings(args))
     _refuse_swept_keys(settings)
+    _prepare_outputs(args, ("results",) if args.no_plot else ("results", "summary_plot"))
     trials = campaign.grid(args.incline_deg, args.distance, args.lateral, _heights(args.height), args.modes,
                            range(args.seed, args.seed + args.seeds))
     stats = campaign.run(trials, settings.data, args.results, backend=args.backend, workers=args.workers,

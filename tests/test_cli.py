@@ -485,3 +485,27 @@ def test_an_export_rate_error_names_the_flag(tmp_path, capsys) -> None:
     out = tmp_path / "x.json"
     assert main(["demo", "--no-plot", "--json", "--export", str(out), "--export-rate", "0"]) == EXIT_USAGE
     assert json.loads(capsys.readouterr().out)["field"] == "--export-rate" and not out.exists()
+
+
+@pytest.mark.parametrize("command,flag", [("simulate", "--gif"), ("simulate", "--output-dir"),
+                                          ("campaign", "--results"), ("campaign", "--summary-plot")])
+def test_an_unusable_output_path_stops_before_any_trial(tmp_path, capsys, monkeypatch, command, flag) -> None:
+    """A path the command could not write was found after every trial had run; it is a usage
+    error on its flag before the first one now."""
+    import avp.campaign as campaign
+
+    def no_trials(*args, **kwargs):
+        raise AssertionError("a trial ran")
+
+    monkeypatch.setattr(campaign, "execute", no_trials)
+    monkeypatch.setattr(campaign, "run", no_trials)
+    blocker = tmp_path / "a_file"
+    blocker.write_text("")
+    paths = {"--gif": str(tmp_path / "anim.gif"), "--output-dir": str(tmp_path / "od"),
+             "--results": str(tmp_path / "r.csv"), "--summary-plot": str(tmp_path / "s.png")}
+    bad = {"--gif": str(blocker / "a.gif"), "--output-dir": str(blocker / "od"),
+           "--results": str(blocker / "r.csv"), "--summary-plot": str(blocker / "s.png")}
+    names = ("--gif", "--output-dir") if command == "simulate" else ("--results", "--summary-plot")
+    argv = [command, "--json"] + [x for n in names for x in (n, bad[n] if n == flag else paths[n])]
+    assert main(argv) == EXIT_USAGE
+    assert json.loads(capsys.readouterr().out)["field"] == flag
