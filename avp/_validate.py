@@ -4,14 +4,17 @@ shapes, rotations. Every failure is a :class:`~avp.errors.ConfigError` naming th
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
-from collections.abc import Mapping
-from typing import Any
+from collections.abc import Callable, Mapping
+from typing import Any, TypeVar
 
 import numpy as np
 import numpy.typing as npt
 
 from .errors import ConfigError
+
+_Cls = TypeVar("_Cls", bound=type)
 
 ORTHONORMAL_TOL = 1e-6
 """Tolerance on ``|R^T R - I|`` (max entry) and ``|det R - 1|`` for rotation inputs."""
@@ -174,3 +177,26 @@ def sequence(field: str, value: Any, what: str, single: tuple[type, ...] = ()) -
         wrap = f"; wrap a single one: ({single[0].__name__}(...),)" if isinstance(value, single) else ""
         raise ConfigError(field, f"must be a sequence of {what}, got {value!r}{wrap}")
     return tuple(value)
+
+
+def typed_keywords(prefix: str) -> Callable[[_Cls], _Cls]:
+    """Class decorator (above ``@dataclass``): a keyword the constructor does not take is a
+    :class:`ConfigError` on ``prefix.<keyword>`` listing the settings (Python's own error is a
+    ``TypeError``, outside the library's one hierarchy)."""
+
+    def wrap(cls: _Cls) -> _Cls:
+        init = vars(cls)["__init__"]  # the dataclass-generated constructor
+        names = tuple(f.name for f in dataclasses.fields(cls) if f.init)
+        known = frozenset(names)
+
+        @functools.wraps(init)
+        def checked_init(self: Any, *args: Any, **kwargs: Any) -> None:
+            if not known.issuperset(kwargs):
+                unknown = next(k for k in kwargs if k not in known)
+                raise ConfigError(f"{prefix}.{unknown}", f"is not a {cls.__name__} setting; use one of {', '.join(names)}")
+            init(self, *args, **kwargs)
+
+        setattr(cls, "__init__", checked_init)  # noqa: B010  # (a method assignment mypy refuses)
+        return cls
+
+    return wrap

@@ -42,6 +42,7 @@ def _default_R_BC() -> Array:
     return FRONT_CAMERA_R_BC.copy()
 
 
+@v.typed_keywords("camera")
 @dataclass(frozen=True, eq=False)
 class Camera:
     """A rigidly mounted pinhole camera with a conical field of view.

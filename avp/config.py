@@ -94,6 +94,7 @@ def _solver_options(value: Any) -> tuple[tuple[str, Any], ...]:
     return tuple((str(k), val) for k, val in pairs)
 
 
+@v.typed_keywords("limits")
 @dataclass(frozen=True)
 class VehicleLimits:
     """Vehicle mass and actuator limits, checked by the bound certificates (15), (21)-(29).
@@ -159,6 +160,7 @@ class VehicleLimits:
         return self.thrust_max / self.mass
 
 
+@v.typed_keywords("contact_velocity")
 @dataclass(frozen=True)
 class ContactVelocity:
     """Velocity at contact in the target frame S; ``None`` leaves a component free.
@@ -189,6 +191,7 @@ class ContactVelocity:
         return slope, self.lateral, self.normal
 
 
+@v.typed_keywords("time_allocation")
 @dataclass(frozen=True)
 class TimeAllocation:
     """Initial duration rule: ``T = t_attitude + sqrt(2 d / a_nominal) + |v0| / a_nominal``.
@@ -221,6 +224,7 @@ class TimeAllocation:
         return max(self.min_duration, self.attitude_time + math.sqrt(2.0 * distance / a) + speed / a)
 
 
+@v.typed_keywords("flip")
 @dataclass(frozen=True)
 class OverhangFlip:
     """Thrust through the horizontal on an overhang (incline above ``min_incline``, up to a
@@ -307,6 +311,7 @@ class Relaxation(Enum):
     NO_BAND = "pre-impact band (14) dropped"
 
 
+@v.typed_keywords("bounds")
 @dataclass(frozen=True)
 class BoundsPolicy:
     """Certification of the actuator bounds and what to change when they fail (Alg. 1).
@@ -366,6 +371,7 @@ class BoundsPolicy:
         return self.factors
 
 
+@v.typed_keywords("workspace.half_spaces")
 @dataclass(frozen=True, eq=False)
 class HalfSpace:
     """The allowed side of a plane: positions ``p`` with ``(p - point) . normal > 0`` (W, m).
@@ -390,6 +396,7 @@ class HalfSpace:
         return float(self.normal @ self.point)
 
 
+@v.typed_keywords("workspace.spheres")
 @dataclass(frozen=True, eq=False)
 class Sphere:
     """A keep-out ball: positions with ``|p - center| > radius`` (W, m)."""
@@ -407,6 +414,7 @@ class Sphere:
         v.within("workspace.spheres.radius", self.radius, "distance")
 
 
+@v.typed_keywords("workspace")
 @dataclass(frozen=True)
 class Workspace:
     """Where the vehicle's centre of mass may go: certified over the whole plan, never relaxed.
@@ -494,6 +502,7 @@ class FovPointPolicy(Enum):
     KEEP = "keep: place the row as is (the QP is infeasible and the fallback (16) fires)"
 
 
+@v.typed_keywords("fov")
 @dataclass(frozen=True)
 class FovConfig:
     """Perception-aware planning: FoV rows (8) with trust region (9) and the fallback (16).
@@ -604,6 +613,7 @@ class FovConfig:
         return self.camera.narrowed(self.margin)
 
 
+@v.typed_keywords("config")
 @dataclass(frozen=True)
 class PlannerConfig:
     """Everything one plan needs besides the start state and the target.
@@ -835,6 +845,7 @@ def _same(a: Any, b: Any) -> bool:
     return bool(a == b)
 
 
+@v.typed_keywords("replan")
 @dataclass(frozen=True)
 class ReplanConfig:
     """Replanning policy (module docstring). Defaults measured in closed loop in the realistic

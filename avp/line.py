@@ -50,6 +50,7 @@ class LineYaw(Enum):
     FREE = "yaw at contact left to the optimiser"
 
 
+@v.typed_keywords("line")
 @dataclass(frozen=True, eq=False)
 class LineTarget:
     """A line to perch on.

@@ -72,6 +72,7 @@ clearance. :func:`plan_line` logs the ones set away from their defaults
 (:meth:`~avp.config.PlannerConfig.changed`)."""
 
 
+@v.typed_keywords("options")
 @dataclass(frozen=True)
 class LineOptions:
     """What a line perch adds to :class:`~avp.config.PlannerConfig`.

@@ -65,6 +65,7 @@ __all__ = [
 
 
 
+@v.typed_keywords("moving")
 @dataclass(frozen=True)
 class MovingConfig:
     """Terminal map and arrival-time search for a moving pad (Gao et al. Sec. V-D, VI).

@@ -67,6 +67,7 @@ def _sinc(x: Array) -> Array:
     return np.where(small, 1.0 - x * x / 6.0, np.sin(safe) / safe)
 
 
+@v.typed_keywords("target")
 @dataclass(frozen=True, eq=False)  # PerchTarget's value equality, over these fields too
 class MovingTarget(PerchTarget):
     """A perch pad carried by a moving platform.

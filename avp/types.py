@@ -24,6 +24,7 @@ __all__ = ["PerchTarget", "State"]
 _ZERO3 = (0.0, 0.0, 0.0)
 
 
+@v.typed_keywords("state")
 @dataclass(frozen=True, eq=False)
 class State:
     """Flat-output state of the vehicle at ``time``: the initial condition of a plan.
@@ -75,6 +76,7 @@ class State:
         return np.stack([self.position, self.velocity, self.acceleration, self.jerk])
 
 
+@v.typed_keywords("target")
 @dataclass(frozen=True, eq=False)
 class PerchTarget:
     """A perch pad: its centre ``point`` and orientation ``R_WS = [s1 s2 s3]``.

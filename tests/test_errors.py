@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -499,3 +500,23 @@ def test_a_degree_beyond_the_body_rate_kernel_plans_when_nothing_is_certified() 
     with pytest.raises(avp.ConfigError) as exc:
         avp.moving.plan_moving_detailed(avp.State(position=[-3.0, 0.0, 1.0], velocity=[2.0, 0.0, 0.0]), pad, cfg)
     assert field_of(exc) == "config.degree"
+
+
+@pytest.mark.parametrize("make,field", [
+    (lambda: avp.PlannerConfig(degre=7), "config.degre"),
+    (lambda: avp.VehicleLimits(mas=1.0), "limits.mas"),
+    (lambda: avp.State(positon=[0.0, 0.0, 1.0]), "state.positon"),
+    (lambda: avp.LineTarget(vertices=[[0.0, 0.0, 1.0], [1.0, 0.0, 1.0]], pich=1.0), "line.pich"),
+    (lambda: avp.ReplanConfig(latancy=0.1), "replan.latancy"),
+    (lambda: avp.Workspace(ground=0.0), "workspace.ground"),
+])
+def test_a_misspelt_setting_is_a_config_error_naming_it(make, field) -> None:
+    """A keyword a public dataclass does not take was Python's TypeError; it is a ConfigError on
+    the keyword that lists the settings. Valid keywords, replace() and pickling are unchanged."""
+    import pickle
+
+    with pytest.raises(avp.ConfigError) as exc:
+        make()
+    assert exc.value.field == field and "setting" in str(exc.value)
+    cfg = dataclasses.replace(avp.PlannerConfig(), degree=8)
+    assert cfg.degree == 8 and pickle.loads(pickle.dumps(cfg)) == cfg
