@@ -742,9 +742,9 @@ def run_campaign(args: argparse.Namespace) -> int:
 # -- entry point ------------------------------------------------------------------------------
 
 PATH_FLAGS = ("config", "export", "output", "output_dir", "gif", "results", "summary_plot")
+"""The flags (``args`` attributes) that name a file or directory the command reads or writes."""
 DIRECTORY_FLAGS = ("output_dir",)
 """The flags of :data:`PATH_FLAGS` that name a directory the command writes its files in."""
-"""The flags (``args`` attributes) that name a file or directory the command reads or writes."""
 
 
 FIELD_FLAGS = {
