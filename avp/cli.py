@@ -581,22 +581,28 @@ LINE_UNUSED = ("incline_deg", "distance", "lateral", "height", "output_dir", "gi
 """``avp simulate`` flags (``args`` attributes) of the pad trials, which line trials do not use."""
 
 
-def _prepare_outputs(args: argparse.Namespace, names: Sequence[str]) -> None:
-    """Before any trial: the directories of the output flags ``names`` (``args`` attributes)
-    exist (created as the writers would create them) and can be written, and a file flag does not
-    name a directory, so that an unusable path is a usage error now, not after the trials (an
-    ``OSError`` naming the path, which :func:`main` reports on its flag)."""
+def _check_outputs(args: argparse.Namespace, names: Sequence[str]) -> None:
+    """Before any trial, without creating anything: the output flags ``names`` (``args``
+    attributes) can be written where they point (the nearest existing directory on the way is a
+    writable directory, not a file; a file flag does not name a directory, a directory flag not a
+    file), so that an unusable path is a usage error now, not after the trials (an ``OSError``
+    naming the path, which :func:`main` reports on its flag)."""
     for name in names:
         value = getattr(args, name, None)
         if value is None:
             continue
-        path = Path(value)
-        directory = path if name in DIRECTORY_FLAGS else path.parent
-        directory.mkdir(parents=True, exist_ok=True)
-        if not os.access(directory, os.W_OK):
-            raise PermissionError(errno.EACCES, "Permission denied", str(directory))
-        if name not in DIRECTORY_FLAGS and path.is_dir():
-            raise IsADirectoryError(errno.EISDIR, "Is a directory", str(path))
+        path = Path(value).absolute()
+        is_dir = name in DIRECTORY_FLAGS
+        if path.exists() and path.is_dir() != is_dir:
+            raise (NotADirectoryError(errno.ENOTDIR, "Not a directory", str(path)) if is_dir
+                   else IsADirectoryError(errno.EISDIR, "Is a directory", str(path)))
+        existing = path if is_dir else path.parent
+        while not existing.exists():
+            existing = existing.parent
+        if not existing.is_dir():
+            raise NotADirectoryError(errno.ENOTDIR, "Not a directory (a file is in the way)", str(existing))
+        if not os.access(existing, os.W_OK):
+            raise PermissionError(errno.EACCES, "Permission denied", str(existing))
 
 
 def _given(args: argparse.Namespace, names: Sequence[str]) -> list[str]:
@@ -623,7 +629,11 @@ def simulate(args: argparse.Namespace) -> int:
             also = f" (and {', '.join(given[1:])})" if len(given) > 1 else ""
             raise ConfigError(given[0], f"sets up the pad trials, which a line perch does not use: drop it{also}; "
                                         "--line-distance, --line-rise, --line-incline-deg place the line")
-        unused = sorted(k for k in settings.data.get("scenario", {}) if k != "backend")
+        table = settings.data.get("scenario", {})
+        if table.get("backend", "avp") != "avp":  # a file's [scenario] backend, as --simulator above
+            raise ConfigError("scenario.backend", f"line perches fly on avp's simulator only, not {table['backend']!r}; "
+                                                  "remove it from the --config file for a line run")
+        unused = sorted(k for k in table if k != "backend")
         if unused:
             raise ConfigError(f"scenario.{unused[0]}", "the line trials do not read the --config file's [scenario] "
                                                       "table (the pad trials' world): remove it for a line run")
@@ -634,7 +644,7 @@ def simulate(args: argparse.Namespace) -> int:
     if args.gif and not str(args.gif).lower().endswith(".gif"):
         raise ConfigError("--gif", f"the animation is a GIF: give a path ending in .gif, got {args.gif!r}")
     _refuse_swept_keys(settings)
-    _prepare_outputs(args, ("gif",) if args.no_plot else ("output_dir", "gif"))
+    _check_outputs(args, ("gif",) if args.no_plot else ("output_dir", "gif"))
     trials = campaign.grid(args.incline_deg, args.distance, args.lateral, _heights(args.height),
                            ("one_shot", "avp"), range(args.seed, args.seed + args.trials))
     runner = campaign.Runner(settings.data, keep_result=True)
@@ -712,7 +722,7 @@ def run_campaign(args: argparse.Namespace) -> int:
         raise ConfigError("--seed", f"must be >= 0 (a random generator seed), got {args.seed}")
     settings = _settings(args, _simulator_settings(args))
     _refuse_swept_keys(settings)
-    _prepare_outputs(args, ("results",) if args.no_plot else ("results", "summary_plot"))
+    _check_outputs(args, ("results",) if args.no_plot else ("results", "summary_plot"))
     trials = campaign.grid(args.incline_deg, args.distance, args.lateral, _heights(args.height), args.modes,
                            range(args.seed, args.seed + args.seeds))
     stats = campaign.run(trials, settings.data, args.results, backend=args.backend, workers=args.workers,

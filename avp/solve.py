@@ -228,8 +228,9 @@ def _backend_error(config: PlannerConfig, exc: Exception) -> AvpError:
     a back-end failure)."""
     text = str(exc)
     named = [k for k, _ in config.solver_options if re.search(rf"(?<![\w.]){re.escape(k)}(?!\w)", text)]
-    if named:
-        return ConfigError("config.solver_options", f"back-end '{config.solver}' refused {', '.join(named)}: {text}; "
+    if named:  # ProxQP lists every setting it was given: then it is one of them
+        which = named[0] if len(named) == 1 else f"one of {', '.join(named)}"
+        return ConfigError("config.solver_options", f"back-end '{config.solver}' refused {which}: {text}; "
                                                     "check its documentation for the names and types of its settings")
     return SolverError(f"QP back-end '{config.solver}' failed: {text}")
 

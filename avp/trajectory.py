@@ -120,6 +120,12 @@ def _times_array(field: str, values: npt.ArrayLike, n: int) -> Array:
     return k
 
 
+def _holds_booleans(t: list[Any] | tuple[Any, ...]) -> bool:
+    """Whether a (nested) list of times holds a boolean, which NumPy would read as 0 or 1 s."""
+    return any(_holds_booleans(x) if isinstance(x, (list, tuple)) else
+               isinstance(x, (bool, np.bool_)) or (isinstance(x, np.ndarray) and x.dtype == np.bool_) for x in t)
+
+
 class Trajectory:
     """A spline of ``S`` segments over the knots ``t0 < t1 < ... < tS``.
 
@@ -246,7 +252,7 @@ class Trajectory:
         t0, tf, tol = self._t0, self._tf, self._tol
         if isinstance(t, float) and t0 - tol <= t <= tf + tol:  # one time, in range
             return np.array([self.duration if t >= tf else max(t - t0, 0.0)]), ()
-        if isinstance(t, (list, tuple)) and any(isinstance(x, (bool, np.bool_)) for x in t):
+        if isinstance(t, (list, tuple)) and _holds_booleans(t):
             raise ConfigError("t", f"expected times in s (numbers), got booleans in {t!r}")  # NumPy reads 1.0
         try:
             raw = t if isinstance(t, np.ndarray) else np.asarray(t)

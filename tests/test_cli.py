@@ -509,3 +509,12 @@ def test_an_unusable_output_path_stops_before_any_trial(tmp_path, capsys, monkey
     argv = [command, "--json"] + [x for n in names for x in (n, bad[n] if n == flag else paths[n])]
     assert main(argv) == EXIT_USAGE
     assert json.loads(capsys.readouterr().out)["field"] == flag
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a_file"]  # the check created nothing
+
+
+def test_a_refused_run_leaves_no_output_directory(tmp_path, capsys) -> None:
+    """The output paths are checked without creating them: a run refused after the check (a
+    start behind the pad) leaves no directory behind."""
+    out = tmp_path / "new" / "sub"
+    assert main(["simulate", "--trials", "1", "--distance", "-1", "--output-dir", str(out)]) == EXIT_USAGE
+    assert not (tmp_path / "new").exists()

@@ -352,6 +352,8 @@ _T = avp.PerchTarget.from_incline([3.5, 0.0, 1.5], math.pi / 2)
         (lambda: avp.PlannerConfig(solver_options=3), "config.solver_options"),  # was SolverError when planning
         (lambda: avp.plan(_S, _T, avp.PlannerConfig(solver="osqp", solver_options={"foo": 1})),
          "config.solver_options"),  # OSQP's own words: "Unrecognized settings ['foo']"
+        (lambda: avp.plan(_S, _T, avp.PlannerConfig(solver="proxqp", solver_options={"foo": 1})),
+         "config.solver_options"),  # ProxQP lists the keywords it was given
         (lambda: avp.PlannerConfig(degree=3, position_cost_order=2, yaw_cost_order=2), "config.degree"),
         (lambda: avp.plan_moving(avp.State(position=[3, 0, 1], velocity=[2, 0, 0]),
                                  avp.MovingTarget.on_platform([0, 0, 1], incline=0.5, speed=2)),

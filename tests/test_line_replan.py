@@ -255,6 +255,9 @@ def test_cli_line_simulate_refuses_the_pad_trials_flags(capsys, flag) -> None:
 
 def test_cli_line_simulate_refuses_a_scenario_table_it_does_not_read(tmp_path, capsys) -> None:
     cfg = tmp_path / "s.toml"
+    cfg.write_text('[scenario]\nbackend = "rotorpy"\n')  # as --simulator rotorpy, which is refused
+    assert main(["simulate", "--line-pitch-deg", "20", "--trials", "1", "--no-plot", "--config", str(cfg)]) == EXIT_USAGE
+    assert "scenario.backend" in capsys.readouterr().err
     cfg.write_text("[scenario]\nincline = 0.5\n")
     assert main(["simulate", "--line-pitch-deg", "20", "--trials", "1", "--no-plot", "--config", str(cfg)]) == EXIT_USAGE
     assert "scenario.incline" in capsys.readouterr().err

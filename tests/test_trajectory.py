@@ -141,7 +141,8 @@ def test_trajectory_rejects_nan_coefficients() -> None:
         avp.Trajectory(c, [0.0, 1.0])
 
 
-@pytest.mark.parametrize("bad", ["0.5", None, True, [0.1, "0.2"], b"1", [0.5, True], 10**400, [0.1, 10**400]])
+@pytest.mark.parametrize("bad", ["0.5", None, True, [0.1, "0.2"], b"1", [0.5, True], 10**400, [0.1, 10**400],
+                                 [[True, 0.5]], [np.array(True), 0.5], [[0.2], [True]]])
 def test_times_that_are_not_numbers_are_typed_errors(bad) -> None:
     """A string, None or a boolean is no time (``"0.5"`` was evaluated at 0.5 s, ``None`` was
     reported as NaN)."""
