@@ -511,6 +511,8 @@ def test_a_degree_beyond_the_body_rate_kernel_plans_when_nothing_is_certified() 
     (lambda: avp.LineTarget(vertices=[[0.0, 0.0, 1.0], [1.0, 0.0, 1.0]], pich=1.0), "line.pich"),
     (lambda: avp.ReplanConfig(latancy=0.1), "replan.latancy"),
     (lambda: avp.Workspace(ground=0.0), "workspace.ground"),
+    (lambda: __import__("avp.sim.run", fromlist=["SimScenario"]).SimScenario(distanse=2.0), "scenario.distanse"),
+    (lambda: __import__("avp.sim.vehicle", fromlist=["VehicleParams"]).VehicleParams(mas=1.0), "vehicle.mas"),
 ])
 def test_a_misspelt_setting_is_a_config_error_naming_it(make, field) -> None:
     """A keyword a public dataclass does not take was Python's TypeError; it is a ConfigError on

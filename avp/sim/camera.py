@@ -49,6 +49,7 @@ def _default_camera() -> Camera:
     return Camera(range=10.0)
 
 
+@v.typed_keywords("camera")
 @dataclass(frozen=True, eq=False)
 class CameraParams:
     """The planner's :class:`avp.Camera` plus timing and the error model (module docstring).

@@ -70,6 +70,7 @@ class PerchPad:
         return bool(np.hypot(p_S[0], p_S[1]) <= self.half_size)
 
 
+@v.typed_keywords("criteria")
 @dataclass(frozen=True)
 class SuccessCriteria:
     """Thresholds of a successful perch (module docstring): angles in rad, speeds in m/s."""
@@ -203,6 +204,7 @@ def detect_contact(
     )
 
 
+@v.typed_keywords("perch_criteria")
 @dataclass(frozen=True)
 class PerchCriteria:
     """Success of a perch judged at the plan's contact time (the evaluation's definition).

@@ -109,6 +109,7 @@ class FlatReference:
         return cls(position, z, z, z, z, yaw, 0.0, 0.0)
 
 
+@v.typed_keywords("gains")
 @dataclass(frozen=True)
 class ControllerGains:
     """Normalised gains of (2): ``K_x = m k_x``, ``K_v = m k_v``, ``K_R = J k_R``, ``K_W = J k_W``.

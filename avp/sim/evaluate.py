@@ -317,6 +317,7 @@ def wilson_interval(successes: int, n: int, z: float = 1.959964) -> tuple[float,
     return (max(0.0, centre - half), min(1.0, centre + half))
 
 
+@v.typed_keywords("sim_config")
 @dataclass(frozen=True)
 class SimConfig:
     """Every realism knob of a sweep, as flat scalars (for CLI flags or a TOML table).

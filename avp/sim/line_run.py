@@ -35,6 +35,7 @@ from typing import Any
 
 import numpy as np
 
+from .. import _validate as v
 from .._typing import Array
 from ..config import PlannerConfig, ReplanConfig, Workspace
 from ..errors import AvpError, ConfigError
@@ -52,6 +53,7 @@ from .vehicle import RigidBodyState, VehicleParams
 __all__ = ["LineCriteria", "LineDetector", "LineScenario", "LineSimResult", "simulate_line"]
 
 
+@v.typed_keywords("detector")
 @dataclass(frozen=True)
 class LineDetector:
     """Line detection model (module docstring): rate (Hz) and per-axis noise ``sigma +
@@ -70,6 +72,7 @@ class LineDetector:
                 raise ConfigError(f"detector.{name}", f"must be >= 0 and finite, got {val}")
 
 
+@v.typed_keywords("criteria")
 @dataclass(frozen=True)
 class LineCriteria:
     """Success of a line perch at the contact time (module docstring): distances in m, ``angle``
@@ -81,6 +84,7 @@ class LineCriteria:
     clearance: float = 0.02
 
 
+@v.typed_keywords("scenario")
 @dataclass(frozen=True, eq=False)
 class LineScenario:
     """A line, a hover start and the noise of the world.

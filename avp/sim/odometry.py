@@ -20,6 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .. import _validate as v
 from ..errors import ConfigError
 from ..frames import expm_so3
 from .vehicle import RigidBodyState
@@ -27,6 +28,7 @@ from .vehicle import RigidBodyState
 __all__ = ["Odometry", "OdometryNoise", "noisy_odometry"]
 
 
+@v.typed_keywords("odometry")
 @dataclass(frozen=True)
 class OdometryNoise:
     """Odometry error model (per-axis standard deviations; module docstring).

@@ -45,6 +45,7 @@ from .vehicle import RigidBodyState, VehicleParams
 __all__ = ["MovingSimResult", "MovingSimScenario", "PlatformFilter", "PlatformNoise", "noisy_platform", "simulate_moving"]
 
 
+@v.typed_keywords("platform_noise")
 @dataclass(frozen=True)
 class PlatformNoise:
     """Standard deviations of the white noise on each platform-state estimate."""
@@ -104,6 +105,7 @@ class PlatformFilter:
         return self.fused
 
 
+@v.typed_keywords("scenario")
 @dataclass(frozen=True, eq=False)
 class MovingSimScenario:
     """A platform and a vehicle tracking it.

@@ -150,6 +150,7 @@ class AfterPlan(Enum):
     IDLE_THRUST = "idle: the final attitude kept and the thrust cut to the vehicle's minimum"
 
 
+@v.typed_keywords("platform")
 @dataclass(frozen=True)
 class PlatformMotion:
     """The pad carried by a moving platform (Gao et al., "Adaptive Tracking and Perching for
@@ -200,6 +201,7 @@ class PlatformMotion:
         return MotionModel.CTRV if self.turn_rate != 0.0 else MotionModel.CONSTANT_VELOCITY
 
 
+@v.typed_keywords("scenario")
 @dataclass(frozen=True, eq=False)
 class SimScenario:
     """Where the pad is, where the vehicle starts, and how noisy the world is.

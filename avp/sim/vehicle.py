@@ -51,6 +51,7 @@ __all__ = ["RigidBodyState", "VehicleParams", "step"]
 _E3 = np.array([0.0, 0.0, 1.0])
 
 
+@v.typed_keywords("vehicle")
 @dataclass(frozen=True, eq=False)
 class VehicleParams:
     """The simulated quadrotor: the planner's :class:`~avp.config.VehicleLimits` plus physics.
