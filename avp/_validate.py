@@ -179,10 +179,20 @@ def sequence(field: str, value: Any, what: str, single: tuple[type, ...] = ()) -
     return tuple(value)
 
 
+def keywords(prefix: str, cls: type, names: tuple[str, ...], kwargs: Mapping[str, Any], also: tuple[str, ...] = ()) -> None:
+    """Refuse a keyword of ``kwargs`` that is not among ``names`` (the settings of ``cls``; a
+    constructor's own arguments ``also``): a :class:`ConfigError` on ``prefix.<keyword>`` listing
+    them (Python's own error is a ``TypeError``, outside the library's one hierarchy)."""
+    unknown = next((k for k in kwargs if k not in names and k not in also), None)
+    if unknown is not None:
+        own = f" (and the constructor's {', '.join(also)})" if also else ""
+        raise ConfigError(f"{prefix}.{unknown}", f"is not a {cls.__name__} setting; use one of "
+                                                 f"{', '.join(map(repr, names))}{own}")
+
+
 def typed_keywords(prefix: str) -> Callable[[_Cls], _Cls]:
-    """Class decorator (above ``@dataclass``): a keyword the constructor does not take is a
-    :class:`ConfigError` on ``prefix.<keyword>`` listing the settings (Python's own error is a
-    ``TypeError``, outside the library's one hierarchy)."""
+    """Class decorator (above ``@dataclass``): the constructor refuses a keyword that is not a
+    field with :func:`keywords`."""
 
     def wrap(cls: _Cls) -> _Cls:
         init = vars(cls)["__init__"]  # the dataclass-generated constructor
@@ -192,8 +202,7 @@ def typed_keywords(prefix: str) -> Callable[[_Cls], _Cls]:
         @functools.wraps(init)
         def checked_init(self: Any, *args: Any, **kwargs: Any) -> None:
             if not known.issuperset(kwargs):
-                unknown = next(k for k in kwargs if k not in known)
-                raise ConfigError(f"{prefix}.{unknown}", f"is not a {cls.__name__} setting; use one of {', '.join(names)}")
+                keywords(prefix, cls, names, kwargs)
             init(self, *args, **kwargs)
 
         setattr(cls, "__init__", checked_init)  # noqa: B010  # (a method assignment mypy refuses)

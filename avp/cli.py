@@ -278,8 +278,11 @@ def demo_geometry(incline_deg: float, distance: float, lateral: float, height: f
 DEMO_DEFAULTS: dict[str, Any] = {"incline_deg": 90.0, "distance": 3.5, "lateral": 0.0, "output": "perch_demo.png"}
 """The pad demo's geometry and plot path when their flags are not given."""
 
-PAD_FLAGS = ("incline_deg", "distance", "lateral", "height", "output")
-"""``avp demo`` flags (``args`` attributes) of a pad perch only: a line perch refuses them."""
+PAD_GEOMETRY = ("incline_deg", "distance", "lateral", "height")
+"""``avp demo`` flags (``args`` attributes) that place the pad and the start (:func:`demo_geometry`)."""
+
+PAD_FLAGS = (*PAD_GEOMETRY, "output")
+"""``avp demo`` flags of a pad perch only: a line perch refuses them."""
 
 
 def _demo_parser(sub: Any, common: argparse.ArgumentParser) -> None:
@@ -319,13 +322,19 @@ def _check_demo_flags(args: argparse.Namespace) -> None:
             if getattr(args, name) is None:
                 setattr(args, name, value)
         return
-    given = ["--" + name.replace("_", "-") for name in PAD_FLAGS if getattr(args, name) is not None]
+    given = _given(args, PAD_FLAGS)  # their defaults are None: given at all
     if "--output" in given:
         raise ConfigError("--output", "avp.plotting draws pad perches only, a line perch has no plot: drop --output "
                                       "(--export FILE writes the plan, --json prints it)")
+    _refuse_for_a_line(given, "places the pad demo's start")
+
+
+def _refuse_for_a_line(given: list[str], what: str) -> None:
+    """A :class:`ConfigError` on the first of the pad flags ``given`` to a line perch, which ``what``
+    (its use for a pad) a line perch does not need; nothing when none was given."""
     if given:
         also = f" (and {', '.join(given[1:])})" if len(given) > 1 else ""
-        raise ConfigError(given[0], f"places the pad demo's start, which a line perch does not use: drop it{also}; "
+        raise ConfigError(given[0], f"{what}, which a line perch does not use: drop it{also}; "
                                     "--line-distance, --line-rise, --line-incline-deg place the line")
 
 
@@ -624,11 +633,8 @@ def simulate(args: argparse.Namespace) -> int:
     if args.line_pitch_deg is not None:  # closed-loop line perches (avp/cli_line.py)
         if args.simulator not in (None, "avp"):
             raise ConfigError("--simulator", "line perches fly on avp's simulator only; drop --simulator/--backend rotorpy")
-        given = _given(args, LINE_UNUSED)  # after _simulator_settings: --backend avp is the default back-end
-        if given:
-            also = f" (and {', '.join(given[1:])})" if len(given) > 1 else ""
-            raise ConfigError(given[0], f"sets up the pad trials, which a line perch does not use: drop it{also}; "
-                                        "--line-distance, --line-rise, --line-incline-deg place the line")
+        # after _simulator_settings: --backend avp is the default back-end
+        _refuse_for_a_line(_given(args, LINE_UNUSED), "sets up the pad trials")
         table = settings.data.get("scenario", {})
         if table.get("backend", "avp") != "avp":  # a file's [scenario] backend, as --simulator above
             raise ConfigError("scenario.backend", f"line perches fly on avp's simulator only, not {table['backend']!r}; "
@@ -782,7 +788,7 @@ def _with_flag(args: argparse.Namespace, error: AvpError) -> AvpError:
         flag = "--" + name.replace("_", "-")
         return ConfigError(flag, f"{getattr(args, name)!r} gives {error.field}: {error.message}")
     if field in GEOMETRY_FIELDS and args.command == "demo" and getattr(args, "line_pitch_deg", None) is None:
-        place = " ".join(f"--{n.replace('_', '-')} {getattr(args, n):g}" for n in ("incline_deg", "distance", "lateral", "height")
+        place = " ".join(f"--{n.replace('_', '-')} {getattr(args, n):g}" for n in PAD_GEOMETRY
                          if getattr(args, n, None) is not None)
         return ConfigError(error.field, f"{error.message} (the demo's geometry: {place})")
     return error

@@ -248,13 +248,10 @@ class LineTarget:
 
 
 def _check_settings(kwargs: dict[str, Any], own: tuple[str, ...] = ("start", "end")) -> None:
-    """The keyword arguments of a :class:`LineTarget` constructor are its fields (not
-    ``vertices``, which the constructor builds) besides the constructor's ``own`` arguments."""
-    names = {f.name for f in fields(LineTarget)} - {"vertices"}
-    unknown = sorted(set(kwargs) - names)
-    if unknown:
-        raise ConfigError(f"line.{unknown[0]}", f"is not a LineTarget setting; use one of {sorted(names)} "
-                                                f"(and the constructor's {', '.join(own)})")
+    """A constructor's keywords are :class:`LineTarget` fields (not ``vertices``, which it builds)
+    or its ``own`` arguments, checked before the constructor builds the vertices."""
+    names = tuple(f.name for f in fields(LineTarget) if f.name != "vertices")
+    v.keywords("line", LineTarget, names, kwargs, own)
 
 
 @dataclass(frozen=True)

@@ -117,8 +117,9 @@ class LineReplanner(Replanner):
         b3 = traj.attitude(traj.tf, rotor_drag=self.config.limits.rotor_drag)[:, 2]
         grasp = traj(traj.tf) - committed.gripper_offset * b3
         k, distance = estimate.closest(grasp)
-        d_committed = np.diff(committed.vertices[committed.grasp_piece:committed.grasp_piece + 2], axis=0)[0]
-        d_estimate = np.diff(estimate.vertices[k:k + 2], axis=0)[0]
+        A, B = committed.piece(committed.grasp_piece)
+        C, D = estimate.piece(k)
+        d_committed, d_estimate = B - A, D - C
         c = abs(float(d_committed @ d_estimate)) / (float(np.linalg.norm(d_committed)) * float(np.linalg.norm(d_estimate)))
         return distance, math.acos(min(1.0, c))
 
