@@ -109,9 +109,9 @@ fn round_up(d: &Dyadic) -> Option<f64> {
     Some(if negative { -magnitude } else { magnitude })
 }
 
-/// Exact coefficients in `u` of the `order`-th derivative of one axis polynomial at `t = T u`,
-/// given `t_pows[k] = T^k`.
-fn axis_derivative(c: &[f64], order: usize, t_pows: &[Dyadic]) -> Vec<Dyadic> {
+/// Exact coefficients `d_k = c[k + order] (k + order)! / k!` of the `order`-th derivative of
+/// one axis polynomial in `t`; at `t = T u` its coefficient of `u^k` is `d_k T^k`.
+fn axis_derivative(c: &[f64], order: usize) -> Vec<Dyadic> {
     let n = c.len();
     if n <= order {
         return Vec::new();
@@ -120,11 +120,29 @@ fn axis_derivative(c: &[f64], order: usize, t_pows: &[Dyadic]) -> Vec<Dyadic> {
         .map(|k| {
             // (k + order)! / k!
             let falling: u64 = ((k + 1)..=(k + order)).map(|j| j as u64).product();
-            let mut term = Dyadic::from_f64(c[k + order]).mul(&t_pows[k]);
+            let mut term = Dyadic::from_f64(c[k + order]);
             term.m *= falling;
             term
         })
         .collect()
+}
+
+/// `v[m] * t^m` for every `m`, exactly: a square norm of polynomials whose coefficients of
+/// `u^k` are `d_k T^k` has the coefficient `T^m sum_{i+j=m} d_i d_j` of `u^m`, so the powers of
+/// `T` are applied once per coefficient instead of inside every product.
+fn scale_by_powers(v: &mut [Dyadic], t: &Dyadic) {
+    let mut power = Dyadic {
+        m: BigInt::from(1),
+        e: 0,
+    };
+    for (m, coefficient) in v.iter_mut().enumerate() {
+        if m > 0 {
+            power = power.mul(t);
+        }
+        if !coefficient.m.is_zero() && m > 0 {
+            *coefficient = coefficient.mul(&power);
+        }
+    }
 }
 
 /// Exact coefficients of `sum_axis p_axis(u)^2` (length `2 max_len - 1`, at least 1).
@@ -238,27 +256,20 @@ pub fn trackability_rows(
     for seg in 0..spline.n_segments() {
         let mut t = Dyadic::from_f64(knots[seg + 1]);
         t.add_assign(&Dyadic::from_f64(knots[seg]).neg());
-        let mut t_pows = Vec::with_capacity(n_c);
-        t_pows.push(Dyadic {
-            m: BigInt::from(1),
-            e: 0,
-        });
-        for k in 1..n_c {
-            let next = t_pows[k - 1].mul(&t);
-            t_pows.push(next);
-        }
+        // sums of products without the powers of T (scale_by_powers applies them)
         let snap_axes: Vec<Vec<Dyadic>> = (0..3)
-            .map(|a| axis_derivative(spline.poly(seg, a), 4, &t_pows))
+            .map(|a| axis_derivative(spline.poly(seg, a), 4))
             .collect();
         let snap = square_norm(&snap_axes);
         if with_snap {
             let mut total = snap.clone();
+            scale_by_powers(&mut total, &t);
             total[0].add_assign(&s2);
             rounded(&total, width, &mut out)?;
         }
         if with_ratio {
             let mut acc: Vec<Vec<Dyadic>> = (0..3)
-                .map(|a| axis_derivative(spline.poly(seg, a), 2, &t_pows))
+                .map(|a| axis_derivative(spline.poly(seg, a), 2))
                 .collect();
             if acc[2].is_empty() {
                 acc[2].push(Dyadic::zero());
@@ -272,6 +283,7 @@ pub fn trackability_rows(
             for (i, f) in thrust.iter().enumerate() {
                 total[i].add_assign(&f.mul(&k2));
             }
+            scale_by_powers(&mut total, &t);
             rounded(&total, width, &mut out)?;
         }
     }
