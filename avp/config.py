@@ -937,6 +937,20 @@ class ReplanConfig:
         of 8.4 ms. ``(1, 0.5, 0.25, 0.125)``: with ``(1, 0.5, 0.25)`` 1/6 (4.5 m) and
         4/6 (7.5 m) wall perches succeeded, with the extra 1/8 step 2/6 and 3/6 (6 seeds each;
         repeated small commits accumulate).
+    partial_min_correction:
+        A latency knob, off (0) by default. In an anchored step, a partial fraction is tried
+        only when it moves the goal by more than this (m for the pad centre, rad for its normal,
+        as ``target_tolerance``); a step that re-anchors on odometry tries every fraction (its
+        plan also corrects the tracking). The steps that make four to six solves are late, small
+        corrections (4-15 mm, 0.2-0.8 deg, measured) whose full correction fails a certificate
+        while a fraction of a few mm certifies. At ``target_tolerance`` (5 mm) the 30 Hz loop of
+        avp's model (``benchmarks/bench_replan.py --seeds 6 --gc-freeze``) had a step p99 of 3.1
+        instead of 4.3 ms and 5 instead of 19 steps over 5 ms of about 2,450 (with ``deadline``
+        5 ms: p99 3.2 ms, none over 5 ms). The price: a few mm still move the contact. On
+        rotorpy's realistic wall (seeds 0-199, 4.5 and 7.5 m) AVP perched 6 fewer of 400 (the
+        four of seeds 100-199 at 4.5 m ended 3.0-3.2 cm off the pad's plane, where the fractions
+        had left them 2.5-2.9 cm, inside the 3 cm tolerance); on avp's model 2 fewer of 600
+        (walls and slopes). ``docs/performance.md`` has the figures.
     reach_tolerance:
         Distance (m) between the committed contact point and the latest estimate above which a
         step without a full correction reports ``CANNOT_REACH``. 0.05 m: half the in-plane
@@ -1060,6 +1074,7 @@ class ReplanConfig:
     target_tolerance: float = 0.005
     reach_acceleration: float = 6.0
     partial_fractions: tuple[float, ...] = (1.0, 0.5, 0.25, 0.125)
+    partial_min_correction: float = 0.0
     reach_tolerance: float = 0.05
     reach_angle_tolerance: float = math.radians(10.0)
     snap_max: float = 600.0
@@ -1085,6 +1100,8 @@ class ReplanConfig:
             val = v.finite_float(f"replan.{name}", getattr(self, name))
             if val < 0:
                 raise ConfigError(f"replan.{name}", f"must be >= 0 (0: never anchor / never hold), got {val}")
+        object.__setattr__(self, "partial_min_correction",
+                           v.nonnegative_float("replan.partial_min_correction", self.partial_min_correction))
         v.positive_float("replan.reach_acceleration", self.reach_acceleration, allow_inf=True)
         v.positive_float("replan.reach_tolerance", self.reach_tolerance)
         if not 0.0 < v.finite_float("replan.reach_angle_tolerance", self.reach_angle_tolerance) <= math.pi:

@@ -277,7 +277,8 @@ UNITS: dict[str, str] = {
     "ReplanConfig.latency": "s", "ReplanConfig.freeze_horizon": "s", "ReplanConfig.deadline": "s",
     "ReplanConfig.reach_tolerance": "m", "ReplanConfig.reach_angle_tolerance": "rad",
     "ReplanConfig.anchor_position": "m", "ReplanConfig.anchor_velocity": "m/s",
-    "ReplanConfig.target_tolerance": "m (rad for the normal)", "ReplanConfig.reach_acceleration": "m/s^2",
+    "ReplanConfig.target_tolerance": "m (rad for the normal)",
+    "ReplanConfig.partial_min_correction": "m (rad for the normal)", "ReplanConfig.reach_acceleration": "m/s^2",
     "ReplanConfig.snap_max": "m/s^4", "ReplanConfig.snap_thrust_max": "1/s^2", "ReplanConfig.retime_min_time": "s",
     # OverhangFlip
     "OverhangFlip.min_incline": "rad", "OverhangFlip.thrust": "m/s^2", "OverhangFlip.turn_rate": "rad/s",

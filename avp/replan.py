@@ -466,6 +466,14 @@ class Replanner:
                           f"and its centre moved {shift:.3f} m, beyond the budget {budget:.3f} m: no partial "
                           "correction blends two such frames")
         fractions = rc.partial_fractions if self._static_pad and not flipped else (1.0,)
+        too_small = ""  # set when partial_min_correction left fractions out
+        if anchored and rc.partial_min_correction > 0.0 and len(fractions) > 1:
+            worth = tuple(fr for fr in fractions[1:]
+                          if fr * f_max * max(shift, turn) > rc.partial_min_correction)
+            if len(worth) < len(fractions) - 1:
+                too_small = (f"; {len(fractions) - 1 - len(worth)} partial correction(s) not tried (at most "
+                             f"partial_min_correction {rc.partial_min_correction:g})")
+                fractions = (fractions[0], *worth)
         elapsed_total, n_solves, last_reason = 0.0, 0, ""
         last_result: PlanResult | None = None
         smallest: tuple[PlanResult, SnapReport | None, PerchTarget, float] | None = None
@@ -606,7 +614,7 @@ class Replanner:
         if pending_retry is not None and not fraction_tried:  # no fraction to try: the deadline cut the retries
             self._resume = pending_retry
             backoff_note += "; the deadline left the retimed retries still due to the next step"
-        return record(ReplanAction.KEPT_PREVIOUS, last_reason + backoff_note, anticipated=start, result=last_result,
+        return record(ReplanAction.KEPT_PREVIOUS, last_reason + backoff_note + too_small, anticipated=start, result=last_result,
                       solve_time=elapsed_total, anchored=anchored, n_solves=n_solves)
 
     def _durations(self, committed: Trajectory, t_ex: float, total: float) -> Array:

@@ -37,7 +37,8 @@ def add_vehicle_options(ap: argparse.ArgumentParser) -> None:
 
 def add_timing_options(ap: argparse.ArgumentParser) -> None:
     """``--deadline-ms``: :attr:`avp.ReplanConfig.deadline` of AVP's steps, in ms;
-    ``--adapt-latency``: :attr:`avp.ReplanConfig.adapt_latency`; and ``--no-retime-backoff``:
+    ``--adapt-latency``: :attr:`avp.ReplanConfig.adapt_latency`; ``--partial-min-correction``:
+    :attr:`avp.ReplanConfig.partial_min_correction`; and ``--no-retime-backoff``:
     :attr:`avp.ReplanConfig.retime_backoff` off."""
     ap.add_argument("--deadline-ms", type=float, default=None,
                     help="ReplanConfig.deadline (ms) of AVP's steps: a solve starts only while it is predicted "
@@ -45,15 +46,20 @@ def add_timing_options(ap: argparse.ArgumentParser) -> None:
     ap.add_argument("--adapt-latency", action="store_true",
                     help="ReplanConfig.adapt_latency: switch to a new plan no sooner than latency_margin times "
                          "the recent median planning call (decisions then depend on this machine's speed)")
+    ap.add_argument("--partial-min-correction", type=float, default=0.0,
+                    help="ReplanConfig.partial_min_correction (m, rad): in an anchored step, a partial fraction "
+                         "is tried only when it moves the goal by more than this")
     ap.add_argument("--no-retime-backoff", action="store_true",
                     help="ReplanConfig.retime_backoff off: retimed retries at every step, also right after "
                          "a step whose retries all failed")
 
 
 def replan_config(args: argparse.Namespace) -> ReplanConfig | None:
-    """The replanning policy ``--deadline-ms``, ``--adapt-latency`` and ``--no-retime-backoff``
-    ask for (``None``: the default policy)."""
-    if args.deadline_ms is None and not args.adapt_latency and not args.no_retime_backoff:
+    """The replanning policy ``--deadline-ms``, ``--adapt-latency``, ``--partial-min-correction``
+    and ``--no-retime-backoff`` ask for (``None``: the default policy)."""
+    if args.deadline_ms is None and not args.adapt_latency and not args.no_retime_backoff \
+            and not args.partial_min_correction:
         return None
     return ReplanConfig(deadline=None if args.deadline_ms is None else args.deadline_ms * 1e-3,
-                        adapt_latency=bool(args.adapt_latency), retime_backoff=not args.no_retime_backoff)
+                        adapt_latency=bool(args.adapt_latency), retime_backoff=not args.no_retime_backoff,
+                        partial_min_correction=args.partial_min_correction)

@@ -249,6 +249,49 @@ def test_fractions_are_tried_full_then_smallest_then_largest_between(monkeypatch
         assert np.linalg.norm(rp.committed_target.point - WALL.point) == pytest.approx(0.04 * want_fraction)
 
 
+@pytest.mark.parametrize(("minimum", "want_tried", "want_fraction", "not_tried"),
+                         [(0.0, [1.0, 0.125, 0.5, 0.25], 0.25, 0),  # the default: every fraction
+                          (0.006, [1.0, 0.25, 0.5], 0.25, 1),  # 1/8 moves the goal by 5 mm: left out
+                          (0.015, [1.0, 0.5], 0.0, 2),  # 1/4 (10 mm) too: 1/2 is the only fraction
+                          (0.02, [1.0], 0.0, 3)])  # 1/2 moves it by exactly 20 mm: not more than the minimum
+def test_partial_min_correction_leaves_out_the_fractions_that_move_the_goal_too_little(
+        monkeypatch, minimum, want_tried, want_fraction, not_tried):
+    """An anchored step tries only the fractions that move the goal (by 40 mm here) by more than
+    ``partial_min_correction``, in the usual order (full, smallest, the ones between; 1/4 and 1/8
+    certify), and a step that commits nothing says how many it left out."""
+    rp, tried = _fraction_probe(monkeypatch, lambda f: f <= 0.25, ReplanConfig(partial_min_correction=minimum))
+    t = 0.4
+    s = rp.step(t, _fly_reference(rp, t), MOVED)
+    assert s.anchored
+    assert tried == pytest.approx(want_tried) and s.n_solves == len(want_tried)
+    assert s.fraction == pytest.approx(want_fraction)
+    if want_fraction:
+        assert s.action is ReplanAction.PARTIAL
+    else:
+        assert s.action is ReplanAction.KEPT_PREVIOUS
+        assert f"{not_tried} partial correction(s) not tried (at most partial_min_correction" in s.reason
+
+
+def test_partial_min_correction_does_not_apply_to_a_step_that_re_anchors(monkeypatch):
+    """A step whose odometry left the committed reference re-anchors on it, and its plan corrects
+    the tracking too: it tries every fraction whatever ``partial_min_correction`` says."""
+    rp, tried = _fraction_probe(monkeypatch, lambda f: False, ReplanConfig(partial_min_correction=1.0))
+    t = 0.4
+    odo = _fly_reference(rp, t)
+    odo = dataclasses.replace(odo, position=odo.position + [0.0, 0.0, 0.2])  # 0.2 m > anchor_position
+    s = rp.step(t, odo, MOVED)
+    assert not s.anchored
+    assert tried == pytest.approx([1.0, 0.125])  # full, then the smallest (which fails: no others)
+    assert "partial_min_correction" not in s.reason
+
+
+def test_partial_min_correction_is_checked():
+    with pytest.raises(avp.ConfigError, match="replan.partial_min_correction"):
+        ReplanConfig(partial_min_correction=-0.001)
+    with pytest.raises(avp.ConfigError, match="replan.partial_min_correction"):
+        ReplanConfig(partial_min_correction=math.nan)
+
+
 def test_a_deadline_commits_the_certified_smallest_correction(monkeypatch):
     """With a deadline that leaves no room for a third solve, the 1/8 correction already
     certified is committed (not thrown away for a KEPT_PREVIOUS); a first solve that overruns
