@@ -35,10 +35,18 @@ def frozen_array(field: str, value: Any, shape: tuple[int, ...]) -> npt.NDArray[
             arr = arr.reshape(shape)
         else:
             raise ConfigError(field, f"expected shape {shape}, got {arr.shape}")
-    if not np.all(np.isfinite(arr)):
+    if not _all_finite(arr):
         raise ConfigError(field, "contains NaN or inf; pass finite values")
     arr.setflags(write=False)
     return arr
+
+
+def _all_finite(arr: npt.NDArray[np.float64]) -> bool:
+    """Every entry of a float array is finite (a Python loop for the small arrays of the
+    planner's inputs, where it is several times cheaper than NumPy's dispatch)."""
+    if arr.size <= 16:
+        return all(map(math.isfinite, arr.ravel().tolist()))
+    return bool(np.isfinite(arr).all())
 
 
 def vector(field: str, value: Any, size: int = 3) -> npt.NDArray[np.float64]:
@@ -80,7 +88,14 @@ of failing clearly."""
 def within(field: str, value: Any, kind: str) -> None:
     """Raise :class:`ConfigError` when ``max |value|`` exceeds :data:`LIMITS` ``[kind]``."""
     limit, unit = LIMITS[kind]
-    size = float(np.max(np.abs(value)))
+    if isinstance(value, float):
+        size = abs(value)
+    elif isinstance(value, np.ndarray) and 0 < value.size <= 16 and value.dtype == np.float64:
+        entries = value.ravel().tolist()
+        # NaN propagates through np.max (no refusal here: finiteness is checked apart)
+        size = math.nan if any(map(math.isnan, entries)) else max(map(abs, entries))
+    else:
+        size = float(np.max(np.abs(value)))
     if size > limit:
         raise ConfigError(field, f"has magnitude {size:.3g} {unit}, beyond {limit:g} {unit}: not a physical "
                           f"{kind.replace('_', ' ')} of a flight (check the units and the frame)")
@@ -145,13 +160,18 @@ def flags(prefix: str, obj: Any) -> None:
             raise ConfigError(f"{prefix}.{f.name}", f"expected True or False, got {value!r} ({type(value).__name__})")
 
 
+_EYE3 = np.eye(3)
+_EYE3.setflags(write=False)
+
+
 def rotation(field: str, value: Any) -> npt.NDArray[np.float64]:
     """A proper rotation matrix (orthonormal, det +1), read-only."""
     R = frozen_array(field, value, (3, 3))
-    err = float(np.max(np.abs(R.T @ R - np.eye(3))))
+    err = max(map(abs, (R.T @ R - _EYE3).ravel().tolist()))
     if err > ORTHONORMAL_TOL:
         raise ConfigError(field, f"is not orthonormal (max |R^T R - I| = {err:.2e}); pass a rotation matrix")
-    det = float(np.linalg.det(R))
+    (a0, a1, a2), (b0, b1, b2), (c0, c1, c2) = R.tolist()
+    det = a0 * (b1 * c2 - b2 * c1) - a1 * (b0 * c2 - b2 * c0) + a2 * (b0 * c1 - b1 * c0)
     if abs(det - 1.0) > ORTHONORMAL_TOL:
         raise ConfigError(field, f"has determinant {det:.3f}; a rotation needs +1 (right-handed frame)")
     return R
@@ -160,7 +180,7 @@ def rotation(field: str, value: Any) -> npt.NDArray[np.float64]:
 def unit_vector(field: str, value: Any, zero: str = "must be a nonzero vector") -> npt.NDArray[np.float64]:
     """``value`` normalised to unit length; rejects (near) zero vectors (message ``zero``)."""
     v = np.array(frozen_array(field, value, (3,)))
-    scale = float(np.max(np.abs(v)))
+    scale = max(map(abs, v.tolist()))
     if scale > 1e150:  # |v| would overflow: scaled first
         v = v / scale
     n = float(np.linalg.norm(v))

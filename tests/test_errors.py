@@ -7,9 +7,13 @@ import math
 
 import numpy as np
 import pytest
+from hypothesis import assume, given, settings
+from hypothesis import strategies as st
 from scenarios import standard
 
 import avp
+from avp import _validate
+from avp._validate import LIMITS
 
 
 def field_of(exc_info: pytest.ExceptionInfo[avp.ConfigError]) -> str:
@@ -524,3 +528,55 @@ def test_a_misspelt_setting_is_a_config_error_naming_it(make, field) -> None:
     assert exc.value.field == field and "setting" in str(exc.value)
     cfg = dataclasses.replace(avp.PlannerConfig(), degree=8)
     assert cfg.degree == 8 and pickle.loads(pickle.dumps(cfg)) == cfg
+
+
+_ENTRY = st.one_of(st.floats(allow_nan=True, allow_infinity=True, width=64),
+                   st.sampled_from([0.0, -0.0, 1e300, -1e300, 1e7, 999_999.0, 1e6, math.nan, math.inf]))
+
+
+@settings(max_examples=400, deadline=None)
+@given(st.lists(_ENTRY, min_size=1, max_size=20), st.sampled_from(sorted(LIMITS)))
+def test_the_validators_small_array_paths_decide_as_numpy(entries, kind) -> None:
+    """The Python loops ``within`` and ``frozen_array`` take on small float arrays (and floats)
+    refuse exactly what NumPy's reductions refuse: ``max |x| > limit`` with NaN propagating
+    (never a refusal by ``within``), and any non-finite entry."""
+    arr = np.array(entries)
+    limit = LIMITS[kind][0]
+    for value in (arr, arr.reshape(1, -1), float(entries[0])):
+        numpy_refuses = bool(float(np.max(np.abs(value))) > limit)
+        try:
+            _validate.within("x", value, kind)
+        except avp.ConfigError:
+            refused = True
+        else:
+            refused = False
+        assert refused == numpy_refuses
+    assert _validate._all_finite(arr) == bool(np.isfinite(arr).all())
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.lists(st.floats(-2.0, 2.0), min_size=9, max_size=9))
+def test_the_rotation_check_decides_as_numpy(entries) -> None:
+    """``rotation`` (a Python determinant) accepts exactly the matrices NumPy's
+    ``R^T R - I`` and ``det`` accept, away from the tolerance's edge; rotations always pass."""
+    R = np.array(entries).reshape(3, 3)
+    err = float(np.max(np.abs(R.T @ R - np.eye(3))))
+    det = float(np.linalg.det(R))
+    tol = _validate.ORTHONORMAL_TOL
+    assume(abs(err - tol) > 1e-12 and abs(abs(det - 1.0) - tol) > 1e-12)
+    try:
+        _validate.rotation("R", R)
+    except avp.ConfigError:
+        accepted = False
+    else:
+        accepted = True
+    assert accepted == (err <= tol and abs(det - 1.0) <= tol)
+    q = np.array(entries[:4]) + [1e-3, 0.0, 0.0, 0.0]
+    q /= np.linalg.norm(q)
+    w, x, y, z = q
+    Rq = np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+                   [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+                   [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
+    assert np.array_equal(_validate.rotation("R", Rq), Rq)
+    with pytest.raises(avp.ConfigError, match="determinant"):
+        _validate.rotation("R", -Rq)
