@@ -942,7 +942,7 @@ class ReplanConfig:
         only when it moves the goal by more than this (m for the pad centre, rad for its normal,
         as ``target_tolerance``); a step that re-anchors on odometry tries every fraction (its
         plan also corrects the tracking). The steps that make four to six solves are late, small
-        corrections (4-15 mm, 0.2-0.8 deg, measured) whose full correction fails a certificate
+        corrections (4-14 mm, 0.15-0.5 deg, measured) whose full correction fails a certificate
         while a fraction of a few mm certifies. At ``target_tolerance`` (5 mm) the 30 Hz loop of
         avp's model (``benchmarks/bench_replan.py --seeds 6 --gc-freeze``) had a step p99 of 3.1
         instead of 4.3 ms and 5 instead of 19 steps over 5 ms of about 2,450 (with ``deadline``
