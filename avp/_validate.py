@@ -90,7 +90,7 @@ def within(field: str, value: Any, kind: str) -> None:
     limit, unit = LIMITS[kind]
     if isinstance(value, float):
         size = abs(value)
-    elif isinstance(value, np.ndarray) and 0 < value.size <= 16 and value.dtype == np.float64:
+    elif type(value) is np.ndarray and 0 < value.size <= 16 and value.dtype == np.float64:
         entries = value.ravel().tolist()
         # NaN propagates through np.max (no refusal here: finiteness is checked apart)
         size = math.nan if any(map(math.isnan, entries)) else max(map(abs, entries))

@@ -938,10 +938,12 @@ class ReplanConfig:
         4/6 (7.5 m) wall perches succeeded, with the extra 1/8 step 2/6 and 3/6 (6 seeds each;
         repeated small commits accumulate).
     partial_min_correction:
-        A latency knob, off (0) by default. In an anchored step, a partial fraction is tried
-        only when it moves the goal by more than this (m for the pad centre, rad for its normal,
-        as ``target_tolerance``); a step that re-anchors on odometry tries every fraction (its
-        plan also corrects the tracking). The steps that make four to six solves are late, small
+        A latency knob, off (0) by default. In an anchored step, a fraction after the first of
+        ``partial_fractions`` is tried only when it moves the goal by more than this (m for the
+        pad centre, rad for its normal, as ``target_tolerance``); the first is always tried, and
+        a step that re-anchors on odometry tries every fraction (its plan also corrects the
+        tracking). A static pad only, as ``partial_fractions`` (a moving pad, a line and a
+        flipped normal try the full correction alone). The steps that make four to six solves are late, small
         corrections (4-14 mm, 0.15-0.5 deg, measured) whose full correction fails a certificate
         while a fraction of a few mm certifies. At ``target_tolerance`` (5 mm) the 30 Hz loop of
         avp's model (``benchmarks/bench_replan.py --seeds 6 --gc-freeze``) had a step p99 of 3.1

@@ -508,7 +508,8 @@ class Replanner:
                 return commit(*smallest)
             if not fraction_tried and (pending_retry is not None or len(order) > 1):
                 self._resume = pending_retry if pending_retry is not None else 0
-            return record(ReplanAction.KEPT_PREVIOUS, f"deadline {(clock.deadline or 0.0) * 1e3:.1f} ms: {reason}{backoff_note}",
+            return record(ReplanAction.KEPT_PREVIOUS,
+                          f"deadline {(clock.deadline or 0.0) * 1e3:.1f} ms: {reason}{backoff_note}{too_small}",
                           anticipated=start, result=result, solve_time=elapsed_total, anchored=anchored,
                           n_solves=n_solves)
 

@@ -272,6 +272,19 @@ def test_partial_min_correction_leaves_out_the_fractions_that_move_the_goal_too_
         assert f"{not_tried} partial correction(s) not tried (at most partial_min_correction" in s.reason
 
 
+def test_a_step_the_deadline_ends_says_which_fractions_partial_min_correction_left_out(monkeypatch):
+    """With a deadline that leaves room for one solve, the step ends before its smallest fraction
+    (1/4 here, 1/8 being left out): its reason says both."""
+    rp, tried = _fraction_probe(monkeypatch, lambda f: False,
+                                ReplanConfig(partial_min_correction=0.006, deadline=1.5), elapsed=1.0)
+    t = 0.4
+    s = rp.step(t, _fly_reference(rp, t), MOVED)
+    assert tried == pytest.approx([1.0])
+    assert s.action is ReplanAction.KEPT_PREVIOUS
+    assert "no time for 25 % of the correction" in s.reason
+    assert "1 partial correction(s) not tried (at most partial_min_correction 0.006)" in s.reason
+
+
 def test_partial_min_correction_does_not_apply_to_a_step_that_re_anchors(monkeypatch):
     """A step whose odometry left the committed reference re-anchors on it, and its plan corrects
     the tracking too: it tries every fraction whatever ``partial_min_correction`` says."""
