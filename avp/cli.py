@@ -260,7 +260,7 @@ DEMO_GROUND_Z = 0.0
 def demo_geometry(incline_deg: float, distance: float, lateral: float, height: float | None) -> tuple[Any, Any, float]:
     """The demo's start state, pad and start height above the pad (m).
 
-    Default height above the pad: 1 m below a 45 deg incline, 0 up to 90 deg, and -1 m (below the
+    Default height above the pad: +1 m for inclines below 45 deg, 0 up to 90 deg, and -1 m (below the
     pad) for ceilings and overhangs above 90 deg, whose outward side faces down. The lower of
     start and pad is at :data:`DEMO_PAD_HEIGHT`, the ground is at z = 0."""
     from .types import PerchTarget, State
@@ -303,8 +303,8 @@ def _demo_parser(sub: Any, common: argparse.ArgumentParser) -> None:
     p.add_argument("--lateral", type=float, default=None,
                    help=f"lateral offset of the start along s2, m (default: {d['lateral']})")
     p.add_argument("--height", type=float, default=None,
-                   help="start height above the pad, m (default: 1 below 45 deg, 0 up to 90 deg, "
-                        "-1 i.e. below the pad above 90 deg)")
+                   help="start height above the pad, m (default: +1 for inclines below 45 deg, 0 up to "
+                        "90 deg, -1 i.e. below the pad above 90 deg)")
     p.add_argument("--output", default=None, help=f"PNG path for the plot of a pad perch (default: {d['output']})")
     p.add_argument("--no-plot", action="store_true", help="skip the plot (a line perch has none)")
     p.add_argument("--export", metavar="FILE", help="write the plan (a line's perch) to FILE (.json, .csv or .npz by suffix)")
@@ -502,7 +502,8 @@ def _sweep_flags(p: argparse.ArgumentParser, distances: Sequence[float]) -> None
     p.add_argument("--distance", type=float, nargs="+", default=list(distances), help="stand-off(s), m")
     p.add_argument("--lateral", type=float, nargs="+", default=[0.0], help="start offset(s) along s2, m")
     p.add_argument("--height", type=_free_float, nargs="+", default=["none"], metavar="H|none",
-                   help="start height(s) above the pad, m; none: 1 below 45 deg, else 0")
+                   help="start height(s) above the pad, m; none: +1 (above the pad) for inclines below 45 deg, "
+                        "else 0")
     p.add_argument("--seed", type=int, default=0, help="first seed")
     p.add_argument("--backend", choices=(*EXECUTION_BACKENDS, *SIMULATORS), default="serial",
                    help="where trials run: serial, a local process pool, or Ray (auto: Ray if installed, else the "

@@ -645,8 +645,9 @@ class PlannerConfig:
         produce shrinks with its thrust, and the trackability limit of a replan scales with it
         (``ReplanConfig.snap_thrust_max``). In the realistic simulator (20 ms motor lag; before
         the controller's thrust lead) 6 raised AVP's perches on a wall at 7.5 m from 83 to 92 of
-        100 (and from 82 to 94 on 100 seeds not used before); ``avp.sim`` flies 6
-        (``SimScenario.alpha_nominal``, ``docs/simulation.md``).
+        100 (and from 82 to 94 on 100 seeds not used before); the realistic point of
+        ``avp.sim`` (``SimConfig``) flies 6 through ``SimScenario.alpha_nominal``, whose default
+        (``None``) keeps the planner's 4 (``docs/simulation.md``).
     alpha_range:
         If given, ``(lo, hi)``: the contact thrust is a decision variable in that range (the
         terminal acceleration is only required to be along ``s3``), as Gao et al., "Adaptive

@@ -433,7 +433,7 @@ def configuration_markdown() -> str:
         if table == "scenario":  # the simulator's nested tables are documented in their classes
             rows = [r for r in rows if not r.startswith("| `odometry`")]
             rows.append("| `odometry` | - | `{...}` | Odometry noise (`avp.sim.odometry.OdometryNoise` fields), or `\"none\"` for perfect state estimation. |")
-            summary = (cls.__doc__ or "").strip().split("\n\n")[0].replace("\n", " ")
+            summary = " ".join((cls.__doc__ or "").strip().split("\n\n")[0].split())
             out += ["", f"## `[{table}]`: `{cls.__module__}.{cls.__name__}` (avp simulate, avp campaign)", "",
                     summary + " `avp simulate` and `avp campaign` set `incline`, `distance`, `lateral` and"
                     " `height` from their flags (`--incline-deg`, `--distance`, `--lateral`, `--height`; a file that sets"
@@ -449,7 +449,7 @@ def configuration_markdown() -> str:
             out += ["", f"## {title}", "", f"Same fields as `{cls.__name__}` above."]
             continue
         seen.add(cls)
-        summary = (cls.__doc__ or "").strip().split("\n\n")[0].replace("\n", " ")
+        summary = " ".join((cls.__doc__ or "").strip().split("\n\n")[0].split())
         out += ["", f"## {title}", "", summary, "", "| key | unit | default | meaning |", "| --- | --- | --- | --- |"]
         out += rows
         if nested:

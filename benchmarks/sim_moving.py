@@ -11,7 +11,9 @@ seeded trials, in one of two simulators:
   FoV and range at 10 Hz with 50 ms latency, 10 % dropouts, range-growing noise, a 3 % range
   scale bias of random sign and a 2 deg normal tilt), the platform state fitted from those
   detections by :class:`avp.sim.estimator.PlatformEstimator` after 2 s of tracking. Both modes
-  fly Gao et al.'s limits (1 kg, thrust 5-17 N, tilt rate 3 rad/s).
+  plan with Gao et al.'s limits (1 kg, thrust 5-17 N, tilt rate 3 rad/s); the realistic one also
+  flies a vehicle with those limits, the default one avp's default vehicle (0.5 kg, 0.25-9.81 N:
+  0.5-19.6 m/s^2, headroom above the plans).
 
 Prints per case Gao et al.'s Table VIII columns (target speed, drone max/mean speed from the
 first plan to contact, contact error from the pad centre) and the success rate with its Wilson

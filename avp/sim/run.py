@@ -219,7 +219,8 @@ class SimScenario:
     lateral:
         Start offset along the pad's ``s2`` (m).
     height:
-        Start height above the pad centre (m); ``None``: 0, or 1 m below a 45 deg incline.
+        Start height above the pad centre (m); ``None``: +1 m (above the pad) for inclines
+        below 45 deg, else 0.
     pad_height:
         Height of the pad centre (m).
     pad_half_size:
