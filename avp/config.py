@@ -947,9 +947,9 @@ class ReplanConfig:
         flipped normal try the full correction alone). The steps that make four to six solves are late, small
         corrections (4-14 mm, 0.15-0.5 deg, measured) whose full correction fails a certificate
         while a fraction of a few mm certifies. At ``target_tolerance`` (5 mm) the 30 Hz loop of
-        avp's model (``benchmarks/bench_replan.py --seeds 6 --gc-freeze``) had a step p99 of 3.1
-        instead of 4.3 ms and 5 instead of 19 steps over 5 ms of about 2,450 (with ``deadline``
-        5 ms: p99 3.2 ms, none over 5 ms). The price: a few mm still move the contact. On
+        avp's model (``benchmarks/bench_replan.py --seeds 6 --gc-freeze``) had a step p99 of
+        3.1-3.3 instead of 4.3-4.5 ms and 5-6 instead of 17-23 steps over 5 ms of about 2,450
+        (three runs each). The price: a few mm still move the contact. On
         rotorpy's realistic wall (seeds 0-199, 4.5 and 7.5 m) AVP perched 6 fewer of 400 (the
         four of seeds 100-199 at 4.5 m ended 3.0-3.2 cm off the pad's plane, where the fractions
         had left them 2.5-2.9 cm, inside the 3 cm tolerance); on avp's model 2 fewer of 600
