@@ -6,7 +6,9 @@ from __future__ import annotations
 import dataclasses
 import functools
 import math
+import numbers
 from collections.abc import Callable, Mapping
+from decimal import Decimal
 from typing import Any, TypeVar
 
 import numpy as np
@@ -28,6 +30,8 @@ def frozen_array(field: str, value: Any, shape: tuple[int, ...]) -> npt.NDArray[
         raise ConfigError(field, f"expected numbers of shape {shape}, got booleans {value!r}")
     try:
         arr = np.array(value, dtype=float)
+    except OverflowError as exc:  # an int beyond the float range
+        raise ConfigError(field, "has a number beyond the float range; pass finite values") from exc
     except (TypeError, ValueError) as exc:
         raise ConfigError(field, f"expected numbers of shape {shape}, got {value!r}") from exc
     if arr.shape != shape:
@@ -53,6 +57,8 @@ def vector(field: str, value: Any, size: int = 3) -> npt.NDArray[np.float64]:
     """``value`` as a finite (writable) float vector of length ``size``; a scalar is broadcast."""
     try:
         arr = np.array(value, dtype=float)
+    except OverflowError as exc:
+        raise ConfigError(field, "has a number beyond the float range; pass finite values") from exc
     except (TypeError, ValueError) as exc:
         raise ConfigError(field, f"expected {size} numbers, got {value!r}") from exc
     if arr.ndim == 0:
@@ -139,6 +145,9 @@ def positive_float(field: str, value: Any, *, allow_inf: bool = False) -> float:
         raise ConfigError(field, f"expected a positive number, got {value!r}")
     try:
         out = float(value)
+    except OverflowError as exc:
+        raise ConfigError(field, f"must be positive{' (or inf for no limit)' if allow_inf else ''} and finite, "
+                                 "got a number beyond the float range") from exc
     except (TypeError, ValueError) as exc:
         raise ConfigError(field, f"expected a positive number, got {value!r}") from exc
     if math.isnan(out) or out <= 0.0 or (math.isinf(out) and not allow_inf):
@@ -210,19 +219,51 @@ def keywords(prefix: str, cls: type, names: tuple[str, ...], kwargs: Mapping[str
                                                  f"{', '.join(map(repr, names))}{own}")
 
 
+_FLOAT_TYPES = frozenset({float, "float", "float | None", "Optional[float]"})
+"""Annotations of the dataclass fields that hold one real number (``from __future__ import
+annotations`` keeps them as strings)."""
+
+
+def _as_float(value: Any) -> Any:
+    """A real number that is not a Python float (``Decimal``, ``Fraction``, a NumPy scalar or
+    0-d array) as the float it stands for; anything else (``None``, a bool, a string, an array,
+    a float already, an int beyond the float range) unchanged, for the field's validator to take
+    or refuse."""
+    if type(value) is float or value is None or isinstance(value, (bool, np.bool_)):
+        return value
+    if isinstance(value, np.ndarray):
+        if value.ndim != 0 or value.dtype.kind not in "iuf":
+            return value
+        value = value[()]
+    if isinstance(value, (numbers.Real, Decimal)):
+        try:
+            return float(value)
+        except OverflowError:  # an int beyond the float range: the validator refuses it
+            return value
+    return value
+
+
 def typed_keywords(prefix: str) -> Callable[[_Cls], _Cls]:
     """Class decorator (above ``@dataclass``): the constructor refuses a keyword that is not a
-    field with :func:`keywords`."""
+    field with :func:`keywords`, and passes a real number that is not a Python float (a
+    ``Decimal``, a ``Fraction``, a NumPy scalar or 0-d array) to a ``float`` field as the float it
+    stands for, so the stored settings are plain floats the planner's arithmetic takes."""
 
     def wrap(cls: _Cls) -> _Cls:
         init = vars(cls)["__init__"]  # the dataclass-generated constructor
-        names = tuple(f.name for f in dataclasses.fields(cls) if f.init)
+        fields = [f for f in dataclasses.fields(cls) if f.init]
+        names = tuple(f.name for f in fields)
         known = frozenset(names)
+        floats = frozenset(f.name for f in fields if f.type in _FLOAT_TYPES)
+        positions = tuple(f.name in floats for f in fields)
 
         @functools.wraps(init)
         def checked_init(self: Any, *args: Any, **kwargs: Any) -> None:
             if not known.issuperset(kwargs):
                 keywords(prefix, cls, names, kwargs)
+            if floats:  # a Decimal, a Fraction, a NumPy scalar: stored as the float it stands for
+                args = tuple(_as_float(a) if i < len(positions) and positions[i] else a for i, a in enumerate(args))
+                kwargs = {k: _as_float(a) if k in floats else a for k, a in kwargs.items()}
             init(self, *args, **kwargs)
 
         setattr(cls, "__init__", checked_init)  # noqa: B010  # (a method assignment mypy refuses)

@@ -182,6 +182,7 @@ class ContactVelocity:
             val = getattr(self, name)
             if val is not None:
                 object.__setattr__(self, name, v.finite_float(f"contact_velocity.{name}", val))
+                v.within(f"contact_velocity.{name}", getattr(self, name), "velocity")
 
     def components(self, incline: float) -> tuple[float | None, float | None, float | None]:
         """``(v.s1, v.s2, v.s3)`` requested at contact for a pad of this ``incline``."""

@@ -580,3 +580,79 @@ def test_the_rotation_check_decides_as_numpy(entries) -> None:
     assert np.array_equal(_validate.rotation("R", Rq), Rq)
     with pytest.raises(avp.ConfigError, match="determinant"):
         _validate.rotation("R", -Rq)
+
+
+def _float_fields(cls):
+    """(name, default) of the ``float`` fields of a dataclass with a finite default."""
+    out = []
+    for f in dataclasses.fields(cls):
+        if f.type in ("float", "float | None") and isinstance(f.default, float) and math.isfinite(f.default):
+            out.append((f.name, f.default))
+    return out
+
+
+_CONFIG_CLASSES = [avp.PlannerConfig, avp.FovConfig, avp.TimeAllocation, avp.OverhangFlip, avp.Workspace,
+                   avp.ReplanConfig, avp.VehicleLimits, avp.ContactVelocity]
+
+
+@pytest.mark.parametrize("cls", _CONFIG_CLASSES, ids=lambda c: c.__name__)
+@pytest.mark.parametrize("kind", ["Decimal", "Fraction", "float32", "float64", "0-d array", "int"])
+def test_a_real_number_of_another_type_is_stored_as_a_float(cls, kind) -> None:
+    """A float setting given as a ``Decimal``, a ``Fraction``, a NumPy scalar, a 0-d array or an
+    int is stored as the Python float it stands for: the planner's arithmetic (``float + Decimal``,
+    hashing an array) then never meets it. The value kept is the default itself where the type
+    can carry it exactly."""
+    from decimal import Decimal
+    from fractions import Fraction
+
+    for name, default in _float_fields(cls):
+        value = {"Decimal": Decimal(repr(default)), "Fraction": Fraction(default), "float32": np.float32(default),
+                 "float64": np.float64(default), "0-d array": np.array(default), "int": round(default)}[kind]
+        if kind == "int" and value == 0 and default != 0:
+            continue  # a zero where the setting needs a positive number: refused, another test's business
+        try:
+            obj = cls(**{name: value})
+        except avp.ConfigError:
+            assert kind == "int", (name, value)  # an int can fall outside a setting's range
+            continue
+        stored = getattr(obj, name)
+        assert type(stored) is float, (name, type(stored))
+        assert stored == float(value)
+
+
+def test_planning_and_replanning_take_settings_of_other_real_types() -> None:
+    """Found by fuzzing: a 0-d array ``g`` made planning hash an array, a ``Decimal`` latency made
+    the second replanning step add a float to a Decimal (a TypeError out of ``step``)."""
+    from decimal import Decimal
+
+    state, target = avp.State.hover([0.0, 0.0, 1.5]), avp.PerchTarget.from_incline([3.5, 0.0, 1.5], math.pi / 2)
+    for cfg in (avp.PlannerConfig(g=np.array(9.81)), avp.PlannerConfig(t_k=Decimal("0.15")),
+                avp.PlannerConfig(fov=avp.FovConfig(gate=Decimal("0.1")))):
+        assert avp.plan_detailed(state, target, cfg).ok
+    rp = avp.Replanner(target, replan=avp.ReplanConfig(latency=Decimal("0.02")))
+    rp.step(0.0, state)
+    assert rp.step(0.1, state).action is not None
+
+
+@pytest.mark.parametrize("make, field", [
+    (lambda: avp.State(position=[10**400, 0, 0]), "state.position"),
+    (lambda: avp.VehicleLimits(mass=10**400), "limits.mass"),
+    (lambda: avp.VehicleLimits(body_rate_max=10**400), "limits.body_rate_max"),
+    (lambda: avp.PlannerConfig(t_k=10**400), "config.t_k"),
+    (lambda: avp.ContactVelocity(slope=1e300), "contact_velocity.slope"),
+    (lambda: avp.ContactVelocity(normal=-2e3), "contact_velocity.normal"),
+])
+def test_numbers_beyond_the_float_range_or_a_flight_are_refused(make, field) -> None:
+    """Found by fuzzing: a huge int raised OverflowError; a contact velocity of 1e300 m/s passed
+    the checks and overflowed in the planner's reachability test."""
+    with pytest.raises(avp.ConfigError) as exc:
+        make()
+    assert field_of(exc) == field
+
+
+@pytest.mark.parametrize("durations", [[True, 1, 1], np.array([True, True, True]), [[1, 1, 1]], [1, 1, 10**400]])
+def test_durations_that_are_not_a_flat_list_of_numbers_are_refused(durations) -> None:
+    state, target = avp.State.hover([0.0, 0.0, 1.5]), avp.PerchTarget.from_incline([3.5, 0.0, 1.5], math.pi / 2)
+    with pytest.raises(avp.ConfigError) as exc:
+        avp.plan_detailed(state, target, durations=durations)
+    assert field_of(exc) == "durations"
