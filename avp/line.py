@@ -218,7 +218,7 @@ class LineTarget:
     def closest(self, point: Any) -> tuple[int, float]:
         """The piece closest to ``point`` (the first of equals) and its distance (m), end points
         included."""
-        p = np.asarray(point, dtype=float)
+        p = v.frozen_array("point", point, (3,))
         best, index = math.inf, 0
         for k in range(self.n_pieces):
             A, B = self.piece(k)

@@ -457,3 +457,12 @@ def test_an_unknown_line_setting_is_a_typed_error() -> None:
             make(pitchh=1.0)
         assert exc.value.field == "line.pitchh" and "'pitch'" in str(exc.value)
         assert make(pitch=1.0).pitch == 1.0
+
+
+@pytest.mark.parametrize("point", ["abc", None, [1.0, 2.0], [1.0, math.nan, 0.0]])
+def test_closest_refuses_a_point_that_is_not_three_finite_numbers(point) -> None:
+    """Found by fuzzing: a string raised NumPy's ValueError and ``None`` returned ``(0, inf)``."""
+    line = avp.LineTarget.segment([3.0, -1.5, 2.5], [3.0, 1.5, 2.5])
+    with pytest.raises(avp.ConfigError) as exc:
+        line.closest(point)
+    assert exc.value.field == "point"
