@@ -20,6 +20,7 @@ import numpy as np
 import numpy.typing as npt
 
 from . import _avp_rust
+from . import _validate
 from .errors import ConfigError
 
 if TYPE_CHECKING:
@@ -232,9 +233,9 @@ def certify_spline(
     }
     if math.isfinite(limits[Bound.THRUST_MIN]) and limits[Bound.THRUST_MIN] > limits[Bound.THRUST_MAX]:
         raise ConfigError("thrust_min", f"{thrust_min} exceeds thrust_max {thrust_max}")
-    g = float(g)
-    if not math.isfinite(g):
-        raise ConfigError("g", f"must be finite, got {g!r}")
+    g = _validate.positive_float("g", g)  # gravity along -e3: the thrust construction needs it > 0
+    if not isinstance(exact, (bool, np.bool_)):
+        raise ConfigError("exact", f"expected True or False, got {exact!r}")
     try:
         budget = float(budget)
     except (TypeError, ValueError):

@@ -656,3 +656,16 @@ def test_durations_that_are_not_a_flat_list_of_numbers_are_refused(durations) ->
     with pytest.raises(avp.ConfigError) as exc:
         avp.plan_detailed(state, target, durations=durations)
     assert field_of(exc) == "durations"
+
+
+@pytest.mark.parametrize("kwargs, field", [({"g": "x"}, "g"), ({"g": 0.0}, "g"), ({"g": -9.81}, "g"),
+                                           ({"exact": "yes"}, "exact")])
+def test_certify_spline_checks_g_and_exact(kwargs, field) -> None:
+    """Found by fuzzing: ``g="x"`` raised a bare ValueError, ``exact="yes"`` a TypeError, and a
+    zero or negative gravity was taken."""
+    from avp.bounds import certify_spline
+
+    c = np.zeros((1, 4, 8))
+    with pytest.raises(avp.ConfigError) as exc:
+        certify_spline(c, [0.0, 1.0], thrust_min=1.0, thrust_max=20.0, **kwargs)
+    assert field_of(exc) == field
