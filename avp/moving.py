@@ -64,6 +64,10 @@ __all__ = [
 ]
 
 
+RETIME_RANGE = (0.1, 10.0)
+"""Factors :attr:`MovingConfig.retime` may hold: a nudge of the fixed duration (a factor
+outside it is another plan, not a retime of this one)."""
+
 
 @v.typed_keywords("moving")
 @dataclass(frozen=True)
@@ -98,7 +102,9 @@ class MovingConfig:
     retime:
         With a fixed ``duration`` (replans): factors tried in order on it when the plan at the
         given duration does not certify (a plan planned at the edge of the limits would
-        otherwise keep the stale plan); ``()`` keeps the duration strictly.
+        otherwise keep the stale plan); ``()`` keeps the duration strictly. Each factor is in
+        :data:`RETIME_RANGE`; a factor that takes the duration beyond the duration limit
+        (``avp._validate.LIMITS``, as ``duration``) is not tried.
 
     The landing-gear offset ``l`` (their (43): the CoM at contact is ``rho + l s3``) and the
     clearance switch come from ``config.workspace`` (``body_offset``, ``perch_clearance``), as for
@@ -134,8 +140,10 @@ class MovingConfig:
         v.integer("moving.max_solves", self.max_solves, 1)
         if not 1e-2 <= v.positive_float("moving.max_duration", self.max_duration) <= LIMITS["duration"][0]:
             raise ConfigError("moving.max_duration", f"must be in [0.01, {LIMITS['duration'][0]:g}] s, got {self.max_duration}")
-        if any(v.finite_float("moving.retime", f) <= 0.0 for f in v.sequence("moving.retime", self.retime, "factors")):
-            raise ConfigError("moving.retime", f"every factor must be finite and > 0, got {self.retime}")
+        if any(not RETIME_RANGE[0] <= v.finite_float("moving.retime", f) <= RETIME_RANGE[1]
+               for f in v.sequence("moving.retime", self.retime, "factors")):
+            raise ConfigError("moving.retime", f"every factor must be in [{RETIME_RANGE[0]:g}, {RETIME_RANGE[1]:g}] "
+                                               f"(a nudge of the fixed duration), got {self.retime}")
         if not isinstance(self.yaw, TerminalYaw):
             raise ConfigError("moving.yaw", f"must be an avp.qp.moving.TerminalYaw, got {self.yaw!r}")
 
@@ -318,7 +326,8 @@ def plan_moving_detailed(
     moving:
         :class:`MovingConfig`.
     duration:
-        Fixed total duration (s): no arrival-time search (replanning keeps the contact time).
+        Fixed total duration (s): no arrival-time search (replanning keeps the contact time);
+        at most the duration limit (``avp._validate.LIMITS``, 1e4 s, as ``avp.plan``'s durations).
     """
     t_start = time.perf_counter()
     if not isinstance(state, State):
@@ -401,7 +410,12 @@ def plan_moving_detailed(
 
     if duration is not None:
         T = v.positive_float("duration", duration)
+        v.within("duration", T, "duration")
         for factor in (1.0, *mcfg.retime):  # a fixed arrival time, nudged only if uncertified
+            if T * factor > LIMITS["duration"][0]:
+                log.append(f"T = {T * factor:.4g} s (retime x{factor:g}): not tried, beyond the duration limit "
+                           f"{LIMITS['duration'][0]:g} s")
+                continue
             if math.isfinite(run(T * factor).score):
                 break
     else:

@@ -257,6 +257,22 @@ def test_bad_input_is_a_config_error_naming_the_field():
         plan_moving_detailed(avp.State.hover([0, 0, 1]), avp.PerchTarget.from_incline([1, 0, 1], 0.3), CONFIG)
 
 
+def test_a_fixed_duration_beyond_the_duration_limit_is_a_config_error():
+    """``duration`` has the limit of ``avp.plan``'s durations: 1e300 overflowed, 1e6 solved to
+    an INFEASIBLE result; the retime factors are nudges, in [0.1, 10]."""
+    pad = MovingTarget.on_platform([0, 0, 1.0], incline=0.5, speed=2.0)
+    start = avp.State(position=[-3.0, 0, 1.0], velocity=[2.0, 0, 0])
+    for duration in (1e300, 1e6, 1.0001e4):
+        with pytest.raises(ConfigError) as exc:
+            plan_moving_detailed(start, pad, duration=duration)
+        assert exc.value.field == "duration"
+    for factors in ((1e300,), (1e6,), (0.0,), (0.01,), (1.03, float("nan"))):
+        with pytest.raises(ConfigError) as exc:
+            MovingConfig(retime=factors)
+        assert exc.value.field == "moving.retime"
+    assert MovingConfig(retime=(0.1, 10.0)).retime == (0.1, 10.0)
+
+
 def test_negative_speed_is_a_reversing_platform():
     tgt = platform(0.5, -1.0, model=MotionModel.CONSTANT_VELOCITY)
     assert tgt.at(1.0).point[0] == pytest.approx(-1.0)
