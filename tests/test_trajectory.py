@@ -134,6 +134,21 @@ def test_rotorpy_adapter(wall_plan: avp.Trajectory) -> None:
     assert np.allclose(end["x"], wall_plan(wall_plan.tf))
 
 
+@pytest.mark.parametrize("bad", [math.nan, math.inf, None, [0.3], {}, 1j, "1.0", True, np.bool_(True), np.array([0.1, 0.2]),
+                                 __import__("datetime").datetime(2024, 1, 1)])
+def test_rotorpy_adapter_checks_its_time_as_the_trajectory_does(wall_plan: avp.Trajectory, bad) -> None:
+    """``update(nan)`` was a KernelError, ``None``, a list, a dict, a complex number or a date a
+    TypeError, and ``"1.0"`` and ``True`` were evaluated as times."""
+    adapter = wall_plan.to_rotorpy()
+    with pytest.raises(avp.ConfigError) as exc:
+        adapter.update(bad)
+    assert exc.value.field == "t"
+    from fractions import Fraction
+
+    for good, same in ((1, 1.0), (np.float64(0.5), 0.5), (np.array(0.5), 0.5), (Fraction(1, 2), 0.5), (-1.0, 0.0)):
+        np.testing.assert_array_equal(adapter.update(good)["x"], adapter.update(same)["x"])  # held at 0 below it
+
+
 def test_trajectory_rejects_nan_coefficients() -> None:
     c = np.zeros((1, 4, 3))
     c[0, 0, 1] = np.nan
