@@ -19,7 +19,8 @@ Two forms:
 Every writer takes a path and returns it; :meth:`Trajectory.to_json` without a path returns the
 text. A path that cannot be written or read (a missing directory, a file where a directory
 should be, no permission) is a :class:`~avp.errors.ConfigError` on ``path`` (``source`` for
-:func:`read_json`) that carries the operating system's message. The ``Trajectory`` methods ``to_csv``, ``to_json``, ``to_npz``, ``from_csv``, ``from_json``,
+:func:`read_json`) that carries the operating system's message; so is a path that is no file name
+(``None`` where a path is required, bytes, a number: give a ``str`` or a ``pathlib.Path``). The ``Trajectory`` methods ``to_csv``, ``to_json``, ``to_npz``, ``from_csv``, ``from_json``,
 ``from_npz`` call these functions.
 """
 
@@ -28,6 +29,7 @@ from __future__ import annotations
 import csv
 import json
 import math
+import os
 import zipfile
 from collections.abc import Iterator, Mapping
 from contextlib import contextmanager
@@ -80,6 +82,28 @@ def _file_errors(field: str, path: Any, verb: str, hint: str) -> Iterator[None]:
         yield
     except OSError as exc:
         raise ConfigError(field, f"cannot {verb} {str(path)!r}: {exc.strerror or exc}; {hint}") from exc
+
+
+def _path(path: Any, field: str = "path") -> Path:
+    """``path`` (a ``str`` or an ``os.PathLike`` of one) as a :class:`Path`; anything else (``None``,
+    bytes, a number) is a :class:`ConfigError` on ``field``."""
+    if isinstance(path, (str, os.PathLike)):
+        try:
+            return Path(path)
+        except TypeError:  # an os.PathLike of bytes
+            pass
+    raise ConfigError(field, f"expected a file name (str or pathlib.Path), got {type(path).__name__} {path!r:.60}")
+
+
+def _indent(indent: Any) -> int | str | None:
+    """``json.dumps``'s ``indent``: ``None`` (one line), a whole number of spaces (<= 0: newlines
+    only) or a string of JSON whitespace; any other string would make text that is no JSON."""
+    if indent is None or (isinstance(indent, str) and indent.strip(" \t\n\r") == ""):
+        return indent
+    if isinstance(indent, (int, np.integer)) and not isinstance(indent, (bool, np.bool_)):
+        return int(indent)
+    raise ConfigError("indent", f"expected None, a number of spaces or a string of spaces and tabs (JSON "
+                                f"whitespace), got {indent!r:.60}")
 
 
 def _times(traj: Trajectory, rate: float) -> Array:
@@ -182,10 +206,11 @@ def _restore_provenance(traj: Trajectory, data: Any) -> None:
 
 def write_json(traj: Trajectory, path: str | Path | None = None, rate: float | None = None,
                indent: int | None = None, rotor_drag: float = 0.0) -> str:
-    text = json.dumps(trajectory_to_dict(traj, rate, rotor_drag), indent=indent, allow_nan=False)
-    if path is not None:
+    target = _path(path) if path is not None else None
+    text = json.dumps(trajectory_to_dict(traj, rate, rotor_drag), indent=_indent(indent), allow_nan=False)
+    if target is not None:
         with _file_errors("path", path, "write", _WRITE_HINT):
-            Path(path).write_text(text + "\n")
+            target.write_text(text + "\n")
     return text
 
 
@@ -207,6 +232,7 @@ def read_json(source: str | Path) -> Trajectory:
 
 def write_npz(traj: Trajectory, path: str | Path, rate: float | None = None, rotor_drag: float = 0.0) -> Path:
     """``coefficients``, ``knots``, ``t0``, ``knots_rel``, ``g`` and, with ``rate``, ``samples`` plus ``columns``."""
+    p = _path(path)
     arrays: dict[str, Any] = {"format": np.array(FORMAT), "version": np.array(VERSION),
                               "coefficients": traj.coefficients, "knots": traj.knots, "t0": np.array(traj.t0),
                               "knots_rel": traj.knots_rel, "g": np.array(traj.g)}
@@ -219,7 +245,6 @@ def write_npz(traj: Trajectory, path: str | Path, rate: float | None = None, rot
         arrays["samples"] = sample_table(traj, rate, rotor_drag)
         arrays["columns"] = np.array(SAMPLE_COLUMNS)
         arrays["samples_rotor_drag"] = np.array(float(rotor_drag))
-    p = Path(path)
     with _file_errors("path", path, "write", _WRITE_HINT), p.open("wb") as fh:
         np.savez(fh, **arrays)  # a file object: numpy does not append ".npz" to the name
     return p
@@ -227,6 +252,7 @@ def write_npz(traj: Trajectory, path: str | Path, rate: float | None = None, rot
 
 def read_npz(path: str | Path) -> Trajectory:
 
+    _path(path)
     try:
         z = np.load(path, allow_pickle=False)
     except (OSError, ValueError, zipfile.BadZipFile) as exc:  # missing, unreadable, not an NPZ
@@ -251,7 +277,7 @@ def write_csv(traj: Trajectory, path: str | Path, rate: float | None = None, rot
     """With ``rate`` (Hz): one row per sample, columns :data:`SAMPLE_COLUMNS`. Without: one row per
     segment and flat output (``x, y, z, yaw``) with ``t_start, t_end, g, c0 ... cN`` (ascending
     powers of ``t - t_start``), which :func:`read_csv` turns back into the trajectory."""
-    p = Path(path)
+    p = _path(path)
     table = sample_table(traj, rate, rotor_drag) if rate is not None else None  # a bad rate writes no file
     with _file_errors("path", path, "write", _WRITE_HINT), p.open("w", newline="") as fh:
         w = csv.writer(fh)
@@ -271,7 +297,7 @@ def write_csv(traj: Trajectory, path: str | Path, rate: float | None = None, rot
 def read_csv(path: str | Path) -> Trajectory:
     from .trajectory import Trajectory
 
-    with _file_errors("path", path, "read", _READ_HINT), Path(path).open(newline="") as fh:
+    with _file_errors("path", path, "read", _READ_HINT), _path(path).open(newline="") as fh:
         rows = list(csv.reader(fh))
     if not rows or tuple(rows[0][: len(COEFFICIENT_HEADER)]) != COEFFICIENT_HEADER:
         raise ConfigError("path", f"{str(path)!r} is not a coefficient CSV (header {COEFFICIENT_HEADER}...); "
@@ -295,7 +321,7 @@ def read_csv(path: str | Path) -> Trajectory:
 
 def read_samples(path: str | Path) -> dict[str, Array]:
     """Sampled data of a CSV, JSON or NPZ export as ``{column: array}`` (:data:`SAMPLE_COLUMNS`)."""
-    p = Path(path)
+    p = _path(path)
     suffix = p.suffix.lower()
     try:
         if suffix == ".npz":

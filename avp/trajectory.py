@@ -381,7 +381,8 @@ class Trajectory:
                 rotor_drag: float = 0.0) -> str:
         """JSON text with the exact coefficients (and samples at ``rate`` Hz if given, their
         thrust, attitude and body rates with ``rotor_drag``, :func:`avp.export.sample_table`);
-        also written to ``path`` if given. :meth:`from_json` reads it back."""
+        also written to ``path`` if given. :meth:`from_json` reads it back. ``indent`` is
+        ``json.dumps``'s: ``None`` (one line), a number of spaces or a whitespace string."""
         from . import export
 
         return export.write_json(self, path, rate=rate, indent=indent, rotor_drag=rotor_drag)

@@ -128,6 +128,28 @@ def test_missing_file_is_a_config_error(tmp_path: Path, fmt: str, field: str) ->
     assert exc.value.field == "path"
 
 
+@pytest.mark.parametrize("call", [lambda tr: tr.to_npz(None), lambda tr: tr.to_csv(None), lambda tr: tr.to_json(123),
+                                  lambda tr: tr.to_npz(b"x.npz"), lambda tr: tr.to_csv(b"x.csv", rate=10.0),
+                                  lambda tr: avp.Trajectory.from_npz(None), lambda tr: avp.Trajectory.from_csv(None),
+                                  lambda tr: export.read_samples(None), lambda tr: export.read_samples(b"x.csv")])
+def test_a_path_that_is_no_file_name_is_a_config_error(traj: avp.Trajectory, call) -> None:
+    """``None``, bytes or a number as a path raised TypeError (``from_json(None)`` already was a
+    ConfigError on ``source``)."""
+    with pytest.raises(ConfigError, match="str or pathlib.Path") as exc:
+        call(traj)
+    assert exc.value.field == "path"
+
+
+@pytest.mark.parametrize("bad", ["x", "  x", True, 1.5, [2]])
+def test_an_indent_that_makes_no_json_is_a_config_error(traj: avp.Trajectory, bad) -> None:
+    """``to_json(indent="x")`` wrote text that ``from_json`` cannot read."""
+    with pytest.raises(ConfigError) as exc:
+        traj.to_json(indent=bad)
+    assert exc.value.field == "indent"
+    for good in (None, 0, 2, np.int64(4), "\t", "  "):
+        assert avp.Trajectory.from_json(traj.to_json(indent=good)).duration == traj.duration
+
+
 def test_foreign_json_is_rejected() -> None:
     with pytest.raises(ConfigError, match="format"):
         avp.Trajectory.from_json('{"knots": [0, 1], "coefficients": [[[0], [0], [0], [0]]]}')
