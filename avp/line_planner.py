@@ -326,6 +326,17 @@ def _recovery_qp(perch: Trajectory, target_point: Array, contact: LineContact, l
     return PerchingQp(layout=layout, durations=T, t0=perch.tf, P=P, equalities=tuple(eq), inequalities=tuple(ineq))
 
 
+def _unflyable_end(perch: Trajectory) -> str | None:
+    """Why the perch's end is no state a recovery can start from (its velocity, acceleration or
+    jerk beyond ``avp._validate.LIMITS``, as a :class:`State` would refuse), or ``None``."""
+    end = perch.derivatives(perch.tf)  # (5, 4)
+    try:
+        State(position=end[0, :3], velocity=end[1, :3], acceleration=end[2, :3], jerk=end[3, :3])
+    except ConfigError as exc:
+        return f"{exc.field.removeprefix('state.')} {exc.message}"
+    return None
+
+
 # -- certificates ------------------------------------------------------------------------------
 
 def line_checks(traj: Trajectory, name: str, line: LineTarget, contact: LineContact, opts: LineOptions, *,
@@ -604,7 +615,12 @@ def plan_line(
     rec_report = None
     rec_ok = True
     t_rec0 = time.perf_counter()
-    if opts.recovery:
+    unflyable = _unflyable_end(perch) if opts.recovery else None
+    if unflyable is not None:  # an uncertified perch (durations far too short) ends in no flight's state
+        rec_ok = False
+        log.append(f"recovery: not planned: the perch's end {unflyable}; no recovery starts there "
+                   "(give a longer duration)")
+    elif opts.recovery:
         end = perch(perch.tf)
         point = opts.recovery_point if opts.recovery_point is not None else end + opts.recovery_distance * contact.n
         point = np.array(point, dtype=float)

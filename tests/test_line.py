@@ -327,6 +327,17 @@ def test_bad_line_input(kwargs: dict, field: str) -> None:
     assert exc.value.field == field
 
 
+@pytest.mark.parametrize("duration", [1e-9, 1e-7, 1e-6])
+def test_a_far_too_short_duration_is_an_uncertified_result(duration: float) -> None:
+    """The recovery started from the uncertified perch's end, a State beyond the limits of a
+    flight: a ConfigError on ``state.acceleration`` / ``state.jerk``, fields the caller never
+    passed. Now NOT_CERTIFIED without a recovery, saying why (as 1e-3 s already was)."""
+    line = LineTarget.segment([3, -1.5, 2.5], [3, 1.5, 2.5])
+    res = plan_line(avp.State.hover([0, 0, 1.5]), line, duration=duration)
+    assert res.status is LineStatus.NOT_CERTIFIED and res.recovery is None
+    assert any(entry.startswith("recovery: not planned: the perch's end") for entry in res.log)
+
+
 def test_start_inside_the_clearance_radius_is_rejected() -> None:
     line = LineTarget.segment([-1.0, 0.0, 1.0], [1.0, 0.0, 1.0], gripper_offset=0.12)
     with pytest.raises(ConfigError) as exc:
