@@ -14,7 +14,9 @@ Two forms:
   segment and flat output with ``repr`` floats, so loading back gives bit-identical coefficients.
 - **samples** at a rate (Hz): one row per time with the flat outputs and derivatives, the
   mass-normalised thrust (10), the attitude ``R_WB`` (11) as a quaternion ``(qw, qx, qy, qz)``
-  and the body rates (22) in B. :func:`read_samples` loads them back as named arrays.
+  and the body rates (22) in B. :func:`read_samples` loads them back as named arrays. Samples are
+  always finite: a trajectory whose attitude is undefined at a sample time (zero thrust: a free
+  fall) is refused with a :class:`~avp.errors.ConfigError` on ``trajectory`` naming that time.
 
 Every writer takes a path and returns it; :meth:`Trajectory.to_json` without a path returns the
 text. A path that cannot be written or read (a missing directory, a file where a directory
@@ -119,16 +121,45 @@ def sample_table(traj: Trajectory, rate: float, rotor_drag: float = 0.0) -> Arra
     """``(n, len(SAMPLE_COLUMNS))`` samples at ``rate`` Hz from ``t0`` to ``tf`` (both included);
     thrust, attitude and body rates with the vehicle's ``rotor_drag`` (1/s,
     ``VehicleLimits.rotor_drag``: the thrust ``a + g e3 + d v`` the planner certifies; 0: the
-    drag-free map (11))."""
+    drag-free map (11)).
+
+    Every sample is finite: where the attitude is undefined, a thrust that vanishes (a free fall,
+    ``a + g e3 = 0``), overflows, or lies along ``b2_des`` of (13) (a roll of +-90 deg), the samples are refused with a
+    :class:`ConfigError` on ``trajectory`` naming the first such time (the coefficient export,
+    without a rate, still holds the trajectory exactly)."""
     from scipy.spatial.transform import Rotation  # type: ignore[import-untyped]
 
     t = _times(traj, rate)
-    d = traj.derivatives(t)  # (5, n, 4)
-    q_xyzw = Rotation.from_matrix(traj.attitude(t, rotor_drag=rotor_drag)).as_quat()
+    with np.errstate(all="ignore"):  # an undefined attitude is NaN: refused below, at its time
+        d = traj.derivatives(t)  # (5, n, 4)
+        R = traj.attitude(t, rotor_drag=rotor_drag)
+        thrust = traj.thrust(t, rotor_drag=rotor_drag)
+        omega = traj.body_rates(t, rotor_drag=rotor_drag)
+    _check_finite(t, d, thrust, R, omega)
+    q_xyzw = Rotation.from_matrix(R).as_quat()
     return np.column_stack([
         t, d[0], d[1], d[2], d[3, :, :3], d[4, :, :3],
-        traj.thrust(t, rotor_drag=rotor_drag), q_xyzw[:, 3], q_xyzw[:, :3], traj.body_rates(t, rotor_drag=rotor_drag),
+        thrust, q_xyzw[:, 3], q_xyzw[:, :3], omega,
     ])
+
+
+def _check_finite(t: Array, d: Array, thrust: Array, R: Array, omega: Array) -> None:
+    """A :class:`ConfigError` on ``trajectory`` at the first sample time with a value that is not
+    finite, saying why (:func:`sample_table`)."""
+    outputs = np.isfinite(d).all(axis=(0, 2)) & np.isfinite(thrust)
+    ok = outputs & np.isfinite(R).all(axis=(1, 2)) & np.isfinite(omega).all(axis=1)
+    if ok.all():
+        return
+    k = int(np.argmin(ok))
+    if not outputs[k]:
+        why = "the flat outputs or the thrust overflow (not finite)"
+    elif thrust[k] == 0.0:
+        why = "the thrust a + g e3 vanishes (free fall), so the attitude (11) and body rates are undefined"
+    else:
+        why = "the attitude (11), (13) is undefined (the thrust along b2_des: a roll of +-90 deg)"
+    raise ConfigError("trajectory", f"cannot sample at t = {float(t[k])!r} s ({int(np.sum(~ok))} of {ok.size} "
+                                    f"samples): {why}; export the exact coefficients (no rate), or sample a "
+                                    "trajectory whose thrust stays finite and nonzero")
 
 
 def trajectory_to_dict(traj: Trajectory, rate: float | None = None, rotor_drag: float = 0.0) -> dict[str, Any]:

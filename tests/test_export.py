@@ -150,6 +150,34 @@ def test_an_indent_that_makes_no_json_is_a_config_error(traj: avp.Trajectory, ba
         assert avp.Trajectory.from_json(traj.to_json(indent=good)).duration == traj.duration
 
 
+def _spline(acceleration: list[float], scale: float = 1.0) -> avp.Trajectory:
+    """One segment of constant ``acceleration`` (from rest at (0, 0, 10)), all coefficients
+    times ``scale``."""
+    c = np.zeros((1, 4, 8))
+    c[0, 2, 0] = 10.0
+    c[0, :3, 2] = np.asarray(acceleration) / 2.0
+    return avp.Trajectory(c * scale if scale != 1.0 else c, [0.0, 1.0])
+
+
+@pytest.mark.parametrize(("traj_of", "why"), [
+    (lambda: _spline([0.0, 0.0, -avp.frames.GRAVITY]), "vanishes"),  # free fall
+    (lambda: _spline([0.0, 3.0, -avp.frames.GRAVITY]), "along b2_des"),  # b3 = y at yaw 0: no b1
+    (lambda: avp.Trajectory(np.full((1, 4, 8), 1e300), [0.0, 1.0]), "overflow"),
+])
+@pytest.mark.parametrize("fmt", ["json", "npz", "csv"])
+def test_samples_where_the_attitude_is_undefined_are_a_config_error(tmp_path: Path, traj_of, why: str,
+                                                                    fmt: str) -> None:
+    """A valid spline whose thrust vanishes (or overflows) had NaN attitudes, which scipy's
+    Rotation.from_matrix refused with LinAlgError: a ConfigError on ``trajectory`` at the time."""
+    traj = traj_of()
+    path = tmp_path / f"x.{fmt}"
+    with pytest.raises(ConfigError, match=f"t = 0.0 s .*{why}.*no rate") as exc:
+        getattr(traj, f"to_{fmt}")(path, rate=10.0)
+    assert exc.value.field == "trajectory" and not path.exists()
+    getattr(traj, f"to_{fmt}")(path)  # the coefficients export it exactly
+    assert np.array_equal(getattr(avp.Trajectory, f"from_{fmt}")(path).coefficients, traj.coefficients)
+
+
 def test_foreign_json_is_rejected() -> None:
     with pytest.raises(ConfigError, match="format"):
         avp.Trajectory.from_json('{"knots": [0, 1], "coefficients": [[[0], [0], [0], [0]]]}')
