@@ -26,8 +26,8 @@ MAX_ORDER = 64
 """Highest derivative order evaluated (the kernel's own limit)."""
 
 MAX_SAMPLES = 10**7
-"""Most samples :meth:`Trajectory.sample` returns (and the exports' rates give): 10 million
-rows of the 13 exported columns are about 1 GB."""
+"""Most samples :meth:`Trajectory.sample` returns (times only: 80 MB); a sampled export holds
+far fewer rows, :data:`avp.export.MAX_EXPORT_SAMPLES`."""
 
 TIME_TOL = 1e-9
 """Times this far outside ``[t0, tf]`` (s) are accepted and evaluated at the end points."""

@@ -107,6 +107,21 @@ def test_bad_rate_is_a_config_error(traj: avp.Trajectory, tmp_path: Path, bad: f
 
 
 @pytest.mark.parametrize("fmt", ["json", "npz", "csv"])
+def test_a_rate_beyond_the_export_cap_is_refused_with_the_highest_rate(traj: avp.Trajectory, tmp_path: Path,
+                                                                        fmt: str) -> None:
+    """The cap was Trajectory.sample's 10^7 rows (a 2 s perch at 100 kHz took 6 s and 1 GB for a
+    137 MB JSON); an export holds MAX_EXPORT_SAMPLES rows and the error gives the highest rate."""
+    path = tmp_path / f"x.{fmt}"
+    with pytest.raises(ConfigError, match="at most 100000 .*give a rate of at most") as exc:
+        getattr(traj, f"to_{fmt}")(path, rate=1e5)
+    assert exc.value.field == "rate" and not path.exists()
+    top = float(str(exc.value).split("rate of at most ")[1].split(" Hz")[0])
+    assert len(export.sample_table(traj, top)) <= export.MAX_EXPORT_SAMPLES == 10**5
+    with pytest.raises(ConfigError, match="rate"):
+        export.sample_table(traj, top * 1.001)
+
+
+@pytest.mark.parametrize("fmt", ["json", "npz", "csv"])
 def test_unwritable_path_is_a_config_error(traj: avp.Trajectory, tmp_path: Path, fmt: str) -> None:
     """A missing directory or a file where a directory should be: a ConfigError on ``path`` with
     the operating system's reason, not a raw OSError."""
