@@ -122,8 +122,8 @@ def _times(traj: Trajectory, rate: float) -> Array:
     if steps + 1 > MAX_EXPORT_SAMPLES:
         top = (MAX_EXPORT_SAMPLES - 1) / traj.duration
         hint = f"{math.floor(top)}" if top >= 1.0 else f"{top * 0.999:.3g}"
-        raise ConfigError("rate", f"{rate:g} Hz gives {steps + 1} samples over {traj.duration:.4g} s; an export "
-                                  f"holds at most {MAX_EXPORT_SAMPLES} (avp.export.MAX_EXPORT_SAMPLES): give a "
+        raise ConfigError("rate", f"would sample {steps + 1} rows over {traj.duration:.4g} s at {rate:g} Hz; an "
+                                  f"export holds at most {MAX_EXPORT_SAMPLES} (avp.export.MAX_EXPORT_SAMPLES): give a "
                                   f"rate of at most {hint} Hz, or export the exact coefficients (no rate)")
     try:
         return traj.sample(1.0 / float(rate))
