@@ -220,3 +220,32 @@ def test_the_scenarios_contact_velocity_is_the_default_planners() -> None:
             SimConfig(**{field: bad})
     with pytest.raises(ConfigError, match="scenario.contact_velocity"):
         SimScenario(contact_velocity=(-0.3, -2.0))
+
+
+@pytest.mark.parametrize(("kwargs", "field"), [
+    (dict(dt=0.0), "dt"),  # was a ZeroDivisionError
+    (dict(dt=1e-9), "dt"),  # was accepted: 2e10 control steps
+    (dict(dt=-0.001), "dt"),
+    (dict(dt=0.01), "dt"),
+    (dict(dt="0.002"), "dt"),
+    (dict(seed=-1), "seed"),  # was numpy's ValueError
+    (dict(seed="x"), "seed"),
+    (dict(seed=1.5), "seed"),  # was truncated to 1
+    (dict(seed=True), "seed"),
+    (dict(max_time=-1.0), "max_time"),  # was accepted
+    (dict(max_time=0.0), "max_time"),
+    (dict(max_time=float("nan")), "max_time"),
+    (dict(plan_drag="no"), "plan_drag"),  # was accepted, and true
+    (dict(plan_drag=1), "plan_drag"),
+])
+def test_simulate_refuses_bad_run_settings_by_name(kwargs, field):
+    with pytest.raises(avp.ConfigError) as info:
+        simulate(SimScenario(), Mode.ONE_SHOT, **kwargs)
+    assert info.value.field == field
+
+
+def test_simulate_takes_run_settings_in_range():
+    sc = WALL_45.ideal()
+    r = simulate(sc, Mode.ONE_SHOT, seed=np.int64(3), dt=avp.sim.flight.DT_MIN, max_time=0.01, plan_drag=np.bool_(False))
+    assert r.seed == 3 and r.path_t[-1] - r.t_plan < 0.05  # one 30 Hz period past max_time at most
+    np.testing.assert_allclose(np.diff(r.path_t), 1e-4, rtol=1e-6)

@@ -15,6 +15,7 @@ from typing import Any
 
 import numpy as np
 
+from .. import _validate as v
 from ..errors import ConfigError
 from ..frames import Array
 from .backend import Plant
@@ -26,6 +27,24 @@ __all__ = ["DT_CONTROL", "FlightResult", "Trace", "fly"]
 
 DT_CONTROL = 0.002
 """Default control and integration step (s): 500 Hz."""
+
+DT_MIN = 1e-4
+"""Smallest control and integration step (s) the simulators take: 10 kHz, twenty times finer
+than :data:`DT_CONTROL` (a finer step changes nothing the model resolves, and a 20 s run would
+take millions of steps)."""
+
+DT_MAX = DT_CONTROL
+"""Largest step (s): the integrator and the contact interpolation assume ``dt <= 2 ms``."""
+
+
+def check_dt(value: Any, field: str = "dt") -> float:
+    """``value`` as a control step (s) in ``[DT_MIN, DT_MAX]``, else a :class:`ConfigError` on
+    ``field``."""
+    dt = v.finite_float(field, value)
+    if not DT_MIN <= dt <= DT_MAX + 1e-12:
+        raise ConfigError(field, f"must be in [{DT_MIN:g}, {DT_MAX:g}] s (500 Hz to 10 kHz), got {dt}; "
+                                 f"the default is {DT_CONTROL:g} s")
+    return dt
 
 StopHook = Callable[[RigidBodyState, RigidBodyState, float, float], Any]
 

@@ -77,7 +77,7 @@ from .contact import (
 )
 from .controller import ControllerGains, FlatReference, planar_drag
 from .estimator import PlatformEstimator, TargetEstimator
-from .flight import DT_CONTROL, fly
+from .flight import DT_CONTROL, check_dt, fly
 from .odometry import Odometry, OdometryNoise
 from .vehicle import RigidBodyState, VehicleParams
 
@@ -693,16 +693,17 @@ def simulate(
     mode:
         :class:`Mode` (or ``"one_shot"`` / ``"avp"``).
     seed:
-        Seed of every random stream of the run.
+        Seed of every random stream of the run: an integer >= 0.
     config:
         Planner configuration (default :func:`sim_config` with the scenario's vehicle and camera);
         its ``limits`` and ``fov.camera`` are what the simulator flies.
     replan:
         Replanning policy (default ``ReplanConfig()``: deterministic).
     dt:
-        Control and integration step (s), at most 2 ms.
+        Control and integration step (s), in [0.1, 2] ms (:data:`~avp.sim.flight.DT_MIN`,
+        :data:`~avp.sim.flight.DT_MAX`).
     max_time:
-        Hard cap on simulated time (s) after the first plan.
+        Hard cap on simulated time (s) after the first plan (positive).
     moving:
         Terminal map and arrival-time search on a moving pad (``scenario.platform``; default
         ``MovingConfig(yaw=TerminalYaw.PAD)``: the yaw at contact follows the detected pad, not
@@ -721,6 +722,13 @@ def simulate(
         no drag, on a vehicle whose controller feeds it forward, plans a contact it cannot fly
         (on rotorpy's wall ``b3`` arrives 9 deg off ``s3``): pass ``False`` to fly one anyway.
     """
+    dt = check_dt(dt)
+    seed = v.integer("seed", seed, 0, hint="(a random generator seed)")
+    max_time = v.positive_float("max_time", max_time)
+    if plan_drag is not None:
+        if not isinstance(plan_drag, (bool, np.bool_)):
+            raise ConfigError("plan_drag", f"expected True, False or None, got {plan_drag!r} ({type(plan_drag).__name__})")
+        plan_drag = bool(plan_drag)
     sc, cfg = _shared(scenario if scenario is not None else SimScenario(), config)
     if sc.backend is Backend.ROTORPY and sc.gains.rotor_drag is None:  # the back-end's drag model
         sc = dataclasses.replace(sc, gains=rotorpy_gains(sc.gains))
