@@ -249,3 +249,45 @@ def test_simulate_takes_run_settings_in_range():
     r = simulate(sc, Mode.ONE_SHOT, seed=np.int64(3), dt=avp.sim.flight.DT_MIN, max_time=0.01, plan_drag=np.bool_(False))
     assert r.seed == 3 and r.path_t[-1] - r.t_plan < 0.05  # one 30 Hz period past max_time at most
     np.testing.assert_allclose(np.diff(r.path_t), 1e-4, rtol=1e-6)
+
+
+@pytest.mark.parametrize(("kwargs", "field"), [
+    (dict(incline=None), "scenario.incline"),  # these were TypeErrors
+    (dict(distance=None), "scenario.distance"),
+    (dict(distance="3"), "scenario.distance"),
+    (dict(distance=[3.0]), "scenario.distance"),
+    (dict(lateral=None), "scenario.lateral"),
+    (dict(lateral="0"), "scenario.lateral"),
+    (dict(height="x"), "scenario.height"),
+    (dict(height=[1.0]), "scenario.height"),
+    (dict(pad_height=None), "scenario.pad_height"),
+    (dict(timeout=None), "scenario.timeout"),
+    (dict(ground_z="0"), "scenario.ground_z"),
+    (dict(distance=1e5), "scenario.distance"),  # broke the simulated camera's arithmetic
+    (dict(lateral=1e300), "scenario.lateral"),  # gave NaN results
+    (dict(lateral=-101.0), "scenario.lateral"),
+    (dict(height=1e4), "scenario.height"),
+    (dict(initial_frames=10**6), "scenario.initial_frames"),  # ran for minutes
+    (dict(initial_frames=2.0), "scenario.initial_frames"),
+    (dict(initial_frames=True), "scenario.initial_frames"),
+    (dict(initial_frames=0), "scenario.initial_frames"),
+])
+def test_scenario_refuses_bad_geometry_by_name(kwargs, field):
+    with pytest.raises(avp.ConfigError) as info:
+        SimScenario(**kwargs)
+    assert info.value.field == field
+
+
+@pytest.mark.parametrize("name", ["camera", "vehicle", "gains", "odometry", "platform", "criteria", "perch_criteria"])
+def test_scenario_refuses_settings_of_the_wrong_type(name):
+    """A wrong object in a settings field was accepted and broke simulate() with an AttributeError."""
+    with pytest.raises(avp.ConfigError, match="must be an avp.sim") as info:
+        SimScenario(**{name: "x"})
+    assert info.value.field == f"scenario.{name}"
+
+
+def test_scenario_takes_geometry_in_range():
+    sc = SimScenario(distance=100, lateral=-100.0, height=np.float32(100.0), initial_frames=np.int64(100),
+                     odometry=None, platform=None)
+    assert (sc.distance, sc.lateral, sc.height, sc.initial_frames) == (100.0, -100.0, 100.0, 100)
+    assert isinstance(sc.distance, float) and type(sc.initial_frames) is int

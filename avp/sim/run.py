@@ -201,6 +201,16 @@ class PlatformMotion:
         return MotionModel.CTRV if self.turn_rate != 0.0 else MotionModel.CONSTANT_VELOCITY
 
 
+MAX_OFFSET = 100.0
+"""Largest stand-off, lateral offset and height of a :class:`SimScenario`'s start from the pad
+(m): ten times the default camera's 10 m range, far beyond any perch approach (a start 100 km
+away broke the simulated camera's arithmetic, one 1e300 m away gave NaN results)."""
+
+MAX_INITIAL_FRAMES = 100
+"""Most detections :class:`SimScenario` fuses at hover before the first plan: 10 s at the
+camera's 10 Hz (a million took minutes)."""
+
+
 @v.typed_keywords("scenario")
 @dataclass(frozen=True, eq=False)
 class SimScenario:
@@ -215,12 +225,13 @@ class SimScenario:
     incline:
         Pad incline (rad).
     distance:
-        Horizontal stand-off (m) from the pad centre along the heading.
+        Horizontal stand-off (m) from the pad centre along the heading: positive, at most
+        :data:`MAX_OFFSET` (100 m, ten times the default camera's range).
     lateral:
-        Start offset along the pad's ``s2`` (m).
+        Start offset along the pad's ``s2`` (m), within +-:data:`MAX_OFFSET`.
     height:
-        Start height above the pad centre (m); ``None``: +1 m (above the pad) for inclines
-        below 45 deg, else 0.
+        Start height above the pad centre (m), within +-:data:`MAX_OFFSET`; ``None``: +1 m
+        (above the pad) for inclines below 45 deg, else 0.
     pad_height:
         Height of the pad centre (m).
     pad_half_size:
@@ -238,7 +249,8 @@ class SimScenario:
         Controller gains, the contact record's thresholds and the success criterion
         (:class:`~avp.sim.contact.PerchCriteria`).
     initial_frames:
-        Detections fused at hover before the first plan (10 Hz apart).
+        Detections fused at hover before the first plan (10 Hz apart): 1 to
+        :data:`MAX_INITIAL_FRAMES` (100, 10 s of hover).
     filter_scale_error, filter_range_ratio, filter_estimate_scale:
         The user-side target filter's settings (:class:`~avp.sim.estimator.TargetEstimator`).
     aim_normal, aim_slope:
@@ -342,13 +354,34 @@ class SimScenario:
                            v.nonnegative_float("scenario.compute_slowdown", self.compute_slowdown))
         if self.backend is Backend.ROTORPY:
             require_rotorpy()
-        if not 0.0 <= self.incline <= math.pi:
-            raise ConfigError("scenario.incline", f"must be in [0, pi] rad, got {self.incline}")
-        if not (math.isfinite(self.distance) and self.distance > 0):
-            raise ConfigError("scenario.distance", f"must be a positive length, got {self.distance}")
-        for name in ("lateral", "pad_height"):
-            if not math.isfinite(getattr(self, name)):
-                raise ConfigError(f"scenario.{name}", "must be finite")
+        for name, cls, optional in _PARTS:
+            part = getattr(self, name)
+            if not (isinstance(part, cls) or (optional and part is None)):
+                where = "avp.sim.run" if cls is PlatformMotion else "avp.sim"
+                raise ConfigError(f"scenario.{name}", f"must be an {where}.{cls.__name__}{' or None' if optional else ''}, "
+                                  f"got {type(part).__name__}: pass {where}.{cls.__name__}(...)")
+        incline = v.finite_float("scenario.incline", self.incline)
+        if not 0.0 <= incline <= math.pi:
+            raise ConfigError("scenario.incline", f"must be in [0, pi] rad, got {incline}")
+        object.__setattr__(self, "incline", incline)
+        distance = v.finite_float("scenario.distance", self.distance)
+        if not 0.0 < distance <= MAX_OFFSET:
+            raise ConfigError("scenario.distance", f"must be a positive length of at most {MAX_OFFSET:g} m "
+                                                   f"(a perch approach), got {distance}")
+        object.__setattr__(self, "distance", distance)
+        for name in ("lateral", "height"):
+            value = getattr(self, name)
+            if value is None and name == "height":
+                continue
+            value = v.finite_float(f"scenario.{name}", value)
+            if abs(value) > MAX_OFFSET:
+                raise ConfigError(f"scenario.{name}", f"must be within +-{MAX_OFFSET:g} m of the pad "
+                                                      f"(a perch approach), got {value}")
+            object.__setattr__(self, name, value)
+        object.__setattr__(self, "pad_height", v.finite_float("scenario.pad_height", self.pad_height))
+        object.__setattr__(self, "initial_frames", v.integer(
+            "scenario.initial_frames", self.initial_frames, 1, MAX_INITIAL_FRAMES,
+            hint=f"(detections before the first plan, {MAX_INITIAL_FRAMES} at most: 10 s of hover at 10 Hz)"))
         for name, window in (("aim_normal", self.perch_criteria.plane_tolerance),
                              ("aim_slope", self.perch_criteria.center_tolerance)):
             val = v.finite_float(f"scenario.{name}", getattr(self, name))
@@ -364,16 +397,10 @@ class SimScenario:
         if self.platform is not None and (self.aim_normal or self.aim_slope):
             raise ConfigError("scenario.aim_normal", "the aim is defined for a static pad; set aim_normal = "
                               "aim_slope = 0 with a platform")
-        if self.height is not None and not math.isfinite(self.height):
-            raise ConfigError("scenario.height", "must be finite or None")
-        if self.initial_frames < 1:
-            raise ConfigError("scenario.initial_frames", "need at least one detection before planning")
         for name in ("replan_rate_hz", "timeout", "pad_half_size"):
-            if not (math.isfinite(getattr(self, name)) and getattr(self, name) > 0):
-                raise ConfigError(f"scenario.{name}", "must be positive and finite")
+            object.__setattr__(self, name, v.positive_float(f"scenario.{name}", getattr(self, name)))
         if self.ground_z is not None:
-            if not math.isfinite(self.ground_z):
-                raise ConfigError("scenario.ground_z", f"must be finite or None, got {self.ground_z}")
+            object.__setattr__(self, "ground_z", v.finite_float("scenario.ground_z", self.ground_z))
             if self.start()[2] <= self.ground_z:
                 raise ConfigError("scenario.ground_z", f"the start ({self.start()[2]:.3g} m high) is not above the "
                                   f"ground at {self.ground_z:g} m: raise pad_height or height, or lower ground_z")
@@ -536,6 +563,12 @@ class SimResult:
     def visible_fraction(self) -> float:
         """Share of the flight time with the pad in the FoV."""
         return float(np.mean(self.visible)) if self.visible.size else 0.0
+
+
+_PARTS = (("camera", CameraParams, False), ("odometry", OdometryNoise, True), ("vehicle", VehicleParams, False),
+          ("gains", ControllerGains, False), ("criteria", SuccessCriteria, False),
+          ("perch_criteria", PerchCriteria, False), ("platform", PlatformMotion, True))
+"""The fields of :class:`SimScenario` holding settings objects: name, class, whether ``None`` is allowed."""
 
 
 def _hold(traj: Trajectory, t: float, idle_accel: float | None = None) -> FlatReference:
