@@ -154,3 +154,11 @@ def test_rotor_floor_is_the_motors_idle_not_a_higher_planner_floor():
     for bad in (-0.1, 1.0, float("nan")):
         with pytest.raises(ConfigError, match="rotor_idle_fraction"):
             VehicleParams(rotor_idle_fraction=bad)
+
+
+@pytest.mark.parametrize("inertia", ["abc", [1e-3, "a", 2e-3], None, {"x": 1.0}, True, [True, True, True]])
+def test_inertia_that_is_not_numbers_is_a_config_error(inertia):
+    """``inertia="abc"`` was NumPy's ValueError."""
+    with pytest.raises(ConfigError) as info:
+        VehicleParams(inertia=inertia)
+    assert info.value.field == "vehicle.inertia"
