@@ -113,3 +113,16 @@ def test_a_plan_through_the_ground_crashes_and_the_default_planner_keeps_clear()
     assert d.outcome.startswith("no plan")
     with pytest.raises(ConfigError, match="scenario.ground_z"):
         SimScenario(pad_height=0.5, ground_z=1.0)
+
+
+@pytest.mark.parametrize("name", ["plane_tolerance", "center_tolerance", "attitude_tolerance"])
+@pytest.mark.parametrize("bad", [-1.0, 0.0, -np.inf, np.inf, np.nan, "0.1", True, None])
+def test_perch_criteria_need_positive_finite_tolerances(name, bad):
+    """A negative tolerance was accepted (and the scenario blamed ``scenario.aim_normal``)."""
+    from avp.sim import PerchCriteria
+    from avp.sim.run import SimScenario
+
+    with pytest.raises(ConfigError) as info:
+        SimScenario(perch_criteria=PerchCriteria(**{name: bad}))
+    assert info.value.field == f"perch_criteria.{name}"
+    assert PerchCriteria(**{name: 1}).__dict__[name] == 1.0

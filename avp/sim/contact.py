@@ -215,11 +215,17 @@ class PerchCriteria:
     - ``|signed distance to the pad plane| <= plane_tolerance`` (m),
     - in-plane distance from the pad centre ``< center_tolerance`` (m),
     - angle between ``b3`` and ``s3`` ``<= attitude_tolerance`` (rad).
+
+    The tolerances are positive and finite.
     """
 
     plane_tolerance: float = 0.03
     center_tolerance: float = 0.10
     attitude_tolerance: float = float(np.deg2rad(10.0))
+
+    def __post_init__(self) -> None:
+        for name in ("plane_tolerance", "center_tolerance", "attitude_tolerance"):
+            object.__setattr__(self, name, v.positive_float(f"perch_criteria.{name}", getattr(self, name)))
 
 
 @dataclass(frozen=True, eq=False, kw_only=True)
