@@ -291,3 +291,45 @@ def test_scenario_takes_geometry_in_range():
                      odometry=None, platform=None)
     assert (sc.distance, sc.lateral, sc.height, sc.initial_frames) == (100.0, -100.0, 100.0, 100)
     assert isinstance(sc.distance, float) and type(sc.initial_frames) is int
+
+
+@pytest.mark.parametrize(("kwargs", "field"), [
+    (dict(modes=None), "sim.modes"),  # was a TypeError
+    (dict(modes="avp"), "sim.modes"),
+    (dict(modes=("avp", "x")), "sim.modes"),  # was reported on "mode"
+    (dict(modes=(1,)), "sim.modes"),
+    (dict(distances=None), "sim.distances"),  # was reported on sim.inclines_deg
+    (dict(distances=()), "sim.distances"),
+    (dict(distances=("a",)), "sim.distances"),
+    (dict(distances=(-1.0,)), "sim.distances"),
+    (dict(distances=(1e5,)), "sim.distances"),
+    (dict(inclines_deg=None), "sim.inclines_deg"),
+    (dict(inclines_deg=(200.0,)), "sim.inclines_deg"),
+    (dict(inclines_deg=(float("nan"),)), "sim.inclines_deg"),
+    (dict(n_trials=2.0), "sim.n_trials"),
+    (dict(seed=-1), "sim.seed"),
+    (dict(seed="0"), "sim.seed"),
+    (dict(initial_frames=10**6), "sim.initial_frames"),
+    (dict(camera_rate_hz=0.0), "sim.camera_rate_hz"),
+    (dict(odometry_rate_hz=None), "sim.odometry_rate_hz"),
+    (dict(camera_dropout=1.0), "sim.camera_dropout"),
+    (dict(camera_bias_sign=2), "sim.camera_bias_sign"),
+    (dict(filter_scale_error=-0.1), "sim.filter_scale_error"),
+    (dict(filter_range_ratio=0.5), "sim.filter_range_ratio"),
+    (dict(aim_normal="0"), "sim.aim_normal"),
+    (dict(alpha_nominal=-1.0), "sim.alpha_nominal"),
+])
+def test_sim_config_is_validated_at_construction(kwargs, field):
+    from avp.sim.evaluate import SimConfig
+
+    with pytest.raises(avp.ConfigError) as info:
+        SimConfig(**kwargs)
+    assert info.value.field == field
+
+
+def test_sim_config_takes_sequences_of_numbers():
+    from avp.sim.evaluate import SimConfig
+
+    c = SimConfig(modes=["avp"], inclines_deg=np.array([90, 45]), distances=[4.5], n_trials=np.int64(2))
+    assert (c.modes, c.inclines_deg, c.distances, c.n_trials) == (("avp",), (90.0, 45.0), (4.5,), 2)
+    assert c.scenario(c.inclines_deg[0], c.distances[0]).distance == 4.5

@@ -33,7 +33,7 @@ from .backend import Backend
 from .camera import CameraParams
 from .controller import ControllerGains
 from .odometry import OdometryNoise
-from .run import Mode, SimResult, SimScenario, simulate
+from .run import MAX_INITIAL_FRAMES, MAX_OFFSET, Mode, SimResult, SimScenario, simulate
 from .vehicle import VehicleParams
 
 __all__ = ["REPLAN_PERIOD", "Comparison", "Condition", "SimConfig", "SweepPoint", "SweepResult", "compare",
@@ -455,12 +455,42 @@ class SimConfig:
             raise ConfigError("sim.camera_uptilt_deg", f"must be within +-60 deg, got {self.camera_uptilt_deg!r}")
         if self.contact_normal >= 0:
             raise ConfigError("sim.contact_normal", f"must be < 0 m/s (into the pad), got {self.contact_normal}")
-        if isinstance(self.n_trials, bool) or not isinstance(self.n_trials, int) or self.n_trials < 1:
-            raise ConfigError("sim.n_trials", f"must be an integer >= 1, got {self.n_trials!r}")
-        for m in self.modes:
-            Mode.parse(m)
-        if not self.inclines_deg or not self.distances:
-            raise ConfigError("sim.inclines_deg", "need at least one incline and one distance")
+        object.__setattr__(self, "n_trials", v.integer("sim.n_trials", self.n_trials, 1, hint="(trials per point and mode)"))
+        object.__setattr__(self, "seed", v.integer("sim.seed", self.seed, 0, hint="(the first random generator seed)"))
+        object.__setattr__(self, "initial_frames", v.integer("sim.initial_frames", self.initial_frames, 1,
+                                                             MAX_INITIAL_FRAMES, hint="(detections before the first plan)"))
+        modes = v.sequence("sim.modes", self.modes, "mode names ('one_shot', 'avp')")
+        for m in modes:
+            if not isinstance(m, (str, Mode)):
+                raise ConfigError("sim.modes", f"expected mode names ('one_shot', 'avp'), got {m!r}")
+            try:
+                Mode.parse(m)
+            except ConfigError as exc:
+                raise ConfigError("sim.modes", exc.message) from None
+        object.__setattr__(self, "modes", modes)
+        for name, what in (("inclines_deg", "pad inclines (deg, in [0, 180])"),
+                           ("distances", f"stand-offs (m, in (0, {MAX_OFFSET:g}])")):
+            values = tuple(v.finite_float(f"sim.{name}", x) for x in v.sequence(f"sim.{name}", getattr(self, name), what))
+            if not values:
+                raise ConfigError(f"sim.{name}", f"need at least one: give a sequence of {what}")
+            bad = next((x for x in values if not (0.0 <= x <= 180.0 if name == "inclines_deg" else 0.0 < x <= MAX_OFFSET)),
+                       None)
+            if bad is not None:
+                raise ConfigError(f"sim.{name}", f"must be a sequence of {what}, got {bad}")
+            object.__setattr__(self, name, values)
+        for name in ("odometry_rate_hz", "camera_rate_hz"):
+            v.positive_float(f"sim.{name}", getattr(self, name))
+        if not 0.0 <= v.finite_float("sim.camera_dropout", self.camera_dropout) < 1.0:
+            raise ConfigError("sim.camera_dropout", f"must be a probability in [0, 1), got {self.camera_dropout}")
+        if self.camera_bias_sign not in (None, 1, -1) or isinstance(self.camera_bias_sign, bool):
+            raise ConfigError("sim.camera_bias_sign", f"must be +1, -1 or None (random per run), got {self.camera_bias_sign!r}")
+        v.nonnegative_float("sim.filter_scale_error", self.filter_scale_error)
+        if self.filter_range_ratio is not None and v.finite_float("sim.filter_range_ratio", self.filter_range_ratio) < 1.0:
+            raise ConfigError("sim.filter_range_ratio", f"must be >= 1 or None, got {self.filter_range_ratio}")
+        for name in ("aim_normal", "aim_slope"):
+            v.finite_float(f"sim.{name}", getattr(self, name))
+        if self.alpha_nominal is not None:
+            v.positive_float("sim.alpha_nominal", self.alpha_nominal)
         for name in ("motor_time_constant", "odometry_sigma_p", "odometry_sigma_v", "odometry_sigma_att_deg",
                      "odometry_drift", "camera_noise_scale", "camera_scale_bias", "camera_normal_tilt_deg",
                      "camera_latency", "compute_slowdown"):
