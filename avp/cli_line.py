@@ -3,7 +3,7 @@ commands' line variants (:mod:`avp.cli` dispatches here when ``--line-pitch-deg`
 
 The geometry: the vehicle hovers at ``(0, 0, 2.5)`` m; a 3 m straight line crosses the flight
 direction at ``x = --line-distance``, ``--line-rise`` above the start (default 0.5 m up to a 90 deg
-pitch, 1.2 m above: the vehicle hangs below it), inclined by ``--line-incline-deg`` along itself.
+pitch, 1.2 m above: the vehicle hangs below it), inclined by ``--line-incline-deg`` (0 to 80 deg) along itself.
 """
 
 from __future__ import annotations
@@ -33,7 +33,8 @@ def add_line_flags(p: argparse.ArgumentParser) -> None:
     g.add_argument("--line-distance", type=float, default=2.5, help="horizontal distance to the line, m")
     g.add_argument("--line-rise", type=float, default=None,
                    help="line height above the start, m (default 0.5 up to 90 deg pitch, else 1.2)")
-    g.add_argument("--line-incline-deg", type=float, default=0.0, help="line inclination along itself, deg")
+    g.add_argument("--line-incline-deg", type=float, default=0.0,
+                   help="line inclination along itself, deg, in [0, 80]")
     g.add_argument("--line-yaw", choices=("across", "along", "free"), default="across",
                    help="yaw at contact: pitch axis along the line, heading along it, or free")
     g.add_argument("--line-free-grasp", action="store_true", help="let the planner choose the grasp point")
@@ -41,14 +42,19 @@ def add_line_flags(p: argparse.ArgumentParser) -> None:
 
 def line_geometry(args: argparse.Namespace) -> tuple[Any, Any]:
     """The CLI's hover start and :class:`~avp.line.LineTarget` (module docstring)."""
-    from .line import LineTarget, LineYaw
+    from .line import MAX_INCLINE, LineTarget, LineYaw
     from .types import State
 
     pitch = float(args.line_pitch_deg)
     if not 0.0 <= pitch <= 180.0:
         raise ConfigError("--line-pitch-deg", f"must be in [0, 180] deg, got {pitch}")
     rise = args.line_rise if args.line_rise is not None else (0.5 if pitch <= 90.0 else 1.2)
-    half = 1.5 * math.tan(math.radians(args.line_incline_deg))
+    most = math.degrees(MAX_INCLINE)
+    incline = float(args.line_incline_deg)
+    if not 0.0 <= incline <= most + 1e-9:  # NaN too
+        raise ConfigError("--line-incline-deg", f"must be in [0, {most:g}] deg (0: level; the sign only mirrors "
+                                                f"the line; steeper lines have no defined pitch), got {incline}")
+    half = 1.5 * math.tan(math.radians(incline))
     z = LINE_START_HEIGHT + rise
     kw: dict[str, Any] = {"pitch": math.radians(pitch), "yaw": LineYaw[args.line_yaw.upper()]}
     if args.line_free_grasp:

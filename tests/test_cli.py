@@ -278,6 +278,14 @@ def test_export_rate_needs_export(capsys) -> None:
     assert "--export-rate:" in capsys.readouterr().err
 
 
+@pytest.mark.parametrize("incline", ["inf", "1e400", "1e300", "-1", "nan", "80.5"])
+def test_line_incline_out_of_range_is_a_usage_error(incline: str, capsys) -> None:
+    """``inf`` and ``1e400`` were a math domain error's traceback; ``1e300`` and ``-1`` were accepted."""
+    assert main(["demo", "--no-plot", "--line-pitch-deg", "0", f"--line-incline-deg={incline}"]) == EXIT_USAGE
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and "--line-incline-deg:" in err and "[0, 80] deg" in err
+
+
 # -- simulate ---------------------------------------------------------------------------------
 
 def test_progress_bar_only_on_a_terminal(monkeypatch, caplog) -> None:
