@@ -321,12 +321,28 @@ def _check_demo_flags(args: argparse.Namespace) -> None:
         for name, value in DEMO_DEFAULTS.items():
             if getattr(args, name) is None:
                 setattr(args, name, value)
+        if not args.no_plot:
+            _check_plot_path(args.output)
         return
     given = _given(args, PAD_FLAGS)  # their defaults are None: given at all
     if "--output" in given:
         raise ConfigError("--output", "avp.plotting draws pad perches only, a line perch has no plot: drop --output "
                                       "(--export FILE writes the plan, --json prints it)")
     _refuse_for_a_line(given, "places the pad demo's start")
+
+
+def _check_plot_path(output: str) -> None:
+    """``--output`` names a file, before any planning: not empty, not ``.`` or ``..``, not ending
+    in a path separator, not an existing directory, also with the ``.png`` that
+    :func:`avp.plotting.plot_plan` adds to a name without a suffix; else a :class:`ConfigError`
+    on ``--output``."""
+    path = Path(output)
+    written = path if path.suffix else path.with_suffix(".png") if path.name not in ("", ".", "..") else path
+    if (not output or output.endswith(("/", os.sep)) or (os.altsep and output.endswith(os.altsep))
+            or path.name in ("", ".", "..") or path.is_dir() or written.is_dir()):
+        raise ConfigError("--output", f"needs a file name for the plot, got {output!r} (a directory or an empty "
+                                      f"path); give a PNG file name, e.g. "
+                                      f"{str(Path(output or '.') / DEMO_DEFAULTS['output'])!r}")
 
 
 def _refuse_for_a_line(given: list[str], what: str) -> None:

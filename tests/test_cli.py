@@ -278,6 +278,19 @@ def test_export_rate_needs_export(capsys) -> None:
     assert "--export-rate:" in capsys.readouterr().err
 
 
+@pytest.mark.parametrize("output", [".", "..", "", "{tmp}", "{tmp}/", "{tmp}/new/", "{tmp}/sub"])
+def test_demo_output_without_a_file_name_is_a_usage_error(output: str, tmp_path: Path, capsys, monkeypatch) -> None:
+    """``--output .`` was a ValueError traceback from plotting.py ("has an empty name"); ``DIR/``
+    wrote ``DIR.png`` beside the directory."""
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "sub.png").mkdir()  # "sub" would be written as sub.png: a directory
+    out = output.format(tmp=tmp_path)
+    assert main(["demo", "--output", out]) == EXIT_USAGE
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and "--output:" in err and "file name" in err
+    assert not list(tmp_path.parent.glob(f"{tmp_path.name}*.png")) and not (tmp_path / "new").exists()
+
+
 @pytest.mark.parametrize("incline", ["inf", "1e400", "1e300", "-1", "nan", "80.5"])
 def test_line_incline_out_of_range_is_a_usage_error(incline: str, capsys) -> None:
     """``inf`` and ``1e400`` were a math domain error's traceback; ``1e300`` and ``-1`` were accepted."""
