@@ -607,6 +607,18 @@ LINE_UNUSED = ("incline_deg", "distance", "lateral", "height", "output_dir", "gi
 """``avp simulate`` flags (``args`` attributes) of the pad trials, which line trials do not use."""
 
 
+def _check_conditions(settings: Settings, trials: Sequence[Any]) -> None:
+    """Build the scenario of every condition of ``trials`` before running any, so that a swept
+    value out of range (``--distance 1e5``) is a usage error now, not in the middle of the run
+    (:func:`_with_flag` names its flag)."""
+    seen = set()
+    for t in trials:
+        key = (t.incline, t.distance, t.lateral, t.height)
+        if key not in seen:
+            seen.add(key)
+            settings.scenario(incline=t.incline, distance=t.distance, lateral=t.lateral, height=t.height)
+
+
 def _check_outputs(args: argparse.Namespace, names: Sequence[str]) -> None:
     """Before any trial, without creating anything: the output flags ``names`` (``args``
     attributes) can be written where they point (the nearest existing directory on the way is a
@@ -670,6 +682,7 @@ def simulate(args: argparse.Namespace) -> int:
     _check_outputs(args, ("gif",) if args.no_plot else ("output_dir", "gif"))
     trials = campaign.grid(args.incline_deg, args.distance, args.lateral, _heights(args.height),
                            ("one_shot", "avp"), range(args.seed, args.seed + args.trials))
+    _check_conditions(settings, trials)
     runner = campaign.Runner(settings.data, keep_result=True)
     comp = Comparison([], [args.seed + k for k in range(args.trials)])
     t0 = time.perf_counter()
@@ -748,6 +761,7 @@ def run_campaign(args: argparse.Namespace) -> int:
     _check_outputs(args, ("results",) if args.no_plot else ("results", "summary_plot"))
     trials = campaign.grid(args.incline_deg, args.distance, args.lateral, _heights(args.height), args.modes,
                            range(args.seed, args.seed + args.seeds))
+    _check_conditions(settings, trials)
     stats = campaign.run(trials, settings.data, args.results, backend=args.backend, workers=args.workers,
                          address=args.address, progress=progress)
     rows = campaign.ResultStore(args.results).rows()
@@ -804,6 +818,10 @@ def _with_flag(args: argparse.Namespace, error: AvpError) -> AvpError:
     if name is not None and getattr(args, name, None) is not None:
         flag = "--" + name.replace("_", "-")
         return ConfigError(flag, f"{getattr(args, name)!r} gives {error.field}: {error.message}")
+    swept = SWEEP_KEYS.get(field.removeprefix("scenario.")) if field.startswith("scenario.") else None
+    if swept is not None and args.command in ("simulate", "campaign") and getattr(args, "line_pitch_deg", None) is None:
+        # the pad trials' flags set these keys (a --config file that sets them is refused: _refuse_swept_keys)
+        return ConfigError(swept, f"gives {error.field}: {error.message}")
     if field in GEOMETRY_FIELDS and args.command == "demo" and getattr(args, "line_pitch_deg", None) is None:
         place = " ".join(f"--{n.replace('_', '-')} {getattr(args, n):g}" for n in PAD_GEOMETRY
                          if getattr(args, n, None) is not None)

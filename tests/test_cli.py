@@ -335,6 +335,24 @@ def test_simulate_json_for_a_45_degree_run(tmp_path: Path, capsys) -> None:
     assert sum(s["trials"] for s in doc["summary"]) == 2
 
 
+@pytest.mark.parametrize(("command", "flags", "flag"), [
+    ("simulate", ["--distance", "1e5"], "--distance"),  # was a math domain error's traceback
+    ("simulate", ["--lateral", "1e300"], "--lateral"),  # was exit 0 with a table of NaN
+    ("simulate", ["--distance", "4.5", "-1"], "--distance"),  # the second condition: before any trial
+    ("simulate", ["--height", "200"], "--height"),
+    ("simulate", ["--incline-deg", "200"], "--incline-deg"),
+    ("campaign", ["--distance", "1e5", "--backend", "serial"], "--distance"),
+])
+def test_swept_geometry_out_of_range_is_a_usage_error_on_its_flag(command, flags, flag, tmp_path: Path, capsys,
+                                                                   monkeypatch) -> None:
+    monkeypatch.chdir(tmp_path)
+    count = ["--trials", "1"] if command == "simulate" else ["--seeds", "1"]
+    assert main([command, "--no-plot", *count, *flags]) == EXIT_USAGE
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and f"{flag}:" in err and "Traceback" not in err
+    assert not list(tmp_path.iterdir())  # no trial ran, no results file
+
+
 def test_simulate_report_has_no_wall_comparison_at_45_degrees(capsys) -> None:
     assert main(["simulate", "--trials", "1", "--incline-deg", "45", "--distance", "2.0", "--no-plot"]) == 0
     out = capsys.readouterr().out

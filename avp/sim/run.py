@@ -362,7 +362,7 @@ class SimScenario:
                                   f"got {type(part).__name__}: pass {where}.{cls.__name__}(...)")
         incline = v.finite_float("scenario.incline", self.incline)
         if not 0.0 <= incline <= math.pi:
-            raise ConfigError("scenario.incline", f"must be in [0, pi] rad, got {incline}")
+            raise ConfigError("scenario.incline", f"must be in [0, pi] rad (0 to 180 deg), got {incline}")
         object.__setattr__(self, "incline", incline)
         distance = v.finite_float("scenario.distance", self.distance)
         if not 0.0 < distance <= MAX_OFFSET:
