@@ -226,11 +226,11 @@ class SimScenario:
         Pad incline (rad).
     distance:
         Horizontal stand-off (m) from the pad centre along the heading: positive, at most
-        :data:`MAX_OFFSET` (100 m, ten times the default camera's range).
+        100 m (``MAX_OFFSET``, ten times the default camera's range).
     lateral:
-        Start offset along the pad's ``s2`` (m), within +-:data:`MAX_OFFSET`.
+        Start offset along the pad's ``s2`` (m), within +-100 m (``MAX_OFFSET``).
     height:
-        Start height above the pad centre (m), within +-:data:`MAX_OFFSET`; ``None``: +1 m
+        Start height above the pad centre (m), within +-100 m (``MAX_OFFSET``); ``None``: +1 m
         (above the pad) for inclines below 45 deg, else 0.
     pad_height:
         Height of the pad centre (m).
@@ -249,8 +249,8 @@ class SimScenario:
         Controller gains, the contact record's thresholds and the success criterion
         (:class:`~avp.sim.contact.PerchCriteria`).
     initial_frames:
-        Detections fused at hover before the first plan (10 Hz apart): 1 to
-        :data:`MAX_INITIAL_FRAMES` (100, 10 s of hover).
+        Detections fused at hover before the first plan (10 Hz apart): 1 to 100
+        (``MAX_INITIAL_FRAMES``, 10 s of hover).
     filter_scale_error, filter_range_ratio, filter_estimate_scale:
         The user-side target filter's settings (:class:`~avp.sim.estimator.TargetEstimator`).
     aim_normal, aim_slope:
