@@ -277,3 +277,25 @@ def test_platform_turn_rate_uses_the_track_not_only_the_noisy_yaw():
         slope.append(np.polyfit(times, yaw, 1)[0] - 0.2)
     rms = lambda e: float(np.sqrt(np.mean(np.square(e))))
     assert rms(fitted) < rms(slope) / 3.0, (rms(fitted), rms(slope))
+
+
+@pytest.mark.parametrize(("kwargs", "field"), [
+    (dict(dt=0.0), "dt"),  # was a ZeroDivisionError
+    (dict(dt=1e-9), "dt"),  # ran for ages
+    (dict(seed=-1), "seed"),  # was numpy's ValueError
+    (dict(seed="x"), "seed"),
+    (dict(seed=1.5), "seed"),  # was truncated
+    (dict(max_time=-1.0), "max_time"),  # was accepted
+])
+def test_simulate_moving_and_simulate_line_refuse_bad_run_settings(kwargs, field):
+    from avp.sim.line_run import LineScenario, simulate_line
+
+    pad = MovingTarget.on_platform([0.0, 0.0, 1.0], incline=0.5, speed=1.0)
+    with pytest.raises(avp.ConfigError) as info:
+        simulate_moving(MovingSimScenario(pad), **kwargs)
+    assert info.value.field == field
+    if field != "max_time":  # simulate_line has no max_time
+        line = LineScenario(avp.LineTarget.segment([3, -1.5, 2.5], [3, 1.5, 2.5]), [0, 0, 2.0])
+        with pytest.raises(avp.ConfigError) as info:
+            simulate_line(line, "one_shot", **kwargs)
+        assert info.value.field == field

@@ -45,7 +45,7 @@ from ..line_replan import LineReplanner
 from ..replan import ReplanStep
 from ..trajectory import Trajectory
 from .controller import ControllerGains, FlatReference
-from .flight import DT_CONTROL, fly
+from .flight import DT_CONTROL, check_dt, fly
 from .odometry import Odometry, OdometryNoise
 from .run import Mode, _odometry_state
 from .vehicle import RigidBodyState, VehicleParams
@@ -176,9 +176,11 @@ def simulate_line(
 ) -> LineSimResult:
     """Fly one line perch of ``scenario`` (module docstring). ``config`` defaults to
     :class:`~avp.config.PlannerConfig` with the scenario vehicle's limits and ``ground_z``; the
-    simulator flies ``config.limits``."""
+    simulator flies ``config.limits``. ``seed``: an integer >= 0; ``dt`` (s) in [0.1, 2] ms."""
     if not isinstance(scenario, LineScenario):
         raise ConfigError("scenario", f"expected avp.sim.LineScenario, got {type(scenario).__name__}")
+    dt = check_dt(dt)
+    seed = v.integer("seed", seed, 0, hint="(a random generator seed)")
     mode = Mode.parse(mode)
     sc = scenario
     cfg = config if config is not None else PlannerConfig(limits=sc.vehicle.limits, workspace=Workspace(ground_z=sc.ground_z))

@@ -37,7 +37,7 @@ from ..replan import ReplanConfig
 from ..trajectory import Trajectory
 from .contact import Contact, SuccessCriteria
 from .controller import ControllerGains, FlatReference
-from .flight import DT_CONTROL
+from .flight import DT_CONTROL, check_dt
 from .odometry import OdometryNoise, noisy_odometry
 from .run import _hold, _odometry_state, closed_loop, pad_contact
 from .vehicle import RigidBodyState, VehicleParams
@@ -187,7 +187,11 @@ def simulate_moving(
     dt: float = DT_CONTROL,
     max_time: float = 15.0,
 ) -> MovingSimResult:
-    """Fly one perch on the moving platform of ``scenario`` (module docstring)."""
+    """Fly one perch on the moving platform of ``scenario`` (module docstring). ``seed``: an
+    integer >= 0; ``dt`` (s) in [0.1, 2] ms; ``max_time`` (s) positive."""
+    dt = check_dt(dt)
+    seed = v.integer("seed", seed, 0, hint="(a random generator seed)")
+    max_time = v.positive_float("max_time", max_time)
     sc = scenario
     rcfg = replan if replan is not None else ReplanConfig(deadline=None)
     rng_ctrl, rng_plan, rng_est = (np.random.default_rng(s) for s in np.random.SeedSequence(int(seed)).spawn(3))
