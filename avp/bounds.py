@@ -19,8 +19,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 import numpy.typing as npt
 
-from . import _avp_rust
-from . import _validate
+from . import _avp_rust, _validate
 from .errors import ConfigError
 
 if TYPE_CHECKING:
