@@ -238,7 +238,7 @@ def _as_float(value: Any) -> Any:
     if isinstance(value, (numbers.Real, Decimal)):
         try:
             return float(value)
-        except OverflowError:  # an int beyond the float range: the validator refuses it
+        except (OverflowError, ValueError):  # an int beyond the float range, a signalling NaN: refused
             return value
     return value
 

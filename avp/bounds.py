@@ -199,9 +199,9 @@ def certify_spline(
         ``sin^2 phi < S`` is certified first, then ``A||j||^2 + (B psidot^2 - w^2)||f||^2 < 0``
         (``(A, B) = (3, 4)`` for ``|phi| < pi/4``, assumption (25)); see docs/bounds.md.
     g:
-        Gravity (m/s^2).
+        Gravity (m/s^2), positive.
     exact:
-        Fall back to exact arithmetic when the floating-point path is unsure (default). With
+        ``True`` or ``False``: fall back to exact arithmetic when the floating-point path is unsure (default). With
         ``False`` undecided cells are :attr:`Certificate.UNKNOWN`. The body rate's roll level
         has no exact path: a segment whose roll is not decided is UNKNOWN either way.
     budget:
@@ -221,7 +221,8 @@ def certify_spline(
     ------
     ConfigError
         Bad shapes, NaN/inf coefficients, non-increasing knots, negative or NaN limits,
-        ``thrust_min > thrust_max``, or a spline whose checked polynomials exceed degree 40.
+        ``thrust_min > thrust_max``, a ``g`` that is not a positive number, an ``exact`` that is not
+        a bool, or a spline whose checked polynomials exceed degree 40.
     """
     limits = {
         Bound.THRUST_MIN: _limit("thrust_min", thrust_min),

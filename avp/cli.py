@@ -616,7 +616,16 @@ def _check_conditions(settings: Settings, trials: Sequence[Any]) -> None:
         key = (t.incline, t.distance, t.lateral, t.height)
         if key not in seen:
             seen.add(key)
-            settings.scenario(incline=t.incline, distance=t.distance, lateral=t.lateral, height=t.height)
+            try:
+                settings.scenario(incline=t.incline, distance=t.distance, lateral=t.lateral, height=t.height)
+            except ConfigError as exc:  # on its flag, with the value as the flag gave it
+                name = exc.field.removeprefix("scenario.")
+                flag = SWEEP_KEYS.get(name)
+                if flag is None:
+                    raise
+                value = math.degrees(t.incline) if name == "incline" else getattr(t, name)
+                shown = f"{value:g}" if isinstance(value, (int, float)) else repr(value)
+                raise ConfigError(flag, f"{shown} gives {exc.field}: {exc.message}") from exc
 
 
 def _check_outputs(args: argparse.Namespace, names: Sequence[str]) -> None:

@@ -51,9 +51,9 @@ def line_geometry(args: argparse.Namespace) -> tuple[Any, Any]:
     rise = args.line_rise if args.line_rise is not None else (0.5 if pitch <= 90.0 else 1.2)
     most = math.degrees(MAX_INCLINE)
     incline = float(args.line_incline_deg)
-    if not 0.0 <= incline <= most + 1e-9:  # NaN too
-        raise ConfigError("--line-incline-deg", f"must be in [0, {most:g}] deg (0: level; the sign only mirrors "
-                                                f"the line; steeper lines have no defined pitch), got {incline}")
+    if not abs(incline) <= most + 1e-9:  # NaN too
+        raise ConfigError("--line-incline-deg", f"must be in [-{most:g}, {most:g}] deg (0: level; the sign only "
+                                                f"mirrors the line; steeper lines have no defined pitch), got {incline}")
     half = 1.5 * math.tan(math.radians(incline))
     z = LINE_START_HEIGHT + rise
     kw: dict[str, Any] = {"pitch": math.radians(pitch), "yaw": LineYaw[args.line_yaw.upper()]}

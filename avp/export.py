@@ -118,11 +118,12 @@ def _indent(indent: Any) -> int | str | None:
 def _times(traj: Trajectory, rate: float) -> Array:
     if not (isinstance(rate, (int, float)) and math.isfinite(rate) and rate > 0):
         raise ConfigError("rate", f"must be a positive sample rate in Hz, got {rate!r}")
-    steps = max(1, math.ceil(traj.duration * float(rate) - 1e-9))  # as Trajectory.sample counts them
+    span = traj.duration * float(rate)  # steps before rounding; compared as a float (1e308 Hz overflows ceil)
+    steps = max(1, math.ceil(span - 1e-9)) if span < MAX_EXPORT_SAMPLES else MAX_EXPORT_SAMPLES
     if steps + 1 > MAX_EXPORT_SAMPLES:
         top = (MAX_EXPORT_SAMPLES - 1) / traj.duration
         hint = f"{math.floor(top)}" if top >= 1.0 else f"{top * 0.999:.3g}"
-        raise ConfigError("rate", f"would sample {steps + 1} rows over {traj.duration:.4g} s at {rate:g} Hz; an "
+        raise ConfigError("rate", f"would sample {span + 1:.3g} rows over {traj.duration:.4g} s at {rate:g} Hz; an "
                                   f"export holds at most {MAX_EXPORT_SAMPLES} (avp.export.MAX_EXPORT_SAMPLES): give a "
                                   f"rate of at most {hint} Hz, or export the exact coefficients (no rate)")
     try:

@@ -327,7 +327,8 @@ def plan_moving_detailed(
         :class:`MovingConfig`.
     duration:
         Fixed total duration (s): no arrival-time search (replanning keeps the contact time);
-        at most the duration limit (``avp._validate.LIMITS``, 1e4 s, as ``avp.plan``'s durations).
+        at most the duration limit (``avp._validate.LIMITS``, 1e4 s, on the total as for ``avp.plan_line``;
+        ``avp.plan`` applies it to each segment).
     """
     t_start = time.perf_counter()
     if not isinstance(state, State):

@@ -370,9 +370,10 @@ class Trajectory:
     def _sample_rel(self, dt: float) -> Array:
         """:meth:`sample` relative to ``t0``: ``0, dt, ...`` up to and including :attr:`duration`."""
         dt = v.positive_float("dt", dt)
-        steps = max(1, math.ceil(self.duration / dt - 1e-9))  # t0 and tf at least
+        span = self.duration / dt  # a float first: a dt of 1e-308 overflows ceil
+        steps = max(1, math.ceil(span - 1e-9)) if span < MAX_SAMPLES else MAX_SAMPLES  # t0 and tf at least
         if steps >= MAX_SAMPLES:
-            raise ConfigError("dt", f"{dt:g} s gives {steps + 1:.3g} samples over {self.duration:.3g} s; at most "
+            raise ConfigError("dt", f"{dt:g} s gives {span + 1:.3g} samples over {self.duration:.3g} s; at most "
                               f"{MAX_SAMPLES:g}: sample at dt >= {self.duration / (MAX_SAMPLES - 1):.3g} s")
         return np.minimum(dt * np.arange(int(steps) + 1), self.duration)
 

@@ -291,12 +291,17 @@ def test_demo_output_without_a_file_name_is_a_usage_error(output: str, tmp_path:
     assert not list(tmp_path.parent.glob(f"{tmp_path.name}*.png")) and not (tmp_path / "new").exists()
 
 
-@pytest.mark.parametrize("incline", ["inf", "1e400", "1e300", "-1", "nan", "80.5"])
+@pytest.mark.parametrize("incline", ["inf", "1e400", "1e300", "-80.5", "nan", "80.5"])
 def test_line_incline_out_of_range_is_a_usage_error(incline: str, capsys) -> None:
-    """``inf`` and ``1e400`` were a math domain error's traceback; ``1e300`` and ``-1`` were accepted."""
+    """``inf`` and ``1e400`` were a math domain error's traceback; ``1e300`` was accepted. A
+    negative incline mirrors the line (accepted, as before, within the same range)."""
     assert main(["demo", "--no-plot", "--line-pitch-deg", "0", f"--line-incline-deg={incline}"]) == EXIT_USAGE
     err = capsys.readouterr().err.strip()
-    assert err.count("\n") == 0 and "--line-incline-deg:" in err and "[0, 80] deg" in err
+    assert err.count("\n") == 0 and "--line-incline-deg:" in err and "[-80, 80] deg" in err
+
+
+def test_a_negative_line_incline_mirrors_the_line(capsys) -> None:
+    assert main(["demo", "--no-plot", "--line-pitch-deg", "20", "--line-incline-deg=-5"]) == 0
 
 
 # -- simulate ---------------------------------------------------------------------------------

@@ -669,3 +669,37 @@ def test_certify_spline_checks_g_and_exact(kwargs, field) -> None:
     with pytest.raises(avp.ConfigError) as exc:
         certify_spline(c, [0.0, 1.0], thrust_min=1.0, thrust_max=20.0, **kwargs)
     assert field_of(exc) == field
+
+
+def test_more_fuzzed_inputs_are_typed_errors() -> None:
+    """Second review of the fuzzing fixes: a signalling NaN Decimal, an inertia with a nested
+    boolean or an int beyond the float range, NumPy booleans as a bias sign, a pad 1e12 m high,
+    and export or sample rates so high that the count of samples overflows."""
+    from decimal import Decimal
+
+    from avp.sim.camera import CameraParams
+    from avp.sim.evaluate import SimConfig
+    from avp.sim.run import SimScenario
+    from avp.sim.vehicle import VehicleParams
+
+    cases = [
+        (lambda: avp.PlannerConfig(q=Decimal("sNaN")), "config.q"),
+        (lambda: VehicleParams(inertia=[[True, 0, 0], [0, 1e-3, 0], [0, 0, 1e-3]]), "vehicle.inertia"),
+        (lambda: VehicleParams(inertia=[10**400, 1e-3, 1e-3]), "vehicle.inertia"),
+        (lambda: SimConfig(camera_bias_sign=np.True_), "sim.camera_bias_sign"),
+        (lambda: CameraParams(bias_sign=True), "camera.bias_sign"),
+        (lambda: SimScenario(pad_height=1e12), "scenario.pad_height"),
+    ]
+    for make, field in cases:
+        with pytest.raises(avp.ConfigError) as exc:
+            make()
+        assert field_of(exc) == field
+    traj = avp.plan(avp.State.hover([0.0, 0.0, 1.5]), avp.PerchTarget.from_incline([3.5, 0.0, 1.5], math.pi / 2))
+    from avp.export import sample_table
+
+    with pytest.raises(avp.ConfigError) as exc:
+        sample_table(traj, rate=1e308)
+    assert field_of(exc) == "rate"
+    with pytest.raises(avp.ConfigError) as exc:
+        traj.sample(1e-308)
+    assert field_of(exc) == "dt"

@@ -110,7 +110,7 @@ class CameraParams:
                 raise ConfigError(f"camera.{name}", "must be a finite number >= 0")
         if not 0.0 <= self.dropout < 1.0:
             raise ConfigError("camera.dropout", f"must be a probability in [0, 1), got {self.dropout}")
-        if self.bias_sign not in (None, 1, -1, 1.0, -1.0):
+        if self.bias_sign not in (None, 1, -1, 1.0, -1.0) or isinstance(self.bias_sign, (bool, np.bool_)):
             raise ConfigError("camera.bias_sign", "must be +1, -1 or None (random per run)")
 
     @property

@@ -482,7 +482,7 @@ class SimConfig:
             v.positive_float(f"sim.{name}", getattr(self, name))
         if not 0.0 <= v.finite_float("sim.camera_dropout", self.camera_dropout) < 1.0:
             raise ConfigError("sim.camera_dropout", f"must be a probability in [0, 1), got {self.camera_dropout}")
-        if self.camera_bias_sign not in (None, 1, -1) or isinstance(self.camera_bias_sign, bool):
+        if self.camera_bias_sign not in (None, 1, -1) or isinstance(self.camera_bias_sign, (bool, np.bool_)):
             raise ConfigError("sim.camera_bias_sign", f"must be +1, -1 or None (random per run), got {self.camera_bias_sign!r}")
         v.nonnegative_float("sim.filter_scale_error", self.filter_scale_error)
         if self.filter_range_ratio is not None and v.finite_float("sim.filter_range_ratio", self.filter_range_ratio) < 1.0:

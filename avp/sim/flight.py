@@ -41,7 +41,7 @@ def check_dt(value: Any, field: str = "dt") -> float:
     """``value`` as a control step (s) in ``[DT_MIN, DT_MAX]``, else a :class:`ConfigError` on
     ``field``."""
     dt = v.finite_float(field, value)
-    if not DT_MIN <= dt <= DT_MAX + 1e-12:
+    if not DT_MIN * (1 - 1e-6) <= dt <= DT_MAX * (1 + 1e-6):  # a float32 of 2 ms is 2.0000001e-3
         raise ConfigError(field, f"must be in [{DT_MIN:g}, {DT_MAX:g}] s (500 Hz to 10 kHz), got {dt}; "
                                  f"the default is {DT_CONTROL:g} s")
     return dt

@@ -191,7 +191,7 @@ def simulate_moving(
     integer >= 0; ``dt`` (s) in [0.1, 2] ms; ``max_time`` (s) positive."""
     dt = check_dt(dt)
     seed = v.integer("seed", seed, 0, hint="(a random generator seed)")
-    max_time = v.positive_float("max_time", max_time)
+    max_time = v.positive_float("max_time", max_time, allow_inf=True)
     sc = scenario
     rcfg = replan if replan is not None else ReplanConfig(deadline=None)
     rng_ctrl, rng_plan, rng_est = (np.random.default_rng(s) for s in np.random.SeedSequence(int(seed)).spawn(3))

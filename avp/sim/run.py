@@ -233,7 +233,7 @@ class SimScenario:
         Start height above the pad centre (m), within +-100 m (``MAX_OFFSET``); ``None``: +1 m
         (above the pad) for inclines below 45 deg, else 0.
     pad_height:
-        Height of the pad centre (m).
+        Height of the pad centre (m), within +-100 m (``MAX_OFFSET``).
     pad_half_size:
         Half the side of the square pad (m); the paper's pad is about 0.3 m wide.
     camera:
@@ -379,6 +379,9 @@ class SimScenario:
                                                       f"(a perch approach), got {value}")
             object.__setattr__(self, name, value)
         object.__setattr__(self, "pad_height", v.finite_float("scenario.pad_height", self.pad_height))
+        if abs(self.pad_height) > MAX_OFFSET:
+            raise ConfigError("scenario.pad_height", f"must be within {MAX_OFFSET:g} m of the ground, got "
+                                                     f"{self.pad_height:g}")
         object.__setattr__(self, "initial_frames", v.integer(
             "scenario.initial_frames", self.initial_frames, 1, MAX_INITIAL_FRAMES,
             hint=f"(detections before the first plan, {MAX_INITIAL_FRAMES} at most: 10 s of hover at 10 Hz)"))
@@ -757,7 +760,7 @@ def simulate(
     """
     dt = check_dt(dt)
     seed = v.integer("seed", seed, 0, hint="(a random generator seed)")
-    max_time = v.positive_float("max_time", max_time)
+    max_time = v.positive_float("max_time", max_time, allow_inf=True)  # inf: the plan's end and the timeout
     if plan_drag is not None:
         if not isinstance(plan_drag, (bool, np.bool_)):
             raise ConfigError("plan_drag", f"expected True, False or None, got {plan_drag!r} ({type(plan_drag).__name__})")
