@@ -52,7 +52,7 @@ def test_demo_flags_and_module_entry_point(tmp_path: Path) -> None:
 
 def test_demo_bad_solver_is_a_clean_error(capsys) -> None:
     assert main(["demo", "--solver", "nope", "--no-plot"]) == EXIT_USAGE
-    assert "not installed" in capsys.readouterr().err
+    assert "not a qpsolvers back-end" in capsys.readouterr().err
 
 
 def test_import_and_module_entry_from_the_clone_root() -> None:

@@ -25,10 +25,23 @@ def test_backend_table_drives_warm_starts_and_the_fov_iteration_cap() -> None:
     assert solve.backend("osqp").max_iter == 200_000
 
 
-def test_unknown_solver_is_a_solver_error() -> None:
+def test_a_known_back_end_not_installed_is_a_solver_error_of_the_plan() -> None:
+    import qpsolvers
+
+    missing = next(n for n in ("gurobi", "mosek", "copt", "hpipm") if n not in qpsolvers.available_solvers)
     sc = standard(90, 3.5)
     with pytest.raises(avp.SolverError, match="not installed"):
-        avp.plan(sc.state, sc.target, avp.PlannerConfig(solver="no_such_solver"))
+        avp.plan(sc.state, sc.target, avp.PlannerConfig(solver=missing))
+
+
+@pytest.mark.parametrize("name, hint", [("no_such_solver", None), ("DAQP", "did you mean 'daqp'")])
+def test_a_name_qpsolvers_does_not_know_is_a_config_error(name, hint) -> None:
+    """Found by fuzzing: a typo was a SolverError at planning time that suggested
+    ``pip install qpsolvers[no_such_solver]``."""
+    with pytest.raises(avp.ConfigError, match="not a qpsolvers back-end") as exc:
+        avp.PlannerConfig(solver=name)
+    assert exc.value.field == "config.solver"
+    assert (hint in str(exc.value)) if hint else "did you mean" not in str(exc.value)
 
 
 @pytest.mark.parametrize("incline", [0, 60, 90])
