@@ -25,8 +25,7 @@ ORTHONORMAL_TOL = 1e-6
 def frozen_array(field: str, value: Any, shape: tuple[int, ...]) -> npt.NDArray[np.float64]:
     """A finite float64 copy of ``value`` with exactly ``shape``, marked read-only (booleans are
     refused: ``True`` is no coordinate)."""
-    if _is_bool_array(value) or isinstance(value, (bool, np.bool_)) \
-            or (isinstance(value, (list, tuple)) and any(isinstance(x, (bool, np.bool_)) for x in value)):
+    if holds_booleans(value):
         raise ConfigError(field, f"expected numbers of shape {shape}, got booleans {value!r}")
     try:
         arr = np.array(value, dtype=float)
@@ -74,6 +73,14 @@ _NOT_QUANTITIES = (bool, np.bool_, str, bytes)
 """Types a float field refuses though ``float()`` takes them: a bool (Python's or NumPy's) is not
 a quantity, and a string that parses would be stored as given by a caller that does not keep the
 result."""
+
+
+def holds_booleans(value: Any) -> bool:
+    """Whether ``value`` is a boolean, an array of them, or a (nested) list or tuple holding one:
+    NumPy reads ``True`` as 1.0, which is no coordinate, time or duration."""
+    if isinstance(value, (list, tuple)):
+        return any(holds_booleans(x) for x in value)
+    return isinstance(value, (bool, np.bool_)) or _is_bool_array(value)
 
 
 def _is_bool_array(value: Any) -> bool:

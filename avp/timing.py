@@ -24,12 +24,11 @@ def initial_durations(state: State, target: PerchTarget, config: PlannerConfig) 
 
 def check_durations(durations: Any, config: PlannerConfig) -> Array:
     """User-given durations as a float array of length ``n_segments``, all finite and > 0."""
-    raw = np.asarray(durations, dtype=object) if not isinstance(durations, np.ndarray) else durations
-    if raw.dtype == np.bool_ or any(isinstance(x, (bool, np.bool_)) for x in np.ravel(raw)):
+    if v.holds_booleans(durations):
         raise ConfigError("durations", f"expected {config.n_segments} numbers (s), got booleans {durations!r}")
-    if np.ndim(raw) > 1:
-        raise ConfigError("durations", f"expected a flat sequence of {config.n_segments} numbers, got shape "
-                                       f"{np.shape(raw)}")
+    shape = np.shape(durations if isinstance(durations, np.ndarray) else np.asarray(durations, dtype=object))
+    if len(shape) > 1:
+        raise ConfigError("durations", f"expected a flat sequence of {config.n_segments} numbers, got shape {shape}")
     try:
         T = np.array(durations, dtype=float).reshape(-1)
     except OverflowError as exc:

@@ -120,17 +120,11 @@ def _times_array(field: str, values: npt.ArrayLike, n: int) -> Array:
     return k
 
 
-def _holds_booleans(t: list[Any] | tuple[Any, ...]) -> bool:
-    """Whether a (nested) list of times holds a boolean, which NumPy would read as 0 or 1 s."""
-    return any(_holds_booleans(x) if isinstance(x, (list, tuple)) else
-               isinstance(x, (bool, np.bool_)) or (isinstance(x, np.ndarray) and x.dtype == np.bool_) for x in t)
-
-
 def _finite_times(t: Any) -> tuple[Array, float, float]:
     """``t`` (a number or an array of them, s) as a float array, with its least and greatest
     value; a :class:`ConfigError` on ``t`` when it holds no numbers (strings, ``None``, booleans,
     complex numbers, dates) or NaN or inf."""
-    if isinstance(t, (list, tuple)) and _holds_booleans(t):
+    if isinstance(t, (list, tuple)) and v.holds_booleans(t):
         raise ConfigError("t", f"expected times in s (numbers), got booleans in {t!r}")  # NumPy reads 1.0
     try:
         raw = t if isinstance(t, np.ndarray) else np.asarray(t)

@@ -105,10 +105,7 @@ class VehicleParams:
         v.flags("vehicle", self)
         if not isinstance(self.limits, VehicleLimits):
             raise ConfigError("vehicle.limits", f"must be an avp.config.VehicleLimits, got {type(self.limits).__name__}")
-        if isinstance(self.inertia, (str, bytes)) or v._is_bool_array(self.inertia) \
-                or isinstance(self.inertia, (bool, np.bool_)) \
-                or (isinstance(self.inertia, (list, tuple))
-                    and any(isinstance(x, (bool, np.bool_)) for x in np.ravel(np.asarray(self.inertia, dtype=object)))):
+        if isinstance(self.inertia, (str, bytes)) or v.holds_booleans(self.inertia):
             raise ConfigError("vehicle.inertia", f"expected 3 principal moments or a symmetric 3x3 (kg m^2), got {self.inertia!r}")
         try:
             J = np.array(self.inertia, dtype=float)
