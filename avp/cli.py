@@ -609,8 +609,9 @@ LINE_UNUSED = ("incline_deg", "distance", "lateral", "height", "output_dir", "gi
 
 def _check_conditions(settings: Settings, trials: Sequence[Any]) -> None:
     """Build the scenario of every condition of ``trials`` before running any, so that a swept
-    value out of range (``--distance 1e5``) is a usage error now, not in the middle of the run
-    (:func:`_with_flag` names its flag)."""
+    value out of range (``--distance 1e5``) is a usage error now, not in the middle of the run,
+    on its flag with the value as the flag gave it (a ``--config`` file cannot set these keys:
+    :func:`_refuse_swept_keys`)."""
     seen = set()
     for t in trials:
         key = (t.incline, t.distance, t.lateral, t.height)
@@ -827,10 +828,6 @@ def _with_flag(args: argparse.Namespace, error: AvpError) -> AvpError:
     if name is not None and getattr(args, name, None) is not None:
         flag = "--" + name.replace("_", "-")
         return ConfigError(flag, f"{getattr(args, name)!r} gives {error.field}: {error.message}")
-    swept = SWEEP_KEYS.get(field.removeprefix("scenario.")) if field.startswith("scenario.") else None
-    if swept is not None and args.command in ("simulate", "campaign") and getattr(args, "line_pitch_deg", None) is None:
-        # the pad trials' flags set these keys (a --config file that sets them is refused: _refuse_swept_keys)
-        return ConfigError(swept, f"gives {error.field}: {error.message}")
     if field in GEOMETRY_FIELDS and args.command == "demo" and getattr(args, "line_pitch_deg", None) is None:
         place = " ".join(f"--{n.replace('_', '-')} {getattr(args, n):g}" for n in PAD_GEOMETRY
                          if getattr(args, n, None) is not None)

@@ -8,7 +8,6 @@ variant with :func:`dataclasses.replace`.
 from __future__ import annotations
 
 import dataclasses
-import functools
 import itertools
 import math
 from collections.abc import Mapping
@@ -615,15 +614,6 @@ class FovConfig:
         return self.camera.narrowed(self.margin)
 
 
-
-@functools.cache
-def _qpsolvers_names() -> tuple[str, ...]:
-    """Every back-end name the installed qpsolvers knows (installed here or not): the names of
-    its ``qpsolvers.solvers.<name>_solve_qp`` entry points."""
-    import qpsolvers.solvers
-
-    return tuple(sorted(n.removesuffix("_solve_qp") for n in dir(qpsolvers.solvers) if n.endswith("_solve_qp")))
-
 @v.typed_keywords("config")
 @dataclass(frozen=True)
 class PlannerConfig:
@@ -754,11 +744,13 @@ class PlannerConfig:
             raise ConfigError("config.qp_form", f"must be a QpForm, got {self.qp_form!r}")
         if not isinstance(self.solver, str):
             raise ConfigError("config.solver", f"must be a qpsolvers solver name, got {self.solver!r}")
-        if self.solver not in _qpsolvers_names():  # a typo; a known back-end not installed here is the
-            close = [n for n in _qpsolvers_names() if n == self.solver.lower()]  # SolverError of a plan
-            hint = f"did you mean {close[0]!r}? " if close else ""
+        from .solve import known_solvers  # the one table of back-end facts (it imports this module)
+
+        known = known_solvers()
+        if self.solver not in known:  # a typo; a known back-end not installed here is the SolverError of a plan
+            hint = f"did you mean {self.solver.lower()!r}? " if self.solver.lower() in known else ""
             raise ConfigError("config.solver", f"{self.solver!r} is not a qpsolvers back-end; {hint}qpsolvers knows "
-                                               f"{', '.join(_qpsolvers_names())}")
+                                               f"{', '.join(known)}")
         object.__setattr__(self, "solver_options", _solver_options(self.solver_options))
         for name, kind in (("contact_velocity", ContactVelocity), ("limits", VehicleLimits),
                            ("time_allocation", TimeAllocation), ("fov", FovConfig)):

@@ -11,6 +11,7 @@ check :data:`FEASIBILITY_TOL` and the KKT compatibility check (16), :func:`incom
 
 from __future__ import annotations
 
+import functools
 import math
 import re
 import time
@@ -41,6 +42,7 @@ __all__ = [
     "available_solvers",
     "backend",
     "incompatibility",
+    "known_solvers",
     "solve_perching_qp",
 ]
 
@@ -144,6 +146,16 @@ class QpOutcome:
 def available_solvers() -> list[str]:
     """qpsolvers back-ends installed here."""
     return list(qpsolvers.available_solvers)
+
+
+@functools.cache
+def known_solvers() -> tuple[str, ...]:
+    """Every back-end name the installed qpsolvers knows, installed here or not: the names of its
+    ``qpsolvers.solvers.<name>_solve_qp`` entry points (:class:`~avp.config.PlannerConfig` refuses
+    any other ``solver``)."""
+    import qpsolvers.solvers
+
+    return tuple(sorted(n.removesuffix("_solve_qp") for n in dir(qpsolvers.solvers) if n.endswith("_solve_qp")))
 
 
 _INF = 1e30
