@@ -167,6 +167,9 @@ class ContactVelocity:
 
     ``normal`` is ``v . s3`` (negative = into the pad; paper: 0.3 m/s into it), ``slope`` is
     ``v . s1`` (negative = down the slope; paper: 2 m/s down), ``lateral`` is ``v . s2``.
+    "Slope" is ``s1`` as the pad's frame gives it: up the slope for a frame built by
+    ``PerchTarget.from_incline`` or ``from_normal`` (without ``up_slope``); a frame whose
+    ``s1`` is turned about the normal turns the slide with it.
     With ``scale_slope_with_incline`` the slide is multiplied by ``sin(incline)``, so it is the
     paper's value on a wall and vanishes on a level pad where "down the slope" has no meaning.
     """

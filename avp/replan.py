@@ -44,6 +44,11 @@ certified. The policy
   ``reach_angle_tolerance``, and no certified plan closes the gap, the step's action is
   ``CANNOT_REACH`` with the numbers (``target_error``, ``target_angle``, ``reach_budget``): the
   user's cue to abort or go around.
+- **Off track.** A step that keeps the plan (``KEPT_PREVIOUS``, frozen, ``CANNOT_REACH``) while
+  the odometry is beyond the anchors from the plan being flown says ``off_track`` (with
+  ``tracking_error``): that plan does not start where the vehicle is, the vehicle's own cue.
+  Neither cue gates outliers: a one-frame jump of the estimate within the budget is replanned
+  to, an odometry glitch beyond the anchors starts the next plan from it (filter upstream).
 
 It never raises for a planning or solver failure (including ``ValueError`` / ``LinAlgError`` from
 inside planning): the :class:`ReplanStep` says what happened.
@@ -129,6 +134,10 @@ class ReplanAction(Enum):
     NO_PLAN = "no plan yet: the first plan failed"
 
 
+_KEEPS = (ReplanAction.KEPT_PREVIOUS, ReplanAction.FROZEN_NEAR_CONTACT, ReplanAction.CANNOT_REACH)
+"""The actions of a step that flies on with the plan it had."""
+
+
 @dataclass(frozen=True, kw_only=True)
 class ReplanStep:
     """Record of one :meth:`Replanner.step`.
@@ -149,6 +158,15 @@ class ReplanStep:
     ``time_factor`` the committed plan's time left over the nominal one (``retime_retries``, or
     a moving pad's ``MovingConfig.retime``: other than 1 when the nominal time failed a
     certificate).
+
+    ``tracking_error`` (m) and ``tracking_velocity_error`` (m/s): how far the odometry was from
+    the plan being flown at ``t`` (:meth:`Replanner.plan_at`; NaN for a first plan and past
+    the plan's end);
+    ``off_track``: they were beyond ``ReplanConfig.anchor_position`` / ``anchor_velocity`` and
+    the step committed no plan from the odometry, so the plan flown on does not start where
+    the vehicle is (the reason says so). ``CANNOT_REACH`` is about the pad; ``off_track`` is the
+    vehicle's own cue to abort or go around when it persists (a controller recovering from a
+    gust may be off for a step or two).
     """
 
     t: float
@@ -167,6 +185,9 @@ class ReplanStep:
     n_solves: int = 0
     snap: SnapReport | None = None
     time_factor: float = 1.0
+    tracking_error: float = math.nan
+    tracking_velocity_error: float = math.nan
+    off_track: bool = False
 
     @property
     def solved(self) -> bool:
@@ -267,9 +288,11 @@ class Replanner:
     replan:
         :class:`ReplanConfig`.
     trajectory:
-        An already committed plan (otherwise the first :meth:`step` plans from odometry); it is
-        taken to end at ``target``, and replans certify their snap against its peaks as against
-        a first plan's.
+        An already committed plan (otherwise the first :meth:`step` plans from odometry); it
+        must end at ``target`` (within ``replan.target_tolerance``, for a static pad; a
+        ``ConfigError`` otherwise: pass the target it was planned for and the newer estimate to
+        :meth:`step`), and replans certify their snap against its peaks as against a first
+        plan's.
     """
 
     def __init__(
@@ -290,6 +313,12 @@ class Replanner:
             raise ConfigError("trajectory", f"expected avp.Trajectory or None, got {type(trajectory).__name__}")
         self.config = config if config is not None else PlannerConfig()
         self.replan = replan if replan is not None else ReplanConfig()
+        if trajectory is not None and self._static_pad:
+            miss = float(np.linalg.norm(trajectory.evaluate(trajectory.tf)[:3] - target.point))
+            if miss > self.replan.target_tolerance:
+                raise ConfigError("trajectory", f"ends {miss:.3f} m from target.point (more than "
+                                  f"replan.target_tolerance {self.replan.target_tolerance:g} m): pass the target "
+                                  "the plan was made for, and give the newer estimate to step()")
         self._replan_config = self.config
         if not self.replan.search_on_replan:
             self._replan_config = replace(
@@ -328,15 +357,29 @@ class Replanner:
         """The last step reported ``CANNOT_REACH``."""
         return bool(self.history) and self.history[-1].action is ReplanAction.CANNOT_REACH
 
-    def reference(self, t: float) -> FlatOutput:
-        """Flat output to track at ``t`` (s, one time): the previous plan until the committed one
-        starts, held at the plans' end points outside them."""
-        t = v.finite_float("t", t)
+    def plan_at(self, t: float) -> Trajectory:
+        """The plan being flown at ``t`` (s, one time): the previous plan until the committed one
+        starts (at its ``t0``, the step's ``t_ex``), the committed one from then on. For a
+        controller's feed-forward beyond the flat outputs of :meth:`reference`: its
+        ``attitude``, ``thrust`` and ``body_rates`` take times within the plan, so clip ``t`` to
+        ``[plan.t0, plan.tf]`` as :meth:`reference` does. After contact (``t > tf``) the perch
+        is over: what the vehicle does then (hold, cut thrust) is the controller's."""
+        return self._flown(v.finite_float("t", t))
+
+    def _flown(self, t: float) -> Trajectory:
         traj = self.trajectory
         if traj is None:
             raise ConfigError("t", "no plan committed yet; call step() first")
         if t < traj.t0 and self._previous is not None:
             traj = self._previous
+        return traj
+
+    def reference(self, t: float) -> FlatOutput:
+        """Flat output to track at ``t`` (s, one time), of :meth:`plan_at`; held at the plans'
+        end points outside them (after contact: the contact state, position with the contact
+        velocity and acceleration, not a kinematically consistent continuation)."""
+        t = v.finite_float("t", t)
+        traj = self._flown(t)
         return traj.flat_output(min(max(t, traj.t0), traj.tf))
 
     def step(self, t: float, odometry: State, target_estimate: PerchTarget | None = None) -> ReplanStep:
@@ -424,6 +467,17 @@ class Replanner:
         committed_target = self.committed_target
         shift, turn = self._change(committed_target, self.target)
         budget = 0.5 * rc.reach_acceleration * max(remaining, 0.0) ** 2
+        # tracking: the odometry against the plan being flown at t (the previous plan until the
+        # committed one starts); not measured past its end (contact: the perch is over)
+        flown = self._flown(t)
+        e_p = e_v = math.nan
+        if t <= flown.tf:
+            ref = flown.derivatives(max(t, flown.t0))
+            e_p = float(np.linalg.norm(odometry.position - ref[0, :3]))
+            e_v = float(np.linalg.norm(odometry.velocity - ref[1, :3]))
+        anchored = e_p <= rc.anchor_position and e_v <= rc.anchor_velocity
+        tracking = (f"odometry {e_p:.3f} m / {e_v:.3f} m/s from the reference (anchors {rc.anchor_position:g} m, "
+                    f"{rc.anchor_velocity:g} m/s)")
 
         def record(action: ReplanAction, reason: str, cue: bool = True, **kw: object) -> ReplanStep:
             """The step's record; ``cue=False``: a step that tried nothing (the committed plan has
@@ -438,21 +492,23 @@ class Replanner:
                           f"{math.degrees(ang):.1f} deg from the estimate (tolerances {rc.reach_tolerance:.3f} m, "
                           f"{math.degrees(rc.reach_angle_tolerance):.1f} deg; {limit}); {reason}")
                 action = ReplanAction.CANNOT_REACH
-            return ReplanStep(t=t, action=action, trajectory=self.trajectory, reason=reason, t_ex=t_ex, target_error=err, target_angle=ang, reach_budget=budget if self._static_pad else math.inf, **kw)  # type: ignore[arg-type]
+            # the plan flown on does not start where the vehicle is: nothing was committed from odometry
+            off_track = not anchored and not math.isnan(e_p) and action in _KEEPS
+            if off_track:
+                reason = f"off track: {tracking}; {reason}"
+            return ReplanStep(t=t, action=action, trajectory=self.trajectory, reason=reason, t_ex=t_ex, target_error=err, target_angle=ang, reach_budget=budget if self._static_pad else math.inf, tracking_error=e_p, tracking_velocity_error=e_v, off_track=off_track, **kw)  # type: ignore[arg-type]
 
         if remaining < max(rc.freeze_horizon, self.config.t_k):
-            return record(ReplanAction.FROZEN_NEAR_CONTACT, f"{max(remaining, 0.0):.3f} s to contact")
+            return record(ReplanAction.FROZEN_NEAR_CONTACT,
+                          f"contact in {max(committed.tf - t, 0.0):.3f} s ({max(remaining, 0.0):.3f} s after the "
+                          f"switch time t_ex; freeze_horizon {rc.freeze_horizon:g} s)")
         if t < committed.t0:
             return record(ReplanAction.KEPT_PREVIOUS, "the committed plan has not started yet", cue=False)
 
-        ref = committed.derivatives(t)
-        e_p = float(np.linalg.norm(odometry.position - ref[0, :3]))
-        e_v = float(np.linalg.norm(odometry.velocity - ref[1, :3]))
-        anchored = e_p <= rc.anchor_position and e_v <= rc.anchor_velocity
         if anchored and shift <= rc.target_tolerance and turn <= rc.target_tolerance and self._can_hold:
             self._resume = None  # nothing to correct: what a cut step left is moot
-            return record(ReplanAction.HELD, f"tracking {e_p:.3f} m / {e_v:.3f} m/s, estimate moved {shift:.4f} m",
-                          anchored=True)
+            return record(ReplanAction.HELD, f"tracking {e_p:.3f} m / {e_v:.3f} m/s, estimate {shift:.4f} m and "
+                          f"{math.degrees(turn):.2f} deg from the committed pad", anchored=True)
         try:
             start = _plan_state(committed, t_ex) if anchored else anticipate(committed, odometry, t, t_ex, rc.measured_orders)
         except ConfigError as exc:
@@ -492,7 +548,10 @@ class Replanner:
             self.trajectory = result.trajectory
             self.committed_target = goal
             action = ReplanAction.REPLANNED if f >= 1.0 else ReplanAction.PARTIAL
-            reason = "ok" if f >= 1.0 else f"{f:.0%} of the correction ({shift:.3f} m requested, budget {budget:.3f} m)"
+            reason = "ok" if f >= 1.0 else (f"{f:.0%} of the correction ({shift:.3f} m and {math.degrees(turn):.1f} deg "
+                                            f"requested, budget {budget:.3f} m)")
+            if not anchored:
+                reason += f"; planned from odometry: {tracking}"
             if time_factor != 1.0:
                 reason += f" (time left x{time_factor:.4g}: the nominal time failed a certificate)"
             if f < 1.0 or time_factor != 1.0:

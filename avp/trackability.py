@@ -140,7 +140,7 @@ class SnapReport:
     def summary(self) -> str:
         head = "certified" if self.certified else "NOT certified"
         cells = ", ".join(v.value for v in self.verdicts)
-        return f"snap < {self.snap_max:g} m/s^4 and < {self.snap_thrust_max:g} |f|: {head} ({cells})"
+        return f"snap < {self.snap_max:g} m/s^4 and < {self.snap_thrust_max:g} |f|: {head} (per segment: {cells})"
 
 
 def _limit(name: str, value: float) -> float:

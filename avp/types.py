@@ -83,8 +83,11 @@ class PerchTarget:
 
     ``s3`` is the pad's outward normal on the side the vehicle arrives from (at contact
     ``b3 = s3``), ``s1`` the up-slope tangent, ``s2 = s3 x s1`` (always horizontal unless the
-    pad is level). Incline is the angle between ``s3`` and ``e3``: 0 floor, 90 deg wall,
-    180 deg ceiling.
+    pad is level), as :meth:`from_incline` and :meth:`from_normal` build them. A frame given
+    directly (a fiducial's, say) or with ``up_slope`` may turn ``s1`` about ``s3``: the
+    contact attitude and the slide ``ContactVelocity.slope`` (along ``s1``) then turn with it,
+    and a replanner takes each estimate's ``s1`` as given. Incline is the angle between
+    ``s3`` and ``e3``: 0 floor, 90 deg wall, 180 deg ceiling.
 
     A plan ends with ``attitude(t_f)[:, 2] == s3`` (thrust axis along the normal) for every
     target, and with ``attitude(t_f) == R_WS`` exactly (to rounding) whenever the frame's roll in

@@ -3,7 +3,8 @@
 Here a perfect-tracking stand-in replaces the vehicle (odometry = the reference being flown) and
 the target estimate drifts from 10 cm off towards the truth, as a camera's would while approaching.
 Every committed plan is certified (actuator bounds and trackability); a step whose action is
-``CANNOT_REACH`` is the cue to abort or go around (``step.target_error``, ``step.reach_budget``).
+``CANNOT_REACH`` is the cue to abort or go around (``step.target_error``, ``step.reach_budget``),
+as is ``step.off_track`` that persists (the vehicle is off the plan it flies).
 """
 
 import numpy as np
@@ -28,6 +29,8 @@ if __name__ == "__main__":
         if step.action is avp.ReplanAction.CANNOT_REACH:
             print(f"  cannot reach the estimate: {step.target_error:.3f} m off, budget {step.reach_budget:.3f} m:"
                   " a real vehicle would go around here")
+        if step.off_track:  # the vehicle is off the plan it flies and no plan from it certified
+            print(f"  off track by {step.tracking_error:.3f} m: a real vehicle would abort if this persists")
         if step.trajectory is None or t >= step.trajectory.tf:
             break
         t = min(t + dt, step.trajectory.tf)

@@ -245,3 +245,86 @@ def test_a_step_before_the_committed_plan_starts_is_never_cannot_reach() -> None
     assert waiting and all(s.action is ReplanAction.KEPT_PREVIOUS and s.n_solves == 0 for s in waiting)
     assert any(s.target_error > 0.05 for s in waiting)  # the estimate was beyond reach_tolerance
     assert steps[-1].action in (ReplanAction.REPLANNED, ReplanAction.PARTIAL)
+
+
+def _perched() -> avp.Replanner:
+    rp = avp.Replanner(WALL)
+    rp.step(0.0, START)
+    return rp
+
+
+def test_a_vehicle_far_off_the_plan_says_off_track_whatever_the_pad():
+    """A vehicle 0.6 m beside its reference whose replans from odometry fail flies on with a
+    plan that does not start where it is: the steps say so (``off_track``, the tracking error,
+    the reason), though the pad estimate is exact and ``CANNOT_REACH`` stays silent (it is
+    about the pad). Found by a review: the reasons spoke only of certificates."""
+    rp = _perched()
+    tf = rp.trajectory.tf
+    offset = np.array([0.0, 0.6, 0.0])
+    steps = []
+    for t in (0.6 * tf, 0.62 * tf, tf - 0.05):
+        f = rp.reference(t)
+        steps.append(rp.step(t, avp.State(position=f.position + offset, velocity=f.velocity), None))
+    kept = [s for s in steps if s.action is not ReplanAction.REPLANNED and s.action is not ReplanAction.PARTIAL]
+    assert kept, "a plan from 0.6 m off certified: the scenario no longer tests a kept plan"
+    for s in kept:
+        assert s.off_track and s.reason.startswith("off track: odometry 0.600 m")
+        assert s.tracking_error == pytest.approx(0.6, abs=1e-9)
+    for s in steps:
+        if s.action in (ReplanAction.REPLANNED, ReplanAction.PARTIAL):
+            assert not s.off_track and "planned from odometry" in s.reason
+
+
+def test_a_tracked_plan_is_never_off_track_and_tracking_is_not_measured_past_contact():
+    rp = _perched()
+    tf = rp.trajectory.tf
+    steps = [rp.step(t, _fly(rp, min(t, tf)), WALL) for t in np.arange(1, 90) / 30]
+    assert any(s.t > tf for s in steps)
+    for s in steps:
+        assert not s.off_track
+        if s.t <= tf:
+            assert s.tracking_error == pytest.approx(0.0, abs=1e-9)
+        else:  # the perch is over: the contact state held is not a reference to be off
+            assert math.isnan(s.tracking_error) and math.isnan(s.tracking_velocity_error)
+
+
+def test_plan_at_is_the_plan_the_reference_comes_from():
+    rp = _perched()
+    first = rp.trajectory
+    moved = avp.PerchTarget(point=WALL.point + [0.0, 0.0, 0.01], R_WS=WALL.R_WS)
+    s = rp.step(0.3, _fly(rp, 0.3), moved)
+    assert s.committed and rp.trajectory is not first and rp.trajectory.t0 > 0.3
+    before, after = 0.5 * (0.3 + rp.trajectory.t0), rp.trajectory.t0 + 0.1
+    assert rp.plan_at(before) is first and rp.plan_at(after) is rp.trajectory
+    for t in (before, after):
+        np.testing.assert_array_equal(rp.reference(t).position, rp.plan_at(t)(t))
+    with pytest.raises(avp.ConfigError, match="no plan committed"):
+        avp.Replanner(WALL).plan_at(0.0)
+
+
+def test_a_plan_handed_in_for_another_pad_is_refused():
+    """The replanner takes a plan handed in as ending at its target: one that ends 1 m away was
+    held ("estimate moved 0.0000 m") all the way to the wrong contact."""
+    plan = avp.plan(START, WALL)
+    elsewhere = avp.PerchTarget.from_incline(WALL.point + [0.0, 1.0, 0.0], math.pi / 2)
+    with pytest.raises(avp.ConfigError, match=r"trajectory.*ends 1\.000 m from target\.point"):
+        avp.Replanner(elsewhere, trajectory=plan)
+    rp = avp.Replanner(WALL, trajectory=plan)  # the pad it was made for, then the newer estimate
+    s = rp.step(0.2, _fly(rp, 0.2), elsewhere)
+    assert s.action is ReplanAction.REPLANNED
+    np.testing.assert_allclose(rp.trajectory(rp.trajectory.tf), elsewhere.point, atol=1e-9)
+
+
+def test_the_reasons_say_the_turn_and_the_time_to_contact():
+    """A partial correction of a turned normal said "0.000 m requested"; a frozen step gave the
+    time from t_ex as the time to contact."""
+    rp = _perched()
+    tf = rp.trajectory.tf
+    turned = avp.PerchTarget.from_incline(WALL.point, math.radians(80.0))
+    s = rp.step(1.5, _fly(rp, 1.5), turned)  # late: only a part of the turn certifies
+    assert s.action is ReplanAction.PARTIAL and 0.0 < s.fraction < 1.0
+    assert "(0.000 m and 10.0 deg requested" in s.reason
+    t = tf - 0.05
+    f = rp.step(t, _fly(rp, t), None)
+    assert f.action in (ReplanAction.FROZEN_NEAR_CONTACT, ReplanAction.CANNOT_REACH)
+    assert f"contact in {rp.trajectory.tf - t:.3f} s" in f.reason
