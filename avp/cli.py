@@ -15,7 +15,6 @@ that needed a relaxation, 1 no certified plan, 2 bad input (usage, configuration
 from __future__ import annotations
 
 import argparse
-import errno
 import json
 import logging
 import math
@@ -314,15 +313,19 @@ def _demo_parser(sub: Any, common: argparse.ArgumentParser) -> None:
 
 
 def _check_demo_flags(args: argparse.Namespace) -> None:
-    """Refuse flags the demo would ignore; fill in :data:`DEMO_DEFAULTS` for a pad perch."""
+    """Refuse flags the demo would ignore, and output paths it could not write (before planning:
+    :func:`_check_outputs`); fill in :data:`DEMO_DEFAULTS` for a pad perch."""
     if args.export_rate is not None and args.export is None:
         raise ConfigError("--export-rate", "samples the --export file: give --export FILE too, or drop it")
+    if args.export is not None:
+        _check_outputs(args, ("export",))
     if args.line_pitch_deg is None:
         for name, value in DEMO_DEFAULTS.items():
             if getattr(args, name) is None:
                 setattr(args, name, value)
         if not args.no_plot:
             _check_plot_path(args.output)
+            _check_outputs(args, ("output",))
         return
     given = _given(args, PAD_FLAGS)  # their defaults are None: given at all
     if "--output" in given:
@@ -560,7 +563,8 @@ def _simulate_parser(sub: Any, common: argparse.ArgumentParser) -> None:
                                    "file sets [planner.workspace] ground_z (line perches: no ground unless set).")
     p.add_argument("--trials", type=int, default=5, help="seeded trials per condition and mode")
     _sweep_flags(p, (4.5, 7.5))
-    p.add_argument("--output-dir", default="avp_simulation", help="directory for the plots")
+    p.add_argument("--output-dir", default="avp_simulation",
+                   help="directory for the plots (created if missing; its parent must exist)")
     p.add_argument("--no-plot", action="store_true", help="skip the plots")
     p.add_argument("--gif", metavar="FILE.gif", help="animate the first AVP trial of the first condition")
     add_line_flags(p)
@@ -630,27 +634,32 @@ def _check_conditions(settings: Settings, trials: Sequence[Any]) -> None:
 
 
 def _check_outputs(args: argparse.Namespace, names: Sequence[str]) -> None:
-    """Before any trial, without creating anything: the output flags ``names`` (``args``
-    attributes) can be written where they point (the nearest existing directory on the way is a
-    writable directory, not a file; a file flag does not name a directory, a directory flag not a
-    file), so that an unusable path is a usage error now, not after the trials (an ``OSError``
-    naming the path, which :func:`main` reports on its flag)."""
+    """Before any planning or trial, without creating anything: the output flags ``names``
+    (``args`` attributes) can be written where they point, else a :class:`ConfigError` on the
+    flag. The directory that holds the path exists, is a directory and is writable: the CLI
+    creates no directory but a missing :data:`DIRECTORY_FLAGS` path itself (``--output-dir``),
+    never its parents; a file flag does not name a directory, a directory flag not a file."""
     for name in names:
         value = getattr(args, name, None)
         if value is None:
             continue
+        flag = "--" + name.replace("_", "-")
         path = Path(value).absolute()
         is_dir = name in DIRECTORY_FLAGS
         if path.exists() and path.is_dir() != is_dir:
-            raise (NotADirectoryError(errno.ENOTDIR, "Not a directory", str(path)) if is_dir
-                   else IsADirectoryError(errno.EISDIR, "Is a directory", str(path)))
-        existing = path if is_dir else path.parent
-        while not existing.exists():
-            existing = existing.parent
-        if not existing.is_dir():
-            raise NotADirectoryError(errno.ENOTDIR, "Not a directory (a file is in the way)", str(existing))
-        if not os.access(existing, os.W_OK):
-            raise PermissionError(errno.EACCES, "Permission denied", str(existing))
+            what = "a file, not a directory; give a directory" if is_dir else "a directory; give a file name"
+            raise ConfigError(flag, f"cannot write {value!r}: it is {what}")
+        holder = path if is_dir and path.exists() else path.parent
+        if holder.exists() and not holder.is_dir():
+            raise ConfigError(flag, f"cannot write {value!r}: {str(holder)!r} is a file, not a directory; give a "
+                                    "path in an existing directory")
+        if not holder.exists():
+            create = f"avp creates {flag} itself, not its parents" if is_dir else "avp creates no directories"
+            raise ConfigError(flag, f"cannot write {value!r}: the directory {str(holder)!r} does not exist ({create}); "
+                                    "create it first or give a path in an existing directory")
+        if not os.access(holder, os.W_OK):
+            raise ConfigError(flag, f"cannot write {value!r}: no permission to write in {str(holder)!r}; give a "
+                                    "path in a directory you can write to")
 
 
 def _given(args: argparse.Namespace, names: Sequence[str]) -> list[str]:
@@ -852,13 +861,13 @@ def _path_error(args: argparse.Namespace, exc: Exception) -> AvpError | None:
     if isinstance(os_error, FileExistsError) and not os.path.isdir(os_error.filename):
         reason = "a file is in the way of a directory"  # mkdir of a path's parent that is a file
     return ConfigError(flag, f"cannot open or create {str(os_error.filename)!r}: {reason}; give a "
-                                       "path whose directories exist (or can be created) and that you can write to")
+                             "path in an existing directory you can write to")
 
 
 def _path_flag(args: argparse.Namespace, filename: Any) -> str | None:
-    """The flag of :data:`PATH_FLAGS` whose path is ``filename``, lies below it (a directory the
-    command creates on the way), is it without the suffix the command adds (``--output plot``),
-    or holds it (a file the command writes in ``--output-dir``)."""
+    """The flag of :data:`PATH_FLAGS` whose path is ``filename``, lies below it (``filename`` is
+    a directory on its way), is it without the suffix the command adds (``--output plot``), or
+    holds it (a file the command writes in ``--output-dir``)."""
     failed = Path(os.fsdecode(filename)).absolute()
     paths = [(name, Path(getattr(args, name)).absolute()) for name in PATH_FLAGS if getattr(args, name, None) is not None]
     for name, given in paths:  # a flag's own path first

@@ -559,6 +559,51 @@ def test_an_unusable_output_path_stops_before_any_trial(tmp_path, capsys, monkey
 def test_a_refused_run_leaves_no_output_directory(tmp_path, capsys) -> None:
     """The output paths are checked without creating them: a run refused after the check (a
     start behind the pad) leaves no directory behind."""
-    out = tmp_path / "new" / "sub"
+    out = tmp_path / "new"
     assert main(["simulate", "--trials", "1", "--distance", "-1", "--output-dir", str(out)]) == EXIT_USAGE
-    assert not (tmp_path / "new").exists()
+    assert "--distance:" in capsys.readouterr().err and not out.exists()
+
+
+def _no_planning(monkeypatch) -> None:
+    """Planning, a line plan, a trial or a campaign fails the test."""
+    import avp.campaign as campaign
+    import avp.line_planner as line_planner
+    import avp.planner as planner
+
+    def never(*args, **kwargs):
+        raise AssertionError("planned, or ran a trial")
+
+    for module, name in ((planner, "plan_detailed"), (line_planner, "plan_line"), (campaign, "execute"),
+                         (campaign, "run")):
+        monkeypatch.setattr(module, name, never)
+
+
+@pytest.mark.parametrize("argv, flag", [
+    (["demo", "--output", "{missing}/p.png"], "--output"),  # created the directory, exit 0
+    (["demo", "--output", "{missing}/p"], "--output"),
+    (["demo", "--no-plot", "--export", "{missing}/p.json"], "--export"),  # exit 2 after planning
+    (["demo", "--line-pitch-deg", "30", "--export", "{missing}/p.npz"], "--export"),
+    (["simulate", "--trials", "1", "--output-dir", "{missing}/od"], "--output-dir"),
+    (["simulate", "--trials", "1", "--no-plot", "--gif", "{missing}/a.gif"], "--gif"),
+    (["campaign", "--seeds", "1", "--results", "{missing}/r.csv"], "--results"),
+    (["campaign", "--seeds", "1", "--summary-plot", "{missing}/s.png"], "--summary-plot"),
+])
+def test_a_missing_directory_is_refused_before_planning_and_not_created(argv, flag, tmp_path, capsys,
+                                                                        monkeypatch) -> None:
+    """Every output path in a directory that does not exist is a usage error on its flag, before
+    any planning or trial and without creating the directory (``--output-dir`` itself may be
+    missing, its parent not)."""
+    _no_planning(monkeypatch)
+    monkeypatch.chdir(tmp_path)
+    argv = [a.format(missing=tmp_path / "missing") for a in argv]
+    assert main(argv) == EXIT_USAGE
+    captured = capsys.readouterr()
+    assert captured.err.startswith(f"avp: ERROR: {flag}: cannot write ") and captured.err.count("\n") == 1
+    assert "does not exist" in captured.err and captured.out == ""  # no summary before the error
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_an_export_suffix_in_capitals_is_its_format(tmp_path, capsys) -> None:
+    out = tmp_path / "PLAN.JSON"
+    assert main(["demo", "--no-plot", "-q", "--export", str(out)]) == EXIT_SOLVED
+    assert avp.Trajectory.from_json(out).duration > 0
