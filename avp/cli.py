@@ -314,10 +314,11 @@ def _demo_parser(sub: Any, common: argparse.ArgumentParser) -> None:
 
 def _check_demo_flags(args: argparse.Namespace) -> None:
     """Refuse flags the demo would ignore, and output paths it could not write (before planning:
-    :func:`_check_outputs`); fill in :data:`DEMO_DEFAULTS` for a pad perch."""
+    :func:`_export_format`, :func:`_check_outputs`); fill in :data:`DEMO_DEFAULTS` for a pad perch."""
     if args.export_rate is not None and args.export is None:
         raise ConfigError("--export-rate", "samples the --export file: give --export FILE too, or drop it")
     if args.export is not None:
+        _export_format(args.export)
         _check_outputs(args, ("export",))
     if args.line_pitch_deg is None:
         for name, value in DEMO_DEFAULTS.items():
@@ -485,16 +486,29 @@ def _export_plan(args: argparse.Namespace, traj: Any, config: Any) -> Path | Non
     return exported
 
 
+EXPORT_FORMATS = (".json", ".csv", ".npz")
+"""``--export`` file name suffixes (any case): the format the plan is written in."""
+
+
+def _export_format(path: str | Path) -> str:
+    """The format (lower-case suffix, one of :data:`EXPORT_FORMATS`) of an ``--export`` path;
+    any other suffix, or none, is a :class:`ConfigError` on ``--export``."""
+    suffix = Path(path).suffix.lower()
+    if suffix not in EXPORT_FORMATS:
+        what = f"unknown format {suffix!r}" if suffix else "no format suffix"
+        raise ConfigError("--export", f"{what} in {str(path)!r}: use a file name ending in "
+                                      f"{', '.join(EXPORT_FORMATS[:-1])} or {EXPORT_FORMATS[-1]}")
+    return suffix
+
+
 def _export(traj: Any, path: Path, rate: float | None, rotor_drag: float = 0.0) -> Path:
-    suffix = path.suffix.lower()
+    suffix = _export_format(path)
     if suffix == ".json":
         traj.to_json(path, rate=rate, indent=1, rotor_drag=rotor_drag)
     elif suffix == ".csv":
         traj.to_csv(path, rate=rate, rotor_drag=rotor_drag)
-    elif suffix == ".npz":
-        traj.to_npz(path, rate=rate, rotor_drag=rotor_drag)
     else:
-        raise ConfigError("--export", f"unknown format {suffix!r}: use a .json, .csv or .npz file name")
+        traj.to_npz(path, rate=rate, rotor_drag=rotor_drag)
     return path
 
 

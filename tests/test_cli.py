@@ -603,6 +603,17 @@ def test_a_missing_directory_is_refused_before_planning_and_not_created(argv, fl
     assert list(tmp_path.iterdir()) == []
 
 
+@pytest.mark.parametrize("line", [[], ["--line-pitch-deg", "30"]])
+@pytest.mark.parametrize("name", ["plan.txt", "plan", "plan.json.bak"])
+def test_an_unknown_export_format_is_refused_before_planning(line, name, tmp_path, capsys, monkeypatch) -> None:
+    """``--export plan.txt`` printed the whole summary and then exited 2."""
+    _no_planning(monkeypatch)
+    assert main(["demo", "--no-plot", *line, "--export", str(tmp_path / name)]) == EXIT_USAGE
+    captured = capsys.readouterr()
+    assert captured.err.startswith("avp: ERROR: --export: ") and ".json, .csv or .npz" in captured.err
+    assert captured.out == "" and list(tmp_path.iterdir()) == []
+
+
 def test_an_export_suffix_in_capitals_is_its_format(tmp_path, capsys) -> None:
     out = tmp_path / "PLAN.JSON"
     assert main(["demo", "--no-plot", "-q", "--export", str(out)]) == EXIT_SOLVED
