@@ -18,11 +18,14 @@ Two forms:
   always finite: a trajectory whose attitude is undefined at a sample time (zero thrust: a free
   fall) is refused with a :class:`~avp.errors.ConfigError` on ``trajectory`` naming that time.
 
-Every writer takes a path and returns it; :meth:`Trajectory.to_json` without a path returns the
-text. A path that cannot be written or read (a missing directory, a file where a directory
+:func:`write_csv` and :func:`write_npz` (``Trajectory.to_csv``, ``to_npz``) take a path and
+return it as a :class:`~pathlib.Path`; :func:`write_json` (``Trajectory.to_json``) returns the
+JSON text, with or without a path, and with one also writes that text (and a final newline)
+there. A path that cannot be written or read (a missing directory, a file where a directory
 should be, no permission) is a :class:`~avp.errors.ConfigError` on ``path`` (``source`` for
-:func:`read_json`) that carries the operating system's message; so is a path that is no file name
-(``None`` where a path is required, bytes, a number: give a ``str`` or a ``pathlib.Path``). The ``Trajectory`` methods ``to_csv``, ``to_json``, ``to_npz``, ``from_csv``, ``from_json``,
+:func:`read_json`) that carries the operating system's message; so is a path that is no file
+name (``None`` where a path is required, bytes, a number: give a ``str`` or a ``pathlib.Path``).
+The ``Trajectory`` methods ``to_csv``, ``to_json``, ``to_npz``, ``from_csv``, ``from_json``,
 ``from_npz`` call these functions.
 """
 
@@ -252,6 +255,7 @@ def _restore_provenance(traj: Trajectory, data: Any) -> None:
 
 def write_json(traj: Trajectory, path: str | Path | None = None, rate: float | None = None,
                indent: int | None = None, rotor_drag: float = 0.0) -> str:
+    """The JSON text of :func:`trajectory_to_dict`; also written to ``path`` if given."""
     target = _path(path) if path is not None else None
     text = json.dumps(trajectory_to_dict(traj, rate, rotor_drag), indent=_indent(indent), allow_nan=False)
     if target is not None:

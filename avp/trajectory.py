@@ -9,6 +9,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from enum import IntEnum
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -382,13 +383,13 @@ class Trajectory:
 
         return export.write_json(self, path, rate=rate, indent=indent, rotor_drag=rotor_drag)
 
-    def to_npz(self, path: Any, *, rate: float | None = None, rotor_drag: float = 0.0) -> Any:
+    def to_npz(self, path: Any, *, rate: float | None = None, rotor_drag: float = 0.0) -> Path:
         """NumPy ``.npz`` with the exact coefficients (and samples at ``rate`` Hz if given)."""
         from . import export
 
         return export.write_npz(self, path, rate=rate, rotor_drag=rotor_drag)
 
-    def to_csv(self, path: Any, *, rate: float | None = None, rotor_drag: float = 0.0) -> Any:
+    def to_csv(self, path: Any, *, rate: float | None = None, rotor_drag: float = 0.0) -> Path:
         """CSV of samples at ``rate`` Hz (:data:`avp.export.SAMPLE_COLUMNS`), or without a rate
         one row of exact coefficients per segment and flat output (:meth:`from_csv` reads it)."""
         from . import export

@@ -61,6 +61,18 @@ def test_json_text_round_trip(traj: avp.Trajectory) -> None:
     assert json.loads(text)["format"] == export.FORMAT
 
 
+def test_writers_return_what_the_module_docstring_says(traj: avp.Trajectory, tmp_path: Path) -> None:
+    """``to_csv`` and ``to_npz`` return the path as a ``Path``; ``to_json`` returns the JSON text
+    also when it writes a file (the docstring said that every writer returns its path)."""
+    for fmt in ("csv", "npz"):
+        given = str(tmp_path / f"p.{fmt}")
+        assert getattr(traj, f"to_{fmt}")(given) == Path(given)
+    path = tmp_path / "p.json"
+    text = traj.to_json(path)
+    assert text == traj.to_json() and path.read_text() == text + "\n"
+    assert export.__doc__ is not None and "Every writer takes a path and returns it" not in export.__doc__
+
+
 @pytest.mark.parametrize("fmt", ["json", "npz", "csv"])
 def test_samples_match_the_trajectory(traj: avp.Trajectory, tmp_path: Path, fmt: str) -> None:
     """Sampled exports against independent evaluations: flat outputs from the polynomial with
