@@ -206,8 +206,12 @@ def trajectory_to_dict(traj: Trajectory, rate: float | None = None, rotor_drag: 
 
 
 def trajectory_from_dict(data: Mapping[str, Any]) -> Trajectory:
-    """The trajectory of a :func:`trajectory_to_dict` dict (samples, if any, are ignored)."""
+    """The trajectory of a :func:`trajectory_to_dict` dict (samples, if any, are ignored). The
+    result document of ``avp ... --json`` is refused with a message that points at its
+    ``trajectory`` entry and at ``--export``, which writes a loadable plan."""
 
+    if isinstance(data, Mapping) and "format" not in data and "command" in data:
+        raise ConfigError("format", _cli_result_message(data))
     if not isinstance(data, Mapping) or data.get("format") != FORMAT:
         raise ConfigError("format", f"not an {FORMAT} document (expected a 'format': '{FORMAT}' entry)")
     if data.get("version") != VERSION:
@@ -218,6 +222,17 @@ def trajectory_from_dict(data: Mapping[str, Any]) -> Trajectory:
     traj = _from_knots(data["coefficients"], data["knots"], data.get("t0"), data.get("knots_rel"), data["g"])
     _restore_provenance(traj, data.get("provenance"))
     return traj
+
+
+def _cli_result_message(doc: Mapping[str, Any]) -> str:
+    """Why the result document of ``avp COMMAND --json`` is no trajectory document, and what to load instead."""
+    what = f"the result document of avp {doc['command']} --json, not an {FORMAT} document"
+    if doc.get("trajectory") is not None:
+        return (f"{what}: its plan is under 'trajectory' (load it with avp.export.trajectory_from_dict("
+                "doc['trajectory'])); avp demo --export FILE.json writes a plan that Trajectory.from_json loads")
+    if "trajectory" in doc:
+        return f"{what}: it holds no plan ('trajectory' is null: the planner found none)"
+    return f"{what}: it holds no plan; avp demo --export FILE.json writes one that Trajectory.from_json loads"
 
 
 def _from_knots(coefficients: Any, knots: Any, t0: Any, knots_rel: Any, g: Any) -> Trajectory:

@@ -273,6 +273,21 @@ def test_export_flag_writes_a_loadable_plan(tmp_path: Path) -> None:
     assert np.allclose(traj(traj.t0), state.position, atol=1e-9)
 
 
+def test_the_json_result_is_not_a_trajectory_file_and_says_where_its_plan_is(tmp_path: Path, capsys) -> None:
+    """``avp demo --json > plan.json`` writes the result document, which ``Trajectory.from_json``
+    refused as "not an avp.trajectory document"; the error now points at its ``trajectory``
+    entry and at ``--export``, and that entry loads."""
+    assert main(["demo", "--no-plot", "--json"]) == EXIT_SOLVED
+    result = tmp_path / "result.json"
+    result.write_text(capsys.readouterr().out)
+    with pytest.raises(avp.ConfigError, match="result document of avp demo --json") as err:
+        avp.Trajectory.from_json(result)
+    assert err.value.field == "format" and "'trajectory'" in err.value.message and "--export" in err.value.message
+    traj = avp.export.trajectory_from_dict(json.loads(result.read_text())["trajectory"])
+    target = demo_geometry(90.0, 3.5, 0.0, None)[1]
+    assert np.linalg.norm(traj(traj.tf) - target.point) < 1e-6
+
+
 def test_export_rate_needs_export(capsys) -> None:
     assert main(["demo", "--no-plot", "--export-rate", "50"]) == EXIT_USAGE
     assert "--export-rate:" in capsys.readouterr().err

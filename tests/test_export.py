@@ -61,6 +61,17 @@ def test_json_text_round_trip(traj: avp.Trajectory) -> None:
     assert json.loads(text)["format"] == export.FORMAT
 
 
+@pytest.mark.parametrize("doc, says", [
+    ({"command": "demo", "exit_code": 1, "trajectory": None}, "holds no plan ('trajectory' is null"),
+    ({"command": "simulate", "rows": []}, "holds no plan; avp demo --export"),
+])
+def test_a_cli_result_without_a_plan_says_so(doc: dict, says: str) -> None:
+    with pytest.raises(ConfigError, match="not an avp.trajectory document") as err:
+        avp.Trajectory.from_json(json.dumps(doc))
+    assert err.value.field == "format" and says in err.value.message
+    assert f"avp {doc['command']} --json" in err.value.message
+
+
 def test_writers_return_what_the_module_docstring_says(traj: avp.Trajectory, tmp_path: Path) -> None:
     """``to_csv`` and ``to_npz`` return the path as a ``Path``; ``to_json`` returns the JSON text
     also when it writes a file (the docstring said that every writer returns its path)."""
