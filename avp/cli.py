@@ -219,8 +219,17 @@ def _flag_overrides(args: argparse.Namespace) -> dict[str, Any]:
     return {"planner": planner} if planner else {}
 
 
-def _settings(args: argparse.Namespace, defaults: dict[str, Any] | None = None) -> Settings:
-    return load_settings(args.config, _flag_overrides(args), defaults)
+def _settings(args: argparse.Namespace, defaults: dict[str, Any] | None = None,
+              overrides: dict[str, Any] | None = None) -> Settings:
+    """:func:`~avp.configfile.load_settings` of ``--config`` with the flags (``overrides``, by
+    default the common ones: :func:`_flag_overrides`) over it; an error on the file itself
+    (missing, unreadable, not TOML: a ``ConfigError`` on ``path``) is reported on ``--config``."""
+    try:
+        return load_settings(args.config, _flag_overrides(args) if overrides is None else overrides, defaults)
+    except ConfigError as exc:
+        if exc.field == "path" and exc.__cause__ is not None:  # read_toml's (not a [path] table's)
+            raise ConfigError("--config", exc.message) from exc
+        raise
 
 
 def _emit_json(doc: Any) -> None:
@@ -690,8 +699,7 @@ def simulate(args: argparse.Namespace) -> int:
         raise ConfigError("--trials", f"must be >= 1, got {args.trials}")
     if args.seed < 0:
         raise ConfigError("--seed", f"must be >= 0 (a random generator seed), got {args.seed}")
-    settings = load_settings(args.config, merge(_flag_overrides(args), _platform_overrides(args)),
-                             _simulator_settings(args))
+    settings = _settings(args, _simulator_settings(args), merge(_flag_overrides(args), _platform_overrides(args)))
     if args.line_pitch_deg is not None:  # closed-loop line perches (avp/cli_line.py)
         if args.simulator not in (None, "avp"):
             raise ConfigError("--simulator", "line perches fly on avp's simulator only; drop --simulator/--backend rotorpy")

@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import os
 import tomllib
 import types
 import typing
@@ -58,17 +59,23 @@ NONE_STRINGS = ("none", "free")
 
 
 def read_toml(path: str | Path) -> dict[str, Any]:
-    """The parsed TOML file; a missing or malformed file is a :class:`ConfigError`."""
+    """The parsed TOML file. A ``path`` that is no file name (give a ``str`` or a
+    :class:`~pathlib.Path`), a missing or unreadable file and a file that is not TOML are a
+    :class:`ConfigError` on ``path`` (``avp ... --config`` reports it on the flag)."""
+    if not isinstance(path, (str, os.PathLike)) or isinstance(os.fspath(path), bytes):
+        raise ConfigError("path", f"expected a TOML file name (str or pathlib.Path), got {type(path).__name__} "
+                                  f"{path!r:.60}")
     p = Path(path)
     try:
         with p.open("rb") as fh:
             return tomllib.load(fh)
     except FileNotFoundError as exc:
-        raise ConfigError("--config", f"file {str(p)!r} not found") from exc
+        raise ConfigError("path", f"file {str(p)!r} not found; give the path of an existing TOML file") from exc
     except tomllib.TOMLDecodeError as exc:
-        raise ConfigError("--config", f"{str(p)!r} is not valid TOML: {exc}") from exc
+        raise ConfigError("path", f"{str(p)!r} is not valid TOML: {exc}") from exc
     except OSError as exc:  # a directory, no permission...
-        raise ConfigError("--config", f"cannot read {str(p)!r}: {exc.strerror or exc}") from exc
+        raise ConfigError("path", f"cannot read {str(p)!r}: {exc.strerror or exc}; give the path of a readable "
+                                  "TOML file") from exc
 
 
 def merge(base: Mapping[str, Any], overlay: Mapping[str, Any]) -> dict[str, Any]:
@@ -230,9 +237,16 @@ class Settings:
 
 def load_settings(path: str | Path | None = None, overrides: Mapping[str, Any] | None = None,
                   defaults: Mapping[str, Any] | None = None) -> Settings:
-    """Settings from an optional TOML file; ``overrides`` (same nesting, e.g. from command-line
-    flags) win over the file, the file wins over ``defaults``. Unknown top-level tables are a
-    :class:`ConfigError`."""
+    """The :class:`Settings` of the TOML file at ``path`` (``None``: no file, the defaults):
+    ``.planner``, ``.replan`` and ``.line`` are the :class:`~avp.PlannerConfig`,
+    :class:`~avp.ReplanConfig` and :class:`~avp.LineOptions` its tables set (each field not set
+    keeps its default), ``.scenario()`` the simulator's :class:`~avp.sim.run.SimScenario`.
+    ``overrides`` (the same nesting as the file, e.g. ``{"planner": {"limits": {"mass": 0.8}}}``,
+    as the command-line flags give) win over the file, the file wins over ``defaults``.
+
+    Bad input is a :class:`ConfigError`: on ``path`` for a file that is missing, unreadable or
+    not TOML (:func:`read_toml`), on the table for an unknown top-level table, and on the key
+    path (``planner.limits.mass``) for an unknown key, a value of the wrong type or out of range."""
     data = merge(defaults or {}, read_toml(path) if path is not None else {})
     data = merge(data, overrides or {})
     sections = _sections()

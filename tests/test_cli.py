@@ -179,7 +179,7 @@ def test_avp_demo_on_a_line_flies_the_line_table(tmp_path: Path, capsys) -> None
     ("[planner]\npre_impact = \"sideways\"\n", "planner.pre_impact"),
     ("[planner.limits]\nmass = -1.0\n", "planner.limits.mass"),
     ("[plannr]\nsolver = \"daqp\"\n", "plannr"),
-    ("[planner]\nsolver = \n", "--config"),
+    ("[path]\nsolver = \"daqp\"\n", "path"),  # a table, not the file: not reported on --config
     ("[line]\nwedge = 0.6\n", "line.wedge"),
     ("[line]\nrecovery_point = [1.0, \"a\", 3.0]\n", "line.recovery_point"),
     ("[line]\nrecovery_point = [1.0, 2.0]\n", "line.recovery_point"),
@@ -197,6 +197,31 @@ def test_config_errors_name_the_key(tmp_path: Path, text: str, field: str, capsy
     assert main(["demo", "--config", str(path), "--json"]) == EXIT_USAGE
     doc = json.loads(capsys.readouterr().out)
     assert doc["exit_code"] == EXIT_USAGE and doc["field"] == field
+
+
+@pytest.mark.parametrize("case", ["missing", "directory", "not TOML"])
+def test_a_config_file_that_cannot_be_read_is_an_error_on_path_or_on_the_flag(case: str, tmp_path: Path,
+                                                                                capsys) -> None:
+    """From Python the error names ``load_settings``'s argument ``path`` (it named the CLI's
+    ``--config``); ``avp demo`` and ``avp simulate`` report it on ``--config``."""
+    path = {"missing": tmp_path / "none.toml", "directory": tmp_path, "not TOML": tmp_path / "bad.toml"}[case]
+    if case == "not TOML":
+        path.write_text("[planner]\nsolver = \n")
+    with pytest.raises(avp.ConfigError) as exc:
+        load_settings(path)
+    assert exc.value.field == "path" and repr(str(path)) in exc.value.message
+    for command in (["demo", "--no-plot"], ["simulate", "--trials", "1", "--no-plot"]):
+        assert main([*command, "--config", str(path), "--json"]) == EXIT_USAGE
+        doc = json.loads(capsys.readouterr().out)
+        assert doc["field"] == "--config" and repr(str(path)) in doc["error"]
+
+
+@pytest.mark.parametrize("path", [5, b"vehicle.toml", ["vehicle.toml"]])
+def test_a_config_path_that_is_no_file_name_is_a_config_error(path) -> None:
+    """Was Python's TypeError from pathlib."""
+    with pytest.raises(avp.ConfigError) as exc:
+        load_settings(path)
+    assert exc.value.field == "path" and "str or pathlib.Path" in exc.value.message
 
 
 # -- exit codes -------------------------------------------------------------------------------
