@@ -109,3 +109,18 @@ def test_the_page_example_loads(tmp_path: Path) -> None:
     assert cfg.solver == "proxqp" and cfg.limits.mass == 0.7 and cfg.contact_velocity.slope is None
     (ceiling,) = cfg.workspace.half_spaces
     assert ceiling.normal.tolist() == [0.0, 0.0, -1.0] and ceiling.offset == -3.0
+
+
+def test_the_page_python_example_runs(tmp_path: Path, monkeypatch) -> None:
+    """The page's Python snippet, run on its TOML example saved as ``vehicle.toml``."""
+    page = configfile.configuration_markdown()
+    toml = page.split("```toml\n", 1)[1].split("```", 1)[0]
+    code = page.split("```python\n", 1)[1].split("```", 1)[0]
+    (tmp_path / "vehicle.toml").write_text(toml)
+    monkeypatch.chdir(tmp_path)
+    names: dict = {}
+    exec(compile(code, "docs/configuration.md", "exec"), names)
+    settings, heavier = names["settings"], names["heavier"]
+    assert settings.planner.limits.mass == 0.7 and settings.replan.latency == 0.03
+    assert heavier.planner.limits.mass == 0.8 and heavier.planner.limits.thrust_max == 13.7
+    assert isinstance(names["traj"], avp.Trajectory) and names["replanner"].config == settings.planner
