@@ -212,7 +212,10 @@ def sequence(field: str, value: Any, what: str, single: tuple[type, ...] = ()) -
     if isinstance(value, (str, bytes, Mapping, *single)) or not hasattr(value, "__iter__"):
         wrap = f"; wrap a single one: ({single[0].__name__}(...),)" if isinstance(value, single) else ""
         raise ConfigError(field, f"must be a sequence of {what}, got {value!r}{wrap}")
-    return tuple(value)
+    try:
+        return tuple(value)
+    except TypeError as exc:  # an __iter__ that refuses (a 0-d NumPy array)
+        raise ConfigError(field, f"must be a sequence of {what}, got {value!r}") from exc
 
 
 def keywords(prefix: str, cls: type, names: tuple[str, ...], kwargs: Mapping[str, Any], also: tuple[str, ...] = ()) -> None:

@@ -19,7 +19,7 @@ the planner's rows (8) use the cone only, which is the paper's model).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field, fields, replace
 from functools import cached_property
 from typing import Any
 
@@ -99,7 +99,12 @@ class Camera:
         ``uptilt`` rad: turned about ``b2`` from ``b1`` towards ``b3``, so that it looks above
         the horizon when the vehicle hovers (``c3 = cos(uptilt) b1 + sin(uptilt) b3``), as FPV
         cameras are mounted for forward flight, in which the vehicle pitches nose down. Other
-        fields as :class:`Camera` (``half_fov``, ``range``...)."""
+        fields as :class:`Camera` (``half_fov``, ``range``...); not ``R_BC``, which ``front``
+        sets (build ``Camera(R_BC=...)`` for another mounting)."""
+        if "R_BC" in kwargs:
+            raise ConfigError("camera.R_BC", "is set by Camera.front (the front mounting tilted up by uptilt); "
+                                             "build Camera(R_BC=...) for another mounting")
+        v.keywords("camera", cls, tuple(f.name for f in fields(cls) if f.init and f.name != "R_BC"), kwargs, ("uptilt",))
         th = v.finite_float("camera.uptilt", uptilt)
         if not abs(th) < math.pi / 2:
             raise ConfigError("camera.uptilt", f"must be in (-pi/2, pi/2) rad, got {th}")

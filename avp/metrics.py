@@ -72,6 +72,8 @@ def visibility(
         ``a + g e3 + d v`` (0: the drag-free map (11)). Pass the planner's
         ``config.limits.rotor_drag`` to get the figures its SQP step scores.
     """
+    if not isinstance(trajectory, Trajectory):
+        raise ConfigError("trajectory", f"expected avp.Trajectory, got {type(trajectory).__name__}")
     return visibility_many((trajectory,), target, camera, dt, rotor_drag=rotor_drag)[0]
 
 
@@ -88,7 +90,10 @@ def visibility_many(
     Plans on the same knots (the candidates of one SQP, say) are evaluated by one kernel call on
     their stacked coefficients and one vectorised camera test; the result equals calling
     :func:`visibility` on each. Plans on different knots are evaluated one after the other.
+    ``trajectories`` is any sequence or iterable of :class:`~avp.Trajectory` (a lone plan is
+    refused: wrap it, ``(trajectory,)``).
     """
+    trajectories = v.sequence("trajectories", trajectories, "avp.Trajectory", (Trajectory,))
     if camera is not None and not isinstance(camera, Camera):
         raise ConfigError("camera", f"expected avp.Camera or None, got {type(camera).__name__}")
     if not isinstance(target, PerchTarget):

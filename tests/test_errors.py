@@ -368,7 +368,7 @@ _T = avp.PerchTarget.from_incline([3.5, 0.0, 1.5], math.pi / 2)
         # wrong types and sizes that raised raw TypeError / AttributeError / KernelError / OSError
         (lambda: avp.metrics.visibility(avp.plan(_S, _T), avp.LineTarget.segment([0, 0, 1], [1, 0, 1])), "target"),
         (lambda: avp.metrics.visibility(avp.plan(_S, _T), _T, camera="x"), "camera"),
-        (lambda: avp.metrics.visibility("x", _T), "trajectories[0]"),
+        (lambda: avp.metrics.visibility("x", _T), "trajectory"),
         (lambda: avp.FovConfig(n_points=100000), "fov.n_points"),
         (lambda: avp.plan(_S, _T)(0.5, 100), "order"),
         (lambda: avp.plan(_S, _T)("x"), "t"),

@@ -88,6 +88,31 @@ def test_visibility_many_equals_one_at_a_time() -> None:
     assert visibility_many([], target) == []
 
 
+def test_bad_inputs_are_config_errors_naming_the_argument() -> None:
+    """A lone plan, a non-iterable, a string, an iterator's wrong element, a line or a camera
+    class: a ConfigError naming the argument (an iterator of plans is taken), the single-plan
+    function naming its own argument ``trajectory``."""
+    from avp.metrics import visibility_many
+
+    tr, target = _hover_then_cruise(), _target([2.0, 0.0, TARGET_HEIGHT])
+    assert visibility_many(iter([tr]), target) == [visibility(tr, target)]
+    for bad in (tr, 5, None, "ab", {"a": tr}, np.array(5.0)):
+        with pytest.raises(ConfigError, match=r"^trajectories: must be a sequence of avp.Trajectory"):
+            visibility_many(bad, target)
+    with pytest.raises(ConfigError, match=r"^trajectories\[1\]: expected avp.Trajectory, got int"):
+        visibility_many([tr, 3], target)
+    with pytest.raises(ConfigError, match=r"^trajectory: expected avp.Trajectory, got tuple"):
+        visibility((tr,), target)
+    for call in (visibility, lambda t, *a: visibility_many((t,), *a)):
+        with pytest.raises(ConfigError, match=r"^target: expected avp.PerchTarget"):
+            call(tr, target.point)
+        with pytest.raises(ConfigError, match=r"^camera: expected avp.Camera or None, got type"):
+            call(tr, target, Camera)
+        for dt in ("0.1", None, [1e-3], math.nan):
+            with pytest.raises(ConfigError, match=r"^dt: "):
+                call(tr, target, None, dt)
+
+
 @pytest.mark.parametrize("incline", [0, 45, 90, 120])
 def test_cone_only_fast_path_equals_the_camera_test(incline) -> None:
     """A cone-only camera is scored by the Rust FoV kernel, a camera with a range by

@@ -132,6 +132,18 @@ def test_camera_front_validation_and_default() -> None:
             avp.Camera.front(bad)
 
 
+def test_camera_front_refuses_its_own_mounting_and_unknown_settings() -> None:
+    """``front`` sets ``R_BC`` itself: passing one is a ConfigError (not Python's "multiple values"
+    TypeError), as is a keyword that is no Camera setting (not listing ``R_BC`` as one to use)."""
+    with pytest.raises(avp.ConfigError, match=r"^camera.R_BC: is set by Camera.front"):
+        avp.Camera.front(R_BC=np.eye(3))
+    with pytest.raises(avp.ConfigError, match=r"^camera.half_angle: is not a Camera setting") as info:
+        avp.Camera.front(0.1, half_angle=0.5)
+    assert "'R_BC'" not in str(info.value) and "'half_fov'" in str(info.value)
+    with pytest.raises(avp.ConfigError, match=r"^camera.range: "):
+        avp.Camera.front(range="far")
+
+
 def test_the_realistic_vehicles_camera_is_tilted_up_and_shared_with_the_planner() -> None:
     from avp.sim.evaluate import SimConfig
     from avp.sim.run import _shared
