@@ -68,6 +68,13 @@ RETIME_RANGE = (0.1, 10.0)
 """Factors :attr:`MovingConfig.retime` may hold: a nudge of the fixed duration (a factor
 outside it is another plan, not a retime of this one)."""
 
+MAX_SOLVES = 1000
+"""Largest :attr:`MovingConfig.max_solves`. A search needs far fewer: growing ``T`` by the
+default ``growth`` 1.25 crosses the whole range of durations (0.01 s to the 1e4 s duration
+limit) in 62 solves, and a geometric bisection reaches the float resolution of ``T`` in about
+60. A candidate takes 1-3 ms with the default spline (6 segments), so 1000 solves are seconds of
+search; beyond, a search that cannot certify runs for minutes."""
+
 
 @v.typed_keywords("moving")
 @dataclass(frozen=True)
@@ -96,7 +103,8 @@ class MovingConfig:
     growth:
         Factor on ``T`` while no candidate is certified (> 1).
     max_solves:
-        QP solves per plan at most.
+        QP solves per plan at most, in [1, :data:`MAX_SOLVES`] (1000: the search needs about 60
+        to cross the whole range of durations, and each solve costs milliseconds).
     max_duration:
         Longest duration tried (s).
     retime:
@@ -137,7 +145,7 @@ class MovingConfig:
         g = v.finite_float("moving.growth", self.growth)
         if not 1.0 < g <= 10.0:
             raise ConfigError("moving.growth", f"must be in (1, 10] (as BoundsPolicy.growth), got {g}")
-        v.integer("moving.max_solves", self.max_solves, 1)
+        v.integer("moving.max_solves", self.max_solves, 1, MAX_SOLVES, "(QP solves of the arrival-time search)")
         if not 1e-2 <= v.positive_float("moving.max_duration", self.max_duration) <= LIMITS["duration"][0]:
             raise ConfigError("moving.max_duration", f"must be in [0.01, {LIMITS['duration'][0]:g}] s, got {self.max_duration}")
         if any(not RETIME_RANGE[0] <= v.finite_float("moving.retime", f) <= RETIME_RANGE[1]

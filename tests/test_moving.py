@@ -273,6 +273,16 @@ def test_a_fixed_duration_beyond_the_duration_limit_is_a_config_error():
     assert MovingConfig(retime=(0.1, 10.0)).retime == (0.1, 10.0)
 
 
+def test_max_solves_is_a_bounded_integer():
+    """``max_solves`` is in [1, 1000] (:data:`avp.moving.MAX_SOLVES`): 10**9 was taken, a search
+    that never certifies then running for days; a float or a bool is no count."""
+    assert MovingConfig(max_solves=1000).max_solves == 1000
+    assert MovingConfig(max_solves=np.int64(3)).max_solves == 3
+    for bad in (0, 1001, 10**9, 7.0, True, "7", None):
+        with pytest.raises(ConfigError, match=r"^moving.max_solves: must be an integer in \[1, 1000\]"):
+            MovingConfig(max_solves=bad)
+
+
 def test_negative_speed_is_a_reversing_platform():
     tgt = platform(0.5, -1.0, model=MotionModel.CONSTANT_VELOCITY)
     assert tgt.at(1.0).point[0] == pytest.approx(-1.0)
