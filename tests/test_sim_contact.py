@@ -126,3 +126,32 @@ def test_perch_criteria_need_positive_finite_tolerances(name, bad):
         SimScenario(perch_criteria=PerchCriteria(**{name: bad}))
     assert info.value.field == f"perch_criteria.{name}"
     assert PerchCriteria(**{name: 1}).__dict__[name] == 1.0
+
+
+@pytest.mark.parametrize("name,bad", [
+    *[(n, b) for n in ("max_attitude_error", "normal_speed_max", "max_tangential_speed")
+      for b in (-1.0, 0.0, -np.inf, np.nan, "1", True, None)],
+    *[("normal_speed_min", b) for b in (-0.1, np.inf, np.nan, "0.05", True, None)],
+    ("max_attitude_error", np.inf), ("max_attitude_error", 3.2),
+])
+def test_success_criteria_refuse_thresholds_no_touch_meets(name, bad):
+    """A NaN, a negative, a string or a boolean threshold was taken (a NaN speed bound judged
+    every touch a failure, a string made detect_contact raise a TypeError mid-run)."""
+    from avp.sim import SuccessCriteria
+
+    with pytest.raises(ConfigError) as info:
+        SuccessCriteria(**{name: bad})
+    assert info.value.field == f"criteria.{name}"
+
+
+def test_success_criteria_take_floats_and_no_limit():
+    from avp.sim import SuccessCriteria
+
+    c = SuccessCriteria(max_attitude_error=np.pi, normal_speed_min=0, normal_speed_max=np.inf,
+                        max_tangential_speed=np.float32(2.5))
+    assert (c.max_attitude_error, c.normal_speed_min, c.normal_speed_max, c.max_tangential_speed) == (
+        np.pi, 0.0, np.inf, 2.5) and type(c.normal_speed_min) is float
+    prev, new = crossing()
+    assert detect_contact(prev, new, PAD, 1.0, 1.002, c).success
+    with pytest.raises(ConfigError, match=r"^criteria.normal_speed_min: \(1.0 m/s\) must be below"):
+        SuccessCriteria(normal_speed_min=1.0, normal_speed_max=1.0)

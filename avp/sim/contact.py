@@ -25,6 +25,7 @@ Two judgements, our choice (the paper gives no numbers):
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
@@ -73,12 +74,32 @@ class PerchPad:
 @v.typed_keywords("criteria")
 @dataclass(frozen=True)
 class SuccessCriteria:
-    """Thresholds of a successful perch (module docstring): angles in rad, speeds in m/s."""
+    """Thresholds of a successful touch (module docstring): angles in rad, speeds in m/s.
+
+    ``max_attitude_error`` is in ``(0, pi]`` (the angle between ``b3`` and ``s3``);
+    ``0 <= normal_speed_min < normal_speed_max``; ``normal_speed_max`` and
+    ``max_tangential_speed`` are positive, ``inf`` for no limit.
+    """
 
     max_attitude_error: float = float(np.deg2rad(15.0))
     normal_speed_min: float = 0.05
     normal_speed_max: float = 1.0
     max_tangential_speed: float = 3.0
+
+    def __post_init__(self) -> None:
+        att = v.positive_float("criteria.max_attitude_error", self.max_attitude_error)
+        if att > math.pi:
+            raise ConfigError("criteria.max_attitude_error", f"must be in (0, pi] rad (the angle between b3 and s3), "
+                                                             f"got {att}")
+        lo = v.nonnegative_float("criteria.normal_speed_min", self.normal_speed_min)
+        hi = v.positive_float("criteria.normal_speed_max", self.normal_speed_max, allow_inf=True)
+        if lo >= hi:
+            raise ConfigError("criteria.normal_speed_min", f"({lo} m/s) must be below criteria.normal_speed_max "
+                                                           f"({hi} m/s)")
+        tangential = v.positive_float("criteria.max_tangential_speed", self.max_tangential_speed, allow_inf=True)
+        for name, val in (("max_attitude_error", att), ("normal_speed_min", lo), ("normal_speed_max", hi),
+                          ("max_tangential_speed", tangential)):
+            object.__setattr__(self, name, val)
 
 
 @dataclass(frozen=True, eq=False)
