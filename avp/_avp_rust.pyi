@@ -236,7 +236,8 @@ def certify_halfspace(
     touch_order: int = 0,
     exact: bool = True,
 ) -> tuple[npt.NDArray[np.int8], npt.NDArray[np.float64], float]:
-    """``normal . p(t) > offset`` per segment of a (S, 4, C) spline: ``(codes (S,), t (S,),
+    """``normal . p(t) > offset`` per segment of a ``(S, A, C)`` spline whose first three axes
+    are the position (``A >= 3``; fewer: ``KernelError`` on ``coeffs``): ``(codes (S,), t (S,),
     residual)``. With ``touch_order = k >= 1`` the last segment touches the plane at its end: a
     ``k``-fold root at ``t_f`` is divided out, the quotient certified, and ``residual`` bounds how
     far beyond the plane the position can be (m). Codes 0 within, 1 violated, 2 unknown."""

@@ -330,6 +330,33 @@ def test_column_major_arrays_are_refused_not_misread():
     np.testing.assert_array_equal(ok, _avp_rust.eval_spline(c, k, t, [0]))
 
 
+@pytest.mark.parametrize("axes", [1, 2, 3, 4])
+def test_a_spline_with_too_few_axes_is_a_kernel_error_without_a_panic(axes, capfd):
+    """Coefficients with fewer axes than a kernel reads (the regions and trackability need x, y,
+    z; the actuator bounds x, y, z, yaw) are refused up front with a KernelError on ``coeffs``:
+    the workspace certificates indexed the missing axes first, panicked (a message and backtrace
+    hint on stderr) and raised an 'internal error' KernelError."""
+    c = np.zeros((2, axes, 6))
+    k = np.array([0.0, 0.5, 1.0])
+    up = np.array([0.0, 0.0, 1.0])
+    calls = {
+        3: [lambda: _avp_rust.certify_halfspace(c, k, up, -1.0), lambda: _avp_rust.certify_halfspace(c, k, up, 0.0, 1),
+            lambda: _avp_rust.certify_sphere_outside(c, k, up, 0.5), lambda: _avp_rust.certify_speed(c, k, 1.0),
+            lambda: _avp_rust.trackability_rows(c, k, 10.0, 2.0)],
+        4: [lambda: _avp_rust.certify_spline(c, k, np.full(5, 10.0)), lambda: _avp_rust.bound_polynomial(c, k, 0, 0, 10.0)],
+    }
+    for needed, kernels in calls.items():
+        for call in kernels:
+            if axes >= needed:
+                call()  # takes it (the regions read the first three axes)
+                continue
+            with pytest.raises(_avp_rust.KernelError) as exc:
+                call()
+            assert exc.value.arg == "coeffs" and "axes" in exc.value.detail and "internal" not in exc.value.detail
+    out, err = capfd.readouterr()
+    assert err == "" and out == ""
+
+
 # ---------------------------------------------------------------- certify_spline
 
 

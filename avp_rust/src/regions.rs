@@ -164,6 +164,12 @@ pub fn certify_region(
     touch_order: usize,
     exact: bool,
 ) -> Result<Vec<RegionVerdict>> {
+    if view.n_axes() < 3 {
+        return Err(Error::Shape {
+            arg: "coeffs",
+            detail: format!("needs at least 3 axes (x, y, z), got {}", view.n_axes()),
+        });
+    }
     region.validate()?;
     let deg = region.degree(view.n_coeffs());
     if deg > MAX_DEGREE {
@@ -354,5 +360,34 @@ mod tests {
             offset: 0.0,
         };
         assert!(certify_region(&view, &plane, 5, true).is_err());
+    }
+
+    #[test]
+    fn fewer_than_three_axes_is_a_shape_error_not_a_panic() {
+        let c = [0.0, 1.0, 0.0, 1.0];
+        for axes in [1, 2] {
+            let view = SplineView::new(&c[..2 * axes], (1, axes, 2), &[0.0, 1.0]).unwrap();
+            for r in [
+                Region::HalfSpace {
+                    normal: [0.0, 0.0, 1.0],
+                    offset: 0.0,
+                },
+                Region::SphereOutside {
+                    center: [0.0; 3],
+                    radius: 1.0,
+                },
+                Region::SpeedBelow { v_max: 1.0 },
+            ] {
+                match certify_region(&view, &r, 0, true) {
+                    Err(Error::Shape {
+                        arg: "coeffs",
+                        detail,
+                    }) => {
+                        assert!(detail.contains("at least 3 axes"), "{detail}")
+                    }
+                    other => panic!("expected a shape error on coeffs, got {other:?}"),
+                }
+            }
+        }
     }
 }

@@ -39,7 +39,7 @@ fn run<'py>(
     Ok((codes.into_pyarray(py), times.into_pyarray(py), residual))
 }
 
-/// `normal . p(t) > offset` on every segment of a `(S, 4, C)` spline. With `touch_order = k >= 1`
+/// `normal . p(t) > offset` on every segment of a `(S, A >= 3, C)` spline (x, y, z first). With `touch_order = k >= 1`
 /// the last segment touches the plane at its end (contact): the quotient after dividing out a
 /// `k`-fold root at `t_f` is certified and `residual` bounds how far beyond the plane the
 /// position can be (m). Returns `(codes int8 (S,), t (S,), residual)`; codes 0 within,
