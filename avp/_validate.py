@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import inspect
 import math
 import numbers
 from collections.abc import Callable, Mapping
@@ -254,18 +255,28 @@ def _as_float(value: Any) -> Any:
 
 
 def typed_keywords(prefix: str) -> Callable[[_Cls], _Cls]:
-    """Class decorator (above ``@dataclass``): the constructor refuses a keyword that is not a
-    field with :func:`keywords`, and passes a real number that is not a Python float (a
-    ``Decimal``, a ``Fraction``, a NumPy scalar or 0-d array) to a ``float`` field as the float it
-    stands for, so the stored settings are plain floats the planner's arithmetic takes."""
+    """Class decorator (above ``@dataclass``): the constructor refuses a keyword that is not one
+    of its parameters (the init fields and any ``InitVar``) with :func:`keywords`, and passes a
+    real number that is not a Python float (a ``Decimal``, a ``Fraction``, a NumPy scalar or 0-d
+    array) to a ``float`` field as the float it stands for, so the stored settings are plain
+    floats the planner's arithmetic takes. Positional arguments are matched to the generated
+    constructor's positional parameters (``kw_only`` fields are none; an ``InitVar`` is one), so
+    any dataclass layout is read right. A class that is not a dataclass with a generated
+    ``__init__`` is a ``TypeError`` at decoration."""
 
     def wrap(cls: _Cls) -> _Cls:
-        init = vars(cls)["__init__"]  # the dataclass-generated constructor
-        fields = [f for f in dataclasses.fields(cls) if f.init]
-        names = tuple(f.name for f in fields)
+        init = vars(cls).get("__init__")  # the dataclass-generated constructor
+        if not dataclasses.is_dataclass(cls) or init is None:
+            raise TypeError(f"typed_keywords({prefix!r}): {cls.__name__} must be a dataclass with its own generated "
+                            "__init__ (place the decorator above @dataclass)")
+        # The constructor's own parameters, not the fields' order: a kw_only field is no positional
+        # argument, and an InitVar is a parameter that is no field
+        params = list(inspect.signature(init).parameters.values())[1:]  # without self
+        names = tuple(p.name for p in params)
         known = frozenset(names)
-        floats = frozenset(f.name for f in fields if f.type in _FLOAT_TYPES)
-        positions = tuple(f.name in floats for f in fields)
+        types = {f.name: f.type for f in dataclasses.fields(cls) if f.init}
+        floats = frozenset(n for n in names if types.get(n) in _FLOAT_TYPES)
+        positions = tuple(p.name in floats for p in params if p.kind is p.POSITIONAL_OR_KEYWORD)
 
         @functools.wraps(init)
         def checked_init(self: Any, *args: Any, **kwargs: Any) -> None:

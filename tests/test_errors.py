@@ -620,6 +620,41 @@ def test_a_real_number_of_another_type_is_stored_as_a_float(cls, kind) -> None:
         assert stored == float(value)
 
 
+def test_typed_keywords_follows_the_constructor_with_kw_only_fields_and_init_vars() -> None:
+    """Positional arguments were matched to the init fields in declaration order: a ``kw_only``
+    field declared between two float fields shifted the second onto it (a ``Decimal`` stored as
+    given), and an ``InitVar`` (no field) shifted every later one and was refused as a keyword."""
+    from decimal import Decimal
+
+    @_validate.typed_keywords("demo")
+    @dataclasses.dataclass
+    class Demo:
+        a: float = 0.0
+        label: str = dataclasses.field(default="x", kw_only=True)
+        b: float = 0.0
+
+    d = Demo(Decimal("1.5"), Decimal("2.5"), label="y")
+    assert (d.a, d.b, d.label) == (1.5, 2.5, "y") and type(d.b) is float
+
+    @_validate.typed_keywords("demo")
+    @dataclasses.dataclass
+    class WithInitVar:
+        name: str = "n"
+        unit: dataclasses.InitVar[str] = "m"
+        y: float = 0.0
+
+        def __post_init__(self, unit: str) -> None:
+            self.name = f"{self.name} [{unit}]"
+
+    w = WithInitVar("n", "s", Decimal("0.25"))
+    assert (w.name, w.y, type(w.y)) == ("n [s]", 0.25, float)
+    assert WithInitVar(unit="km", y=np.float32(0.5)).name == "n [km]"
+    with pytest.raises(avp.ConfigError, match=r"^demo.units: is not a WithInitVar setting; use one of 'name', 'unit', 'y'"):
+        WithInitVar(units="km")
+    with pytest.raises(TypeError, match="above @dataclass"):
+        _validate.typed_keywords("demo")(type("Plain", (), {}))
+
+
 def test_planning_and_replanning_take_settings_of_other_real_types() -> None:
     """Found by fuzzing: a 0-d array ``g`` made planning hash an array, a ``Decimal`` latency made
     the second replanning step add a float to a Decimal (a TypeError out of ``step``)."""
