@@ -626,6 +626,18 @@ class PlannerConfig:
     ----------
     n_segments, degree:
         Spline shape: ``n_segments`` polynomials of ``degree`` per flat output (paper: 7).
+        Above degree 10 with many segments the plans are slow and poor: in the monomial basis
+        of the coefficients the reduced QP is ill-conditioned (condition numbers 3e13 to 3e21),
+        DAQP's solution is far from the optimum, fails the certificates, and the relaxation
+        stages are solved in turn, each a dense QP in the ``4 n_segments (degree + 1)``
+        coefficients. Measured (certificates and FoV off; wall and 45 deg pads from 3 to
+        7.5 m): up to degree 10 the snap cost is within 0.1 % of the optimum at 1 to 32
+        segments; at degree 11 from 10 segments, 12 to 14 from 8, 15 and 20 from 6 it exceeds
+        it, by 0.2 % up to a factor 6e4 (degree 15, 32 segments). With the certificates (one
+        BLAS thread), 32 segments of degree 15 took 17 s (10 QPs of 1404 unknowns left by the
+        elimination of 2048 coefficients: 10.6 s in DAQP, 5.4 s in the eliminations) and ended
+        ``BOUNDS_NOT_CERTIFIED``; of degree 10, 0.5 s and one QP. Refine with segments at degree
+        <= 10: where no inequality row is active, a snap-optimal piece is of degree 7 anyway.
     position_cost_order, yaw_cost_order:
         ``j`` of the cost (4): 4 (snap) for position, 2 or 3 for yaw.
     continuity_order:
