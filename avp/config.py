@@ -768,7 +768,8 @@ class PlannerConfig:
                                                f"{', '.join(known)}")
         object.__setattr__(self, "solver_options", _solver_options(self.solver_options))
         for name, kind in (("contact_velocity", ContactVelocity), ("limits", VehicleLimits),
-                           ("time_allocation", TimeAllocation), ("fov", FovConfig)):
+                           ("time_allocation", TimeAllocation), ("fov", FovConfig), ("bounds", BoundsPolicy),
+                           ("workspace", Workspace), ("flip", OverhangFlip)):
             if not isinstance(getattr(self, name), kind):
                 raise ConfigError(f"config.{name}", f"must be an avp.{kind.__name__}, got {getattr(self, name)!r}")
         if not self.limits.accel_max > self.g:  # the hover the planner starts from and the band need it
@@ -787,12 +788,6 @@ class PlannerConfig:
             if not (math.isfinite(a_lo) and math.isfinite(a_hi) and 0.0 < a_lo <= a_hi):
                 raise ConfigError("config.alpha_range", f"must be (lo, hi) with 0 < lo <= hi, got {self.alpha_range}")
             object.__setattr__(self, "alpha_range", (a_lo, a_hi))
-        if not isinstance(self.workspace, Workspace):
-            raise ConfigError("config.workspace", f"must be an avp.Workspace, got {self.workspace!r}")
-        if not isinstance(self.bounds, BoundsPolicy):
-            raise ConfigError("config.bounds", f"must be a BoundsPolicy, got {self.bounds!r}")
-        if not isinstance(self.flip, OverhangFlip):
-            raise ConfigError("config.flip", f"must be an OverhangFlip, got {self.flip!r}")
         if self.flip.thrust is not None and not self.limits.accel_min < self.flip.thrust < self.limits.accel_max:
             raise ConfigError(
                 "flip.thrust",

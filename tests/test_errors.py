@@ -188,6 +188,8 @@ def test_errors_survive_pickling(error) -> None:
     (lambda: avp.PlannerConfig(contact_velocity={"normal": -0.3}), "config.contact_velocity"),
     (lambda: avp.PlannerConfig(fov=None), "config.fov"),
     (lambda: avp.PlannerConfig(time_allocation=None), "config.time_allocation"),
+    (lambda: avp.PlannerConfig(bounds="x"), "config.bounds"),  # was an AttributeError on .certify
+    (lambda: avp.PlannerConfig(bounds=None, workspace="x"), "config.bounds"),
     (lambda: avp.PlannerConfig(alpha_range=5.0), "config.alpha_range"),
     (lambda: avp.PlannerConfig(alpha_range=("a", 6.0)), "config.alpha_range"),
     (lambda: avp.Workspace(half_spaces=avp.HalfSpace(point=[0, 0, 3], normal=[0, 0, -1])), "workspace.half_spaces"),
