@@ -214,6 +214,63 @@ def test_configuration_objects_check_their_types(make, field) -> None:
     assert exc.value.field == field
 
 
+def _simulator_settings():
+    from avp.sim.camera import CameraParams
+    from avp.sim.contact import PerchPad
+    from avp.sim.line_run import LineCriteria, LineDetector, LineScenario
+    from avp.sim.odometry import OdometryNoise
+    from avp.sim.platform import PlatformNoise
+    from avp.sim.run import PlatformMotion
+
+    line = avp.LineTarget.segment([0.0, 0.0, 1.0], [1.0, 0.0, 1.0])
+    return [
+        (lambda: CameraParams(rate_hz="30"), "camera.rate_hz"),
+        (lambda: CameraParams(min_range=None), "camera.min_range"),
+        (lambda: CameraParams(dropout=True), "camera.dropout"),
+        (lambda: CameraParams(latency=-0.01), "camera.latency"),
+        (lambda: OdometryNoise(sigma_p="0.01"), "odometry.sigma_p"),
+        (lambda: OdometryNoise(rate_hz=None), "odometry.rate_hz"),
+        (lambda: PlatformNoise(sigma_heading="0.1"), "platform_noise.sigma_heading"),
+        (lambda: PlatformMotion(speed=None), "scenario.platform.speed"),
+        (lambda: PlatformMotion(window="1"), "scenario.platform.window"),
+        (lambda: LineDetector(sigma="0"), "detector.sigma"),
+        (lambda: LineCriteria(gripper=-0.01), "criteria.gripper"),
+        (lambda: LineCriteria(angle=math.nan), "criteria.angle"),
+        (lambda: LineCriteria(angle=4.0), "criteria.angle"),
+        (lambda: LineCriteria(speed="0.3"), "criteria.speed"),
+        (lambda: LineCriteria(clearance=-0.02), "criteria.clearance"),
+        (lambda: LineScenario(line, [-3.0, 0.0, 1.0], initial_frames="3"), "scenario.initial_frames"),
+        (lambda: LineScenario(line, [-3.0, 0.0, 1.0], initial_frames=10**6), "scenario.initial_frames"),
+        (lambda: LineScenario(line, [-3.0, 0.0, 1.0], replan_rate_hz=None), "scenario.replan_rate_hz"),
+        (lambda: LineScenario(line, 1.0), "scenario.start"),
+        (lambda: PerchPad([0.0, 0.0, 1.0], np.eye(3), half_size="0.15"), "pad.half_size"),
+    ]
+
+
+@pytest.mark.parametrize("index", range(20))
+def test_simulator_settings_refuse_wrong_types_with_config_errors(index) -> None:
+    """The simulator's noise, camera, platform, line and pad settings were checked with
+    ``math.isfinite`` / ``np.isfinite`` or comparisons: a string or ``None`` was a TypeError, a
+    boolean or a string that compared was taken, and the line criteria were not checked."""
+    settings = _simulator_settings()
+    assert len(settings) == 20
+    make, field = settings[index]
+    with pytest.raises(avp.ConfigError) as exc:
+        make()
+    assert exc.value.field == field
+
+
+def test_simulator_settings_are_stored_as_floats() -> None:
+    from avp.sim.line_run import LineCriteria, LineScenario
+    from avp.sim.odometry import OdometryNoise
+
+    assert type(OdometryNoise(sigma_p=np.float32(0.5)).sigma_p) is float
+    c = LineCriteria(gripper=1, angle=math.pi, speed=math.inf, clearance=0)
+    assert (c.gripper, c.angle, c.speed, c.clearance) == (1.0, math.pi, math.inf, 0.0) and type(c.gripper) is float
+    sc = LineScenario(avp.LineTarget.segment([0.0, 0.0, 1.0], [1.0, 0.0, 1.0]), (-3, 0, 1), initial_frames=np.int64(100))
+    assert sc.initial_frames == 100 and sc.start.tolist() == [-3.0, 0.0, 1.0]
+
+
 def _switch_configs():
     """``{configuration class: (field prefix, constructor taking keyword arguments)}``."""
     from avp.line_planner import LineOptions

@@ -100,15 +100,13 @@ class CameraParams:
         if not isinstance(self.camera, Camera):
             raise ConfigError("camera.camera", f"must be an avp.Camera, got {type(self.camera).__name__}")
         object.__setattr__(self, "p_B", v.vector("camera.p_B", self.p_B))
-        if not 0.0 <= self.min_range < self.camera.range:
-            raise ConfigError("camera.min_range", "need 0 <= min_range < camera.range (m)")
         for name in ("rate_hz", "d0_pos", "d0_ang"):
-            if not (np.isfinite(getattr(self, name)) and getattr(self, name) > 0):
-                raise ConfigError(f"camera.{name}", "must be a positive finite number")
-        for name in ("sigma0_pos", "sigma0_ang", "latency", "scale_bias", "normal_tilt"):
-            if not (np.isfinite(getattr(self, name)) and getattr(self, name) >= 0):
-                raise ConfigError(f"camera.{name}", "must be a finite number >= 0")
-        if not 0.0 <= self.dropout < 1.0:
+            object.__setattr__(self, name, v.positive_float(f"camera.{name}", getattr(self, name)))
+        for name in ("min_range", "sigma0_pos", "sigma0_ang", "latency", "scale_bias", "normal_tilt", "dropout"):
+            object.__setattr__(self, name, v.nonnegative_float(f"camera.{name}", getattr(self, name)))
+        if not self.min_range < self.camera.range:
+            raise ConfigError("camera.min_range", "need 0 <= min_range < camera.range (m)")
+        if not self.dropout < 1.0:
             raise ConfigError("camera.dropout", f"must be a probability in [0, 1), got {self.dropout}")
         if self.bias_sign not in (None, 1, -1, 1.0, -1.0) or isinstance(self.bias_sign, (bool, np.bool_)):
             raise ConfigError("camera.bias_sign", "must be +1, -1 or None (random per run)")

@@ -55,8 +55,7 @@ class PerchPad:
     def __post_init__(self) -> None:
         object.__setattr__(self, "p_W", v.vector("pad.p_W", self.p_W))
         object.__setattr__(self, "R_WS", np.array(v.rotation("pad.R_WS", self.R_WS)))
-        if not (np.isfinite(self.half_size) and self.half_size > 0):
-            raise ConfigError("pad.half_size", f"must be a positive length, not {self.half_size}")
+        object.__setattr__(self, "half_size", v.positive_float("pad.half_size", self.half_size))
         if self.shape not in ("square", "disc"):
             raise ConfigError("pad.shape", f"expected 'square' or 'disc', got {self.shape!r}")
 

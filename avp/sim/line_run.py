@@ -47,7 +47,7 @@ from ..trajectory import Trajectory
 from .controller import ControllerGains, FlatReference
 from .flight import DT_CONTROL, check_dt, fly
 from .odometry import Odometry, OdometryNoise
-from .run import Mode, _odometry_state
+from .run import MAX_INITIAL_FRAMES, Mode, _odometry_state
 from .vehicle import RigidBodyState, VehicleParams
 
 __all__ = ["LineCriteria", "LineDetector", "LineScenario", "LineSimResult", "simulate_line"]
@@ -64,24 +64,31 @@ class LineDetector:
     sigma_per_metre: float = 0.01
 
     def __post_init__(self) -> None:
-        if not (math.isfinite(self.rate_hz) and self.rate_hz > 0):
-            raise ConfigError("detector.rate_hz", f"must be positive, got {self.rate_hz}")
+        object.__setattr__(self, "rate_hz", v.positive_float("detector.rate_hz", self.rate_hz))
         for name in ("sigma", "sigma_per_metre"):
-            val = getattr(self, name)
-            if not (math.isfinite(val) and val >= 0):
-                raise ConfigError(f"detector.{name}", f"must be >= 0 and finite, got {val}")
+            object.__setattr__(self, name, v.nonnegative_float(f"detector.{name}", getattr(self, name)))
 
 
 @v.typed_keywords("criteria")
 @dataclass(frozen=True)
 class LineCriteria:
     """Success of a line perch at the contact time (module docstring): distances in m, ``angle``
-    in rad, ``speed`` in m/s."""
+    in rad, ``speed`` in m/s. ``gripper`` and ``speed`` are positive (``speed`` ``inf``: no
+    limit), ``angle`` in ``(0, pi]``, ``clearance`` >= 0."""
 
     gripper: float = 0.03
     angle: float = math.radians(10.0)
     speed: float = 0.3
     clearance: float = 0.02
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "gripper", v.positive_float("criteria.gripper", self.gripper))
+        angle = v.positive_float("criteria.angle", self.angle)
+        if angle > math.pi:
+            raise ConfigError("criteria.angle", f"must be in (0, pi] rad, got {angle}")
+        object.__setattr__(self, "angle", angle)
+        object.__setattr__(self, "speed", v.positive_float("criteria.speed", self.speed, allow_inf=True))
+        object.__setattr__(self, "clearance", v.nonnegative_float("criteria.clearance", self.clearance))
 
 
 @v.typed_keywords("scenario")
@@ -107,14 +114,11 @@ class LineScenario:
     def __post_init__(self) -> None:
         if not isinstance(self.line, LineTarget):
             raise ConfigError("scenario.line", f"expected avp.LineTarget, got {type(self.line).__name__}")
-        p = np.asarray(self.start, dtype=float)
-        if p.shape != (3,) or not np.all(np.isfinite(p)):
-            raise ConfigError("scenario.start", f"expected 3 finite numbers (m), got {self.start!r}")
-        object.__setattr__(self, "start", p)
-        if self.initial_frames < 1:
-            raise ConfigError("scenario.initial_frames", "need at least one detection before planning")
-        if not (math.isfinite(self.replan_rate_hz) and self.replan_rate_hz > 0):
-            raise ConfigError("scenario.replan_rate_hz", "must be positive and finite")
+        object.__setattr__(self, "start", np.array(v.frozen_array("scenario.start", self.start, (3,))))
+        object.__setattr__(self, "initial_frames", v.integer(
+            "scenario.initial_frames", self.initial_frames, 1, MAX_INITIAL_FRAMES,
+            hint=f"(detections before the first plan, {MAX_INITIAL_FRAMES} at most, as SimScenario's)"))
+        object.__setattr__(self, "replan_rate_hz", v.positive_float("scenario.replan_rate_hz", self.replan_rate_hz))
 
 
 @dataclass(frozen=True, eq=False, kw_only=True)

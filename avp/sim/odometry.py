@@ -21,7 +21,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from .. import _validate as v
-from ..errors import ConfigError
 from ..frames import expm_so3
 from .vehicle import RigidBodyState
 
@@ -61,11 +60,8 @@ class OdometryNoise:
 
     def __post_init__(self) -> None:
         for name in ("sigma_p", "sigma_v", "sigma_att", "sigma_omega", "drift_p"):
-            val = getattr(self, name)
-            if not (np.isfinite(val) and val >= 0):
-                raise ConfigError(f"odometry.{name}", f"must be a finite std >= 0, got {val}")
-        if not (np.isfinite(self.rate_hz) and self.rate_hz > 0):
-            raise ConfigError("odometry.rate_hz", f"must be a positive rate (Hz), got {self.rate_hz}")
+            object.__setattr__(self, name, v.nonnegative_float(f"odometry.{name}", getattr(self, name)))
+        object.__setattr__(self, "rate_hz", v.positive_float("odometry.rate_hz", self.rate_hz))
 
 
 def noisy_odometry(

@@ -57,9 +57,7 @@ class PlatformNoise:
 
     def __post_init__(self) -> None:
         for name in ("sigma_position", "sigma_velocity", "sigma_heading", "sigma_turn_rate"):
-            val = getattr(self, name)
-            if not (math.isfinite(val) and val >= 0.0):
-                raise ConfigError(f"platform_noise.{name}", f"must be finite and >= 0, got {val}")
+            object.__setattr__(self, name, v.nonnegative_float(f"platform_noise.{name}", getattr(self, name)))
 
 
 def noisy_platform(truth: MovingTarget, noise: PlatformNoise | None, rng: np.random.Generator) -> MovingTarget:

@@ -188,12 +188,10 @@ class PlatformMotion:
     window: float = 4.0
 
     def __post_init__(self) -> None:
-        for name in ("speed", "heading", "turn_rate", "vertical_speed", "tracking_time", "window"):
-            if not math.isfinite(getattr(self, name)):
-                raise ConfigError(f"scenario.platform.{name}", f"must be finite, got {getattr(self, name)}")
-        for name in ("tracking_time", "window"):
-            if getattr(self, name) <= 0.0:
-                raise ConfigError(f"scenario.platform.{name}", f"must be a positive time (s), got {getattr(self, name)}")
+        for name in ("speed", "heading", "turn_rate", "vertical_speed"):
+            object.__setattr__(self, name, v.finite_float(f"scenario.platform.{name}", getattr(self, name)))
+        for name in ("tracking_time", "window"):  # s
+            object.__setattr__(self, name, v.positive_float(f"scenario.platform.{name}", getattr(self, name)))
 
     @property
     def model(self) -> MotionModel:
