@@ -759,13 +759,18 @@ class PlannerConfig:
             raise ConfigError("config.qp_form", f"must be a QpForm, got {self.qp_form!r}")
         if not isinstance(self.solver, str):
             raise ConfigError("config.solver", f"must be a qpsolvers solver name, got {self.solver!r}")
-        from .solve import known_solvers  # the one table of back-end facts (it imports this module)
+        # the one table of back-end facts (that module imports this one)
+        from .solve import backend, known_solvers
 
         known = known_solvers()
         if self.solver not in known:  # a typo; a known back-end not installed here is the SolverError of a plan
             hint = f"did you mean {self.solver.lower()!r}? " if self.solver.lower() in known else ""
             raise ConfigError("config.solver", f"{self.solver!r} is not a qpsolvers back-end; {hint}qpsolvers knows "
                                                f"{', '.join(known)}")
+        if self.qp_form is QpForm.FULL and not backend(self.solver).full_form:
+            raise ConfigError("config.qp_form", f"QpForm.FULL with '{self.solver}' gives feasible plans far from "
+                                                "the optimum (its Hessian is singular in that form); use "
+                                                "QpForm.REDUCED (the default) or solver='proxqp' (avp.solve.Backend.full_form)")
         object.__setattr__(self, "solver_options", _solver_options(self.solver_options))
         for name, kind in (("contact_velocity", ContactVelocity), ("limits", VehicleLimits),
                            ("time_allocation", TimeAllocation), ("fov", FovConfig), ("bounds", BoundsPolicy),

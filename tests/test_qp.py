@@ -352,3 +352,28 @@ def test_a_second_stage_without_free_directions_checks_the_rows_it_cannot_move()
     assert c_p.tobytes() == c0.tobytes()
     with pytest.raises(avp.InfeasibleError, match="inconsistent"):
         assemble.eliminate_within(Z0, c0, G0, P, A_t, A_t @ c0 + 1.0)
+
+
+@pytest.mark.parametrize("solver", ["daqp", "osqp"])
+def test_the_full_form_is_refused_with_the_back_ends_that_miss_its_optimum(solver):
+    """The full form's Hessian is singular; DAQP and OSQP returned feasible plans with 2.3 and
+    1.46 times the reduced form's snap cost there, reported as SOLVED (a fuzzing review)."""
+    with pytest.raises(avp.ConfigError, match="config.qp_form"):
+        avp.PlannerConfig(solver=solver, qp_form=avp.QpForm.FULL)
+    avp.PlannerConfig(solver=solver)  # the reduced form stays
+
+
+def test_proxqp_meets_the_reduced_optimum_in_the_full_form_where_daqp_did_not():
+    """The fact behind Backend.full_form, on the case that showed it: 12 segments of degree 9."""
+    wall = avp.PerchTarget.from_incline([4.5, 0.0, 1.5], np.pi / 2)
+    start = avp.State.hover([0.0, 0.0, 1.5])
+
+    def snap_cost(**kw):
+        cfg = avp.PlannerConfig(n_segments=12, degree=9, **kw)
+        cfg = dataclasses.replace(cfg, fov=dataclasses.replace(cfg.fov, enabled=False))
+        tr = avp.plan(start, wall, cfg)
+        t = tr.sample(1e-3)
+        return float(np.sum(tr(t, 4) ** 2) * 1e-3)
+
+    reduced = snap_cost()
+    assert snap_cost(solver="proxqp", qp_form=avp.QpForm.FULL) == pytest.approx(reduced, rel=1e-3)
