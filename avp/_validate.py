@@ -261,8 +261,8 @@ def typed_keywords(prefix: str) -> Callable[[_Cls], _Cls]:
     array) to a ``float`` field as the float it stands for, so the stored settings are plain
     floats the planner's arithmetic takes. Positional arguments are matched to the generated
     constructor's positional parameters (``kw_only`` fields are none; an ``InitVar`` is one), so
-    any dataclass layout is read right. A class that is not a dataclass with a generated
-    ``__init__`` is a ``TypeError`` at decoration."""
+    any dataclass layout is read right. A class that is not a dataclass with an ``__init__`` of
+    its own is a ``TypeError`` at decoration (a hand-written ``__init__`` is wrapped as it is)."""
 
     def wrap(cls: _Cls) -> _Cls:
         init = vars(cls).get("__init__")  # the dataclass-generated constructor

@@ -624,9 +624,10 @@ class PlannerConfig:
 
     Parameters
     ----------
-    n_segments, degree:
-        Spline shape: ``n_segments`` polynomials of ``degree`` per flat output (paper: 7).
-        Above degree 10 with many segments the plans are slow and poor: in the monomial basis
+    n_segments:
+        Spline shape: ``n_segments`` polynomials of ``degree`` per flat output.
+    degree:
+        Degree of each polynomial (paper: 7). Above degree 10 with many segments the plans are slow and poor: in the monomial basis
         of the coefficients the reduced QP is ill-conditioned (condition numbers 3e13 to 3e21),
         DAQP's solution is far from the optimum, fails the certificates, and the relaxation
         stages are solved in turn, each a dense QP in the ``4 n_segments (degree + 1)``

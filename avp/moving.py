@@ -72,7 +72,7 @@ MAX_SOLVES = 1000
 """Largest :attr:`MovingConfig.max_solves`. A search needs far fewer: growing ``T`` by the
 default ``growth`` 1.25 crosses the whole range of durations (0.01 s to the 1e4 s duration
 limit) in 62 solves, and a geometric bisection reaches the float resolution of ``T`` in about
-60. A candidate takes 1-3 ms with the default spline (6 segments), so 1000 solves are seconds of
+60. A candidate takes milliseconds with the default spline, so 1000 solves are seconds of
 search; beyond, a search that cannot certify runs for minutes."""
 
 
@@ -103,8 +103,7 @@ class MovingConfig:
     growth:
         Factor on ``T`` while no candidate is certified (> 1).
     max_solves:
-        QP solves per plan at most, in [1, :data:`MAX_SOLVES`] (1000: the search needs about 60
-        to cross the whole range of durations, and each solve costs milliseconds).
+        QP solves per plan at most, in [1, :data:`MAX_SOLVES`] (why that bound: there).
     max_duration:
         Longest duration tried (s).
     retime:

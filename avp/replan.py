@@ -160,10 +160,11 @@ class ReplanStep:
     certificate).
 
     ``tracking_error`` (m) and ``tracking_velocity_error`` (m/s): how far the odometry was from
-    the plan being flown at ``t`` (:meth:`Replanner.plan_at`; NaN for a first plan and past
-    the plan's end);
-    ``off_track``: they were beyond ``ReplanConfig.anchor_position`` / ``anchor_velocity`` and
-    the step committed no plan from the odometry, so the plan flown on does not start where
+    the plan being flown at ``t`` (:meth:`Replanner.plan_at`; NaN for a first plan and outside
+    that plan's times, as past its end);
+    ``off_track``: they were beyond ``ReplanConfig.anchor_position`` / ``anchor_velocity``, the
+    committed plan had started (before its ``t0`` it was just planned, from odometry when the
+    vehicle was off) and the step committed nothing, so the plan flown on does not start where
     the vehicle is (the reason says so). ``CANNOT_REACH`` is about the pad; ``off_track`` is the
     vehicle's own cue to abort or go around when it persists (a controller recovering from a
     gust may be off for a step or two).
@@ -289,7 +290,8 @@ class Replanner:
         :class:`ReplanConfig`.
     trajectory:
         An already committed plan (otherwise the first :meth:`step` plans from odometry); it
-        must end at ``target`` (within ``replan.target_tolerance``, for a static pad; a
+        must end at ``target``'s contact point (the pad centre, or ``workspace.body_offset``
+        off it along the normal; within ``replan.target_tolerance``, for a static pad; a
         ``ConfigError`` otherwise: pass the target it was planned for and the newer estimate to
         :meth:`step`), and replans certify their snap against its peaks as against a first
         plan's.
@@ -314,11 +316,13 @@ class Replanner:
         self.config = config if config is not None else PlannerConfig()
         self.replan = replan if replan is not None else ReplanConfig()
         if trajectory is not None and self._static_pad:
-            miss = float(np.linalg.norm(trajectory.evaluate(trajectory.tf)[:3] - target.point))
+            # a plan's centre of mass ends body_offset off the pad along its normal (avp.qp.perching)
+            contact = target.point + self.config.workspace.body_offset * target.s3
+            miss = float(np.linalg.norm(trajectory.evaluate(trajectory.tf)[:3] - contact))
             if miss > self.replan.target_tolerance:
-                raise ConfigError("trajectory", f"ends {miss:.3f} m from target.point (more than "
-                                  f"replan.target_tolerance {self.replan.target_tolerance:g} m): pass the target "
-                                  "the plan was made for, and give the newer estimate to step()")
+                raise ConfigError("trajectory", f"ends {miss:.3f} m from its contact point at target.point (more "
+                                  f"than replan.target_tolerance {self.replan.target_tolerance:g} m): pass the "
+                                  "target (and config) the plan was made for, and give the newer estimate to step()")
         self._replan_config = self.config
         if not self.replan.search_on_replan:
             self._replan_config = replace(
@@ -471,8 +475,8 @@ class Replanner:
         # committed one starts); not measured past its end (contact: the perch is over)
         flown = self._flown(t)
         e_p = e_v = math.nan
-        if t <= flown.tf:
-            ref = flown.derivatives(max(t, flown.t0))
+        if flown.t0 <= t <= flown.tf:
+            ref = flown.derivatives(t)
             e_p = float(np.linalg.norm(odometry.position - ref[0, :3]))
             e_v = float(np.linalg.norm(odometry.velocity - ref[1, :3]))
         anchored = e_p <= rc.anchor_position and e_v <= rc.anchor_velocity
@@ -492,8 +496,10 @@ class Replanner:
                           f"{math.degrees(ang):.1f} deg from the estimate (tolerances {rc.reach_tolerance:.3f} m, "
                           f"{math.degrees(rc.reach_angle_tolerance):.1f} deg; {limit}); {reason}")
                 action = ReplanAction.CANNOT_REACH
-            # the plan flown on does not start where the vehicle is: nothing was committed from odometry
-            off_track = not anchored and not math.isnan(e_p) and action in _KEEPS
+            # the plan flown on does not start where the vehicle is: it has started (before its t0 it
+            # was planned from odometry or the reference just now) and the step committed nothing
+            off_track = (not anchored and not math.isnan(e_p) and t >= committed.t0 and action in _KEEPS
+                         and kw.get("fraction", 0.0) == 0.0)
             if off_track:
                 reason = f"off track: {tracking}; {reason}"
             return ReplanStep(t=t, action=action, trajectory=self.trajectory, reason=reason, t_ex=t_ex, target_error=err, target_angle=ang, reach_budget=budget if self._static_pad else math.inf, tracking_error=e_p, tracking_velocity_error=e_v, off_track=off_track, **kw)  # type: ignore[arg-type]
@@ -508,7 +514,7 @@ class Replanner:
         if anchored and shift <= rc.target_tolerance and turn <= rc.target_tolerance and self._can_hold:
             self._resume = None  # nothing to correct: what a cut step left is moot
             return record(ReplanAction.HELD, f"tracking {e_p:.3f} m / {e_v:.3f} m/s, estimate {shift:.4f} m and "
-                          f"{math.degrees(turn):.2f} deg from the committed pad", anchored=True)
+                          f"{math.degrees(turn):.2f} deg from the committed target", anchored=True)
         try:
             start = _plan_state(committed, t_ex) if anchored else anticipate(committed, odometry, t, t_ex, rc.measured_orders)
         except ConfigError as exc:

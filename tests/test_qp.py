@@ -356,15 +356,16 @@ def test_a_second_stage_without_free_directions_checks_the_rows_it_cannot_move()
 
 @pytest.mark.parametrize("solver", ["daqp", "osqp"])
 def test_the_full_form_is_refused_with_the_back_ends_that_miss_its_optimum(solver):
-    """The full form's Hessian is singular; DAQP and OSQP returned feasible plans with 2.3 and
-    1.46 times the reduced form's snap cost there, reported as SOLVED (a fuzzing review)."""
+    """The full form's Hessian is singular; DAQP and OSQP returned feasible plans far from its
+    optimum there, reported as SOLVED (figures at Backend.full_form)."""
     with pytest.raises(avp.ConfigError, match="config.qp_form"):
         avp.PlannerConfig(solver=solver, qp_form=avp.QpForm.FULL)
     avp.PlannerConfig(solver=solver)  # the reduced form stays
 
 
 def test_proxqp_meets_the_reduced_optimum_in_the_full_form_where_daqp_did_not():
-    """The fact behind Backend.full_form, on the case that showed it: 12 segments of degree 9."""
+    """ProxQP stays allowed with the full form: on the case where DAQP missed the optimum (12
+    segments of degree 9) it meets the reduced form's snap cost (Backend.full_form is True)."""
     wall = avp.PerchTarget.from_incline([4.5, 0.0, 1.5], np.pi / 2)
     start = avp.State.hover([0.0, 0.0, 1.5])
 
@@ -376,4 +377,5 @@ def test_proxqp_meets_the_reduced_optimum_in_the_full_form_where_daqp_did_not():
         return float(np.sum(tr(t, 4) ** 2) * 1e-3)
 
     reduced = snap_cost()
+    assert avp.solve.backend("proxqp").full_form
     assert snap_cost(solver="proxqp", qp_form=avp.QpForm.FULL) == pytest.approx(reduced, rel=1e-3)

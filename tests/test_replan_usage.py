@@ -307,7 +307,7 @@ def test_a_plan_handed_in_for_another_pad_is_refused():
     held ("estimate moved 0.0000 m") all the way to the wrong contact."""
     plan = avp.plan(START, WALL)
     elsewhere = avp.PerchTarget.from_incline(WALL.point + [0.0, 1.0, 0.0], math.pi / 2)
-    with pytest.raises(avp.ConfigError, match=r"trajectory.*ends 1\.000 m from target\.point"):
+    with pytest.raises(avp.ConfigError, match=r"trajectory.*ends 1\.000 m from its contact point"):
         avp.Replanner(elsewhere, trajectory=plan)
     rp = avp.Replanner(WALL, trajectory=plan)  # the pad it was made for, then the newer estimate
     s = rp.step(0.2, _fly(rp, 0.2), elsewhere)
@@ -328,3 +328,42 @@ def test_the_reasons_say_the_turn_and_the_time_to_contact():
     f = rp.step(t, _fly(rp, t), None)
     assert f.action in (ReplanAction.FROZEN_NEAR_CONTACT, ReplanAction.CANNOT_REACH)
     assert f"contact in {rp.trajectory.tf - t:.3f} s" in f.reason
+
+
+def test_a_partial_commit_from_odometry_reported_as_cannot_reach_is_not_off_track():
+    """A step that commits half a 1 m correction from odometry 0.2 m off says ``CANNOT_REACH``
+    (the rest is out of reach); the plan it committed starts at the vehicle, so it is not off
+    track (a review found both said, the tracking text twice)."""
+    truth = avp.PerchTarget.from_incline([3.5, 0.0, 1.5], math.pi / 2)
+    rp = avp.Replanner(truth, replan=avp.ReplanConfig(latency=0.02, deadline=None))
+    rp.step(0.0, START, truth)
+    f = rp.reference(0.8)
+    s = rp.step(0.8, avp.State(position=f.position + [0.0, 0.2, 0.0], velocity=f.velocity),
+                avp.PerchTarget(point=truth.point + [0.0, 1.0, 0.0], R_WS=truth.R_WS))
+    assert s.action is ReplanAction.CANNOT_REACH and s.committed and not s.anchored
+    assert not s.off_track and s.reason.count("from the reference") == 1
+
+
+def test_steps_before_a_plan_from_odometry_starts_are_not_off_track():
+    """Until the plan just committed from odometry takes over (its ``t0``), the vehicle is still
+    off the previous plan: that is not a plan flown on from elsewhere."""
+    rp = avp.Replanner(WALL, replan=avp.ReplanConfig(latency=0.1, deadline=None))
+    rp.step(0.0, START)
+    first = rp.trajectory
+    off = np.array([0.0, 0.3, 0.0])
+    s = rp.step(0.5, avp.State(position=first(0.5) + off, velocity=first(0.5, 1)), WALL)
+    assert s.committed and not s.anchored and rp.trajectory.t0 > 0.55
+    s2 = rp.step(0.55, avp.State(position=first(0.55) + off, velocity=first(0.55, 1)), WALL)
+    assert s2.action is ReplanAction.KEPT_PREVIOUS and not s2.off_track
+    assert s2.tracking_error == pytest.approx(0.3, abs=1e-9)  # measured, against the plan flown
+
+
+def test_a_plan_handed_in_with_a_body_offset_ends_at_its_contact_point():
+    """The centre of mass of a plan with ``workspace.body_offset`` ends that far off the pad
+    along its normal: still the plan made for the pad (a review found it refused)."""
+    cfg = avp.PlannerConfig(workspace=avp.Workspace(body_offset=0.1))
+    plan = avp.plan(START, WALL, cfg)
+    assert np.linalg.norm(plan(plan.tf) - WALL.point) == pytest.approx(0.1, abs=1e-9)
+    avp.Replanner(WALL, cfg, trajectory=plan)
+    with pytest.raises(avp.ConfigError, match="trajectory"):
+        avp.Replanner(WALL, trajectory=plan)  # without the offset the contact point is elsewhere

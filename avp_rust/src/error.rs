@@ -51,8 +51,9 @@ std::thread_local! {
 }
 
 /// Installs, once, a panic hook that stays silent inside [`guarded`] (recording the location
-/// for the error) and defers to the previous hook elsewhere. The hook is this library's own
-/// (a cdylib carries its own `std`), so other Rust code in the process is not affected.
+/// for the error) and defers to the previous hook elsewhere. In the Python extension (a cdylib
+/// with its own `std`) the hook is the extension's alone; linked as an rlib into a program, it
+/// wraps that program's hook, which still sees every panic outside [`guarded`].
 fn install_quiet_hook() {
     static HOOK: Once = Once::new();
     HOOK.call_once(|| {
