@@ -23,17 +23,24 @@ ORTHONORMAL_TOL = 1e-6
 """Tolerance on ``|R^T R - I|`` (max entry) and ``|det R - 1|`` for rotation inputs."""
 
 
+def float_array(field: str, value: Any, expected: str) -> npt.NDArray[np.float64]:
+    """``np.array(value, dtype=float)``, or a :class:`ConfigError` on ``field``: "expected
+    ``expected``" when ``value`` holds no numbers, and its own message for an int beyond the
+    float range (NumPy's ``OverflowError``)."""
+    try:
+        return np.array(value, dtype=float)
+    except OverflowError as exc:
+        raise ConfigError(field, "has a number beyond the float range; pass finite values") from exc
+    except (TypeError, ValueError) as exc:
+        raise ConfigError(field, f"expected {expected}, got {value!r}") from exc
+
+
 def frozen_array(field: str, value: Any, shape: tuple[int, ...]) -> npt.NDArray[np.float64]:
     """A finite float64 copy of ``value`` with exactly ``shape``, marked read-only (booleans are
     refused: ``True`` is no coordinate)."""
     if holds_booleans(value):
         raise ConfigError(field, f"expected numbers of shape {shape}, got booleans {value!r}")
-    try:
-        arr = np.array(value, dtype=float)
-    except OverflowError as exc:  # an int beyond the float range
-        raise ConfigError(field, "has a number beyond the float range; pass finite values") from exc
-    except (TypeError, ValueError) as exc:
-        raise ConfigError(field, f"expected numbers of shape {shape}, got {value!r}") from exc
+    arr = float_array(field, value, f"numbers of shape {shape}")
     if arr.shape != shape:
         if arr.size == math.prod(shape) and arr.ndim <= 1 and len(shape) == 1:
             arr = arr.reshape(shape)
@@ -55,12 +62,7 @@ def _all_finite(arr: npt.NDArray[np.float64]) -> bool:
 
 def vector(field: str, value: Any, size: int = 3) -> npt.NDArray[np.float64]:
     """``value`` as a finite (writable) float vector of length ``size``; a scalar is broadcast."""
-    try:
-        arr = np.array(value, dtype=float)
-    except OverflowError as exc:
-        raise ConfigError(field, "has a number beyond the float range; pass finite values") from exc
-    except (TypeError, ValueError) as exc:
-        raise ConfigError(field, f"expected {size} numbers, got {value!r}") from exc
+    arr = float_array(field, value, f"{size} numbers")
     if arr.ndim == 0:
         arr = np.full(size, float(arr))
     if arr.shape != (size,):

@@ -627,8 +627,9 @@ class PlannerConfig:
     n_segments:
         Spline shape: ``n_segments`` polynomials of ``degree`` per flat output.
     degree:
-        Degree of each polynomial (paper: 7). Above degree 10 with many segments the plans are slow and poor: in the monomial basis
-        of the coefficients the reduced QP is ill-conditioned (condition numbers 3e13 to 3e21),
+        Degree of each polynomial (paper: 7). Above degree 10 with many segments the plans are
+        slow and poor: in the monomial basis of the coefficients the reduced QP is
+        ill-conditioned (condition numbers 3e13 to 3e21),
         DAQP's solution is far from the optimum, fails the certificates, and the relaxation
         stages are solved in turn, each a dense QP in the ``4 n_segments (degree + 1)``
         coefficients. Measured (certificates and FoV off; wall and 45 deg pads from 3 to

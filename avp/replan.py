@@ -74,6 +74,7 @@ from ._validate import LIMITS
 from .config import PlannerConfig, ReplanConfig
 from .errors import AvpError, ConfigError
 from .planner import PlanResult, PlanStatus, plan_detailed
+from .safety import contact_position
 from .trackability import SnapReport, certify_snap, trackability_peaks
 from .trajectory import FlatOutput, Trajectory
 from .types import PerchTarget, State
@@ -316,8 +317,7 @@ class Replanner:
         self.config = config if config is not None else PlannerConfig()
         self.replan = replan if replan is not None else ReplanConfig()
         if trajectory is not None and self._static_pad:
-            # a plan's centre of mass ends body_offset off the pad along its normal (avp.qp.perching)
-            contact = target.point + self.config.workspace.body_offset * target.s3
+            contact = contact_position(target, self.config.workspace)  # body_offset along the normal
             miss = float(np.linalg.norm(trajectory.evaluate(trajectory.tf)[:3] - contact))
             if miss > self.replan.target_tolerance:
                 raise ConfigError("trajectory", f"ends {miss:.3f} m from its contact point at target.point (more "
@@ -480,7 +480,9 @@ class Replanner:
             e_p = float(np.linalg.norm(odometry.position - ref[0, :3]))
             e_v = float(np.linalg.norm(odometry.velocity - ref[1, :3]))
         anchored = e_p <= rc.anchor_position and e_v <= rc.anchor_velocity
-        tracking = (f"odometry {e_p:.3f} m / {e_v:.3f} m/s from the reference (anchors {rc.anchor_position:g} m, "
+
+        def tracking() -> str:  # for the reasons of the steps that report it (not on the hold path)
+            return (f"odometry {e_p:.3f} m / {e_v:.3f} m/s from the reference (anchors {rc.anchor_position:g} m, "
                     f"{rc.anchor_velocity:g} m/s)")
 
         def record(action: ReplanAction, reason: str, cue: bool = True, **kw: object) -> ReplanStep:
@@ -501,7 +503,7 @@ class Replanner:
             off_track = (not anchored and not math.isnan(e_p) and t >= committed.t0 and action in _KEEPS
                          and kw.get("fraction", 0.0) == 0.0)
             if off_track:
-                reason = f"off track: {tracking}; {reason}"
+                reason = f"off track: {tracking()}; {reason}"
             return ReplanStep(t=t, action=action, trajectory=self.trajectory, reason=reason, t_ex=t_ex, target_error=err, target_angle=ang, reach_budget=budget if self._static_pad else math.inf, tracking_error=e_p, tracking_velocity_error=e_v, off_track=off_track, **kw)  # type: ignore[arg-type]
 
         if remaining < max(rc.freeze_horizon, self.config.t_k):
@@ -557,7 +559,7 @@ class Replanner:
             reason = "ok" if f >= 1.0 else (f"{f:.0%} of the correction ({shift:.3f} m and {math.degrees(turn):.1f} deg "
                                             f"requested, budget {budget:.3f} m)")
             if not anchored:
-                reason += f"; planned from odometry: {tracking}"
+                reason += f"; planned from odometry: {tracking()}"
             if time_factor != 1.0:
                 reason += f" (time left x{time_factor:.4g}: the nominal time failed a certificate)"
             if f < 1.0 or time_factor != 1.0:

@@ -29,12 +29,7 @@ def check_durations(durations: Any, config: PlannerConfig) -> Array:
     shape = np.shape(durations if isinstance(durations, np.ndarray) else np.asarray(durations, dtype=object))
     if len(shape) > 1:
         raise ConfigError("durations", f"expected a flat sequence of {config.n_segments} numbers, got shape {shape}")
-    try:
-        T = np.array(durations, dtype=float).reshape(-1)
-    except OverflowError as exc:
-        raise ConfigError("durations", "has a number beyond the float range; pass finite values") from exc
-    except (TypeError, ValueError) as exc:
-        raise ConfigError("durations", f"expected {config.n_segments} numbers, got {durations!r}") from exc
+    T = v.float_array("durations", durations, f"{config.n_segments} numbers").reshape(-1)
     if T.shape != (config.n_segments,):
         raise ConfigError("durations", f"expected {config.n_segments} values (config.n_segments), got {T.size}")
     if not np.isfinite(T).all() or (T <= 0.0).any():
