@@ -21,16 +21,22 @@ with ``time.thread_time`` (the minimum over ``--rounds`` of the mean per call):
   its Python objects, caches and NumPy calls included: the most a compiled version of it could
   save;
 * with every stage taken away: what is left is the orchestration (the time search, the FoV
-  stage and the workspace rounds, the input checks, logs and result objects), the floor of a
-  design that keeps those decisions in Python;
-* ``daqp.solve`` alone on the reduced QPs of the same calls, with its inputs prepared outside
-  the timing: the back-end's own share of the solve stage.
+  stage and the workspace rounds, the input checks, logs and result objects) and the numeric
+  work outside the stages (trajectory objects, the endpoint checks, the time search's own
+  sampling), the floor of a design that keeps those decisions in Python;
+* the reduced QPs of the same calls back to back: ``daqp.solve`` alone, its inputs prepared
+  outside the timing (the back-end's own share of the solve stage), and with avp's wrapper.
+
+A played-back result is returned as its producer returned it: a shallow copy without the
+values cached on it afterwards (a FoV linearisation's rows, a QP's reduction), so the planner
+computes those again where it did; a recorded exception is raised again. Differences of about
+0.02 ms are noise (two rounds of the same code differ by that much).
 
 The stages: building the QP (``build_perching_qp``), the workspace rows (``workspace_blocks``
 and ``refinement_blocks``), the FoV linearisation (``perception.linearise_on``) and the FoV
 rows it builds when a QP needs them (``qp.fov.fov_rows``), the visibility score of a first plan's
-SQP steps (``perception._scores``) and the sampled limit check before them
-(``time_search.scaled_excess``), reducing and solving the QPs
+SQP steps (``perception._scores``) and the sampled limit check before them (``scaled_excess``
+as the planner calls it there; the time search's own sampling stays), reducing and solving the QPs
 (``solve_perching_qp``; and, each taken away alone, its parts: the equality elimination and
 reduced rows of ``PerchingQp.reduce``, the DAQP call with its solution object, the lift and the
 feasibility check of ``solve._outcome``), the bound certificate (``planner._certify``) and the workspace certificate
@@ -40,6 +46,7 @@ feasibility check of ``solve._outcome``), the bound certificate (``planner._cert
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import hashlib
 import math
 import time
@@ -119,14 +126,45 @@ def timed(calls: list[Call], rounds: int, before: Callable[[], None] = lambda: N
     return best, digest
 
 
+def _state(value: Any) -> Any:
+    """What of ``value`` its producer made: the keys of every dataclass's ``__dict__`` (its
+    fields and the cached values filled so far), in nested dataclasses and tuples too."""
+    if isinstance(value, tuple):
+        return tuple(_state(v) for v in value)
+    if dataclasses.is_dataclass(value) and not isinstance(value, type):
+        d = value.__dict__
+        return frozenset(d), {k: _state(v) for k, v in d.items()
+                              if isinstance(v, tuple) or (dataclasses.is_dataclass(v) and not isinstance(v, type))}
+    return None
+
+
+def _as_recorded(value: Any, state: Any) -> Any:
+    """``value`` as its producer returned it: a shallow copy without the cached values that later
+    code filled in (the same object when there are none), so the planner computes them again."""
+    if state is None:
+        return value
+    if isinstance(value, tuple):
+        items = tuple(_as_recorded(v, st) for v, st in zip(value, state, strict=True))
+        return value if all(a is b for a, b in zip(items, value, strict=True)) else type(value)(items)
+    keys, children = state
+    d = value.__dict__
+    fresh = {k: _as_recorded(d[k], st) for k, st in children.items()}
+    if len(d) == len(keys) and all(fresh[k] is d[k] for k in fresh):
+        return value
+    copy = object.__new__(type(value))
+    object.__setattr__(copy, "__dict__", {k: fresh.get(k, d[k]) for k in keys})
+    return copy
+
+
 class Tape:
-    """The results of some functions, recorded in call order and then played back (``play``)
-    or computed again (``through``)."""
+    """The results of some functions, recorded in call order (returned values with what their
+    producer had computed of them, raised exceptions) and then played back (``play``) or
+    computed again (``through``)."""
 
     def __init__(self, functions: tuple[tuple[Any, str], ...]) -> None:
         self.functions = functions
         self.originals = [getattr(mod, name) for mod, name in functions]
-        self.tapes: list[list[Any]] = [[] for _ in functions]
+        self.tapes: list[list[tuple[bool, Any, Any]]] = [[] for _ in functions]
         self.positions = [0] * len(functions)
         self.mode = "record"
 
@@ -139,6 +177,10 @@ class Tape:
         for (mod, name), fn in zip(self.functions, self.originals, strict=True):
             setattr(mod, name, fn)
 
+    @property
+    def recorded(self) -> int:
+        return sum(map(len, self.tapes))
+
     def _wrap(self, k: int, fn: Callable[..., Any]) -> Callable[..., Any]:
         tape = self.tapes[k]
 
@@ -146,10 +188,18 @@ class Tape:
             if self.mode == "play":
                 i = self.positions[k]
                 self.positions[k] = i + 1
-                return tape[i]
-            out = fn(*args, **kw)
-            if self.mode == "record":
-                tape.append(out)
+                raised, value, state = tape[i]
+                if raised:
+                    raise value
+                return _as_recorded(value, state)
+            if self.mode != "record":
+                return fn(*args, **kw)
+            try:
+                out = fn(*args, **kw)
+            except Exception as exc:  # the planner catches some (InfeasibleError): play them back too
+                tape.append((True, exc, None))
+                raise
+            tape.append((False, out, _state(out)))
             return out
         return stage
 
@@ -159,28 +209,32 @@ class Tape:
 
 
 def taken_away(calls: list[Call], functions: tuple[tuple[Any, str], ...], rounds: int,
-               digest: str) -> tuple[float, float]:
+               digest: str) -> tuple[float, float, int]:
     """Seconds per call as they are and with ``functions`` answering from a recording of their
-    results, in alternate rounds (the same machine load for both)."""
+    results, in alternate rounds (the same machine load for both), and the number of results
+    recorded (0: the calls never reach them)."""
+    full = away = math.inf
     with Tape(functions) as tape:
         replay(calls)
-        tape.set("through")
-        full, _ = timed(calls, 1)
-        tape.set("play")
-        away, got = timed(calls, 1)
-        for _ in range(rounds - 1):
-            tape.set("through")
-            full = min(full, timed(calls, 1)[0])
-            tape.set("play")
-            away = min(away, timed(calls, 1)[0])
-    if got != digest:
-        raise SystemExit(f"the replay with {[name for _, name in functions]} taken away planned differently "
-                         f"({got} != {digest}): the stage's results depend on more than the call order")
-    return full, away
+        for _ in range(rounds):
+            for mode in ("through", "play"):
+                tape.set(mode)
+                seconds, got = timed(calls, 1)
+                if got != digest:
+                    raise SystemExit(f"the replay with {[name for _, name in functions]} in mode {mode!r} planned "
+                                     f"differently ({got} != {digest}): the stage's results depend on more than "
+                                     "the call order")
+                if mode == "through":
+                    full = min(full, seconds)
+                else:
+                    away = min(away, seconds)
+    return full, away, tape.recorded
 
 
-def daqp_alone(calls: list[Call], rounds: int) -> tuple[float, int]:
-    """Seconds per call of ``daqp.solve`` on the calls' reduced QPs, and their number."""
+def back_end_alone(calls: list[Call], rounds: int) -> tuple[float, float, int]:
+    """Seconds per call of ``daqp.solve`` on the calls' reduced QPs (its inputs prepared outside
+    the timing) and of ``solve._solve_two_sided`` (the same call with its input preparation and
+    solution object), each run back to back; and the number of QPs."""
     import daqp  # type: ignore[import-not-found]
 
     qps: list[tuple[Any, ...]] = []
@@ -188,8 +242,9 @@ def daqp_alone(calls: list[Call], rounds: int) -> tuple[float, int]:
 
     def record(H: Any, g: Any, G: Any, lower: Any, upper: Any, options: dict[str, Any]) -> Any:
         opts = {k: v for k, v in options.items() if k != "verbose"}
-        qps.append((np.array(H), g, np.ascontiguousarray(G), np.where(np.isfinite(upper), upper, solve._INF),
-                    np.where(np.isfinite(lower), lower, -solve._INF), np.zeros(G.shape[0], dtype=np.intc), opts))
+        qps.append(((H, g, G, lower, upper, options),
+                    (np.array(H), g, np.ascontiguousarray(G), np.where(np.isfinite(upper), upper, solve._INF),
+                     np.where(np.isfinite(lower), lower, -solve._INF), np.zeros(G.shape[0], dtype=np.intc), opts)))
         return original(H, g, G, lower, upper, options)
 
     solve._solve_two_sided = record  # type: ignore[assignment]
@@ -197,21 +252,32 @@ def daqp_alone(calls: list[Call], rounds: int) -> tuple[float, int]:
         replay(calls)
     finally:
         solve._solve_two_sided = original  # type: ignore[assignment]
-    best = math.inf
+    bare = wrapped = math.inf
     for _ in range(rounds):
         c0 = time.thread_time()
-        for H, g, G, bu, bl, sense, opts in qps:
+        for _args, (H, g, G, bu, bl, sense, opts) in qps:
             daqp.solve(H, g, G, bu, bl, sense, **opts)
-        best = min(best, (time.thread_time() - c0) / len(calls))
-    return best, len(qps)
+        c1 = time.thread_time()
+        for args, _ in qps:
+            original(*args)
+        c2 = time.thread_time()
+        bare, wrapped = min(bare, (c1 - c0) / len(calls)), min(wrapped, (c2 - c1) / len(calls))
+    return bare, wrapped, len(qps)
+
+
+def _positive(text: str) -> int:
+    value = int(text)
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be at least 1, got {value}")
+    return value
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--seeds", type=int, default=2)
+    ap.add_argument("--seeds", type=_positive, default=2)
     ap.add_argument("--distances", type=float, nargs="+", default=[1.5, 4.5, 7.5])
     ap.add_argument("--inclines", type=float, nargs="+", default=[90.0, 45.0], help="degrees")
-    ap.add_argument("--rounds", type=int, default=7)
+    ap.add_argument("--rounds", type=_positive, default=7)
     ap.add_argument("--first-plans", action="store_true",
                     help="the default plan() of bench_pipeline.py's standard scenarios instead of replans")
     args = ap.parse_args()
@@ -231,24 +297,30 @@ def main() -> None:
         n_runs = len(args.inclines) * len(args.distances) * args.seeds
         what = (f"{len(calls)} replanning calls of {n_runs} closed-loop runs (inclines {args.inclines} deg, "
                 f"distances {args.distances} m, {args.seeds} seeds)")
+    if not calls:
+        raise SystemExit("no planning call to replay: the runs made no replanning call")
     with serial_blas():  # as Replanner.step plans (avp._blas)
         digest = replay(calls)  # warm: the caches as a loop that has run for a while has them
         full, got = timed(calls, args.rounds)
-        assert got == digest, "two replays of the same calls planned differently"
+        if got != digest:
+            raise SystemExit(f"two replays of the same calls planned differently ({got} != {digest})")
         rows = [(label, *taken_away(calls, fns, args.rounds, digest)) for label, fns in STAGES]
-        every_full, every = taken_away(calls, tuple(f for label, fns in STAGES if not label.startswith(" ") for f in fns),
-                           args.rounds, digest)
-        back_end, n_qps = daqp_alone(calls, args.rounds)
+        whole = tuple(f for label, fns in STAGES if not label.startswith(" ") for f in fns)
+        rows.append(("every stage: what is left", *taken_away(calls, whole, args.rounds, digest)))
+        daqp_ms, wrapper_ms, n_qps = back_end_alone(calls, args.rounds)
     print(f"{what}, replayed with one BLAS thread; CPU ms per call (minimum over {args.rounds} rounds of the "
           "mean):")
     print(f"  {'as they are':<58} {full * 1e3:7.3f}")
     print(f"  {'stage taken away (alternate rounds with and without)':<58} {'with':>7} {'without':>7} "
           f"{'saved':>7} {'share':>6}")
-    for label, with_it, seconds in [*rows, ("every stage: the orchestration left", every_full, every)]:
+    for label, with_it, seconds, recorded in rows:
+        if not recorded:
+            print(f"  {label:<58} {'not called':>30}")
+            continue
         saved = with_it - seconds
         print(f"  {label:<58} {with_it * 1e3:7.3f} {seconds * 1e3:7.3f} {saved * 1e3:7.3f} {saved / with_it:6.1%}")
-    print(f"  daqp.solve alone on the calls' {n_qps} reduced QPs ({n_qps / len(calls):.2f} per call): "
-          f"{back_end * 1e3:.3f} ms per call")
+    print(f"  the calls' {n_qps} reduced QPs ({n_qps / len(calls):.2f} per call), back to back: daqp.solve alone "
+          f"{daqp_ms * 1e3:.3f} ms per call, with avp's wrapper (solve._solve_two_sided) {wrapper_ms * 1e3:.3f}")
 
 
 if __name__ == "__main__":
