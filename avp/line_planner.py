@@ -72,6 +72,11 @@ clearance. :func:`plan_line` logs the ones set away from their defaults
 (:meth:`~avp.config.PlannerConfig.changed`)."""
 
 
+RECOVERY_POINT_TOL = 1e-6
+"""How far (m) a recovery may end from a given ``LineOptions.recovery_point`` and count as
+reaching it (the perch flown backwards ends at the perch's start)."""
+
+
 @v.typed_keywords("options")
 @dataclass(frozen=True)
 class LineOptions:
@@ -99,7 +104,11 @@ class LineOptions:
         Plan the recovery.
     recovery_point:
         Hover point (m) the recovery ends at; ``None`` = ``recovery_distance`` along ``n`` from
-        the contact CoM (raised to ``config.workspace.ground_z + recovery_height_margin``).
+        the contact CoM (raised to ``config.workspace.ground_z + recovery_height_margin``). With
+        ``None`` a perch that ends upside down (or whose recovery QP fails) may recover by
+        flying the perch backwards to its start; a point given here is not replaced by that
+        (unless it is the start, within :data:`RECOVERY_POINT_TOL`): when no certified recovery
+        reaches it, the status is ``NOT_CERTIFIED``.
     recovery_distance, recovery_height_margin:
         See ``recovery_point`` (m).
     ground_margin:
@@ -169,7 +178,10 @@ class LineStatus(Enum):
 
     @property
     def has_trajectory(self) -> bool:
-        return self is not LineStatus.INFEASIBLE
+        """A certified perch and recovery were returned, as :attr:`avp.PlanStatus.has_trajectory`
+        means for a pad. A ``NOT_CERTIFIED`` result still carries its last perch and recovery
+        (``perch``, ``recovery``) for diagnostics; they are not to be flown."""
+        return self is LineStatus.SOLVED
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -640,7 +652,8 @@ def plan_line(
         build = lambda T: _recovery_qp(perch, point, contact, line, cfg, opts, T)
         rcerts: list[LineCertificate] = []
         recovery, rec_ok, rec_report = None, False, None
-        if contact.n[2] >= 0.0 or line.contact_speed != 0.0 or cfg.limits.rotor_drag:  # else the reverse first
+        explicit = opts.recovery_point is not None  # the perch backwards ends at the start, maybe not there
+        if contact.n[2] >= 0.0 or explicit or line.contact_speed != 0.0 or cfg.limits.rotor_drag:  # else the reverse first
             recovery, rec_ok, rec_report, rcerts, _rf = _search(build, certify_recovery, (1.0,), rT0, cfg, log, "recovery",
                                                                       refine_recovery)
         at_rest = not (np.any(state.velocity) or np.any(state.acceleration) or np.any(state.jerk))
@@ -655,8 +668,11 @@ def plan_line(
             back_report = _bounds(back, cfg)
             back_certs = certify_recovery(back)
             back_ok = back_report.certified and all(c.ok for c in back_certs)
+            elsewhere = explicit and float(np.linalg.norm(back(back.tf) - point)) > RECOVERY_POINT_TOL
             log.append(f"recovery = perch backwards (T = {back.duration:.3f} s): "
-                       + ("certified" if back_ok else "NOT certified"))
+                       + ("certified" if back_ok else "NOT certified")
+                       + ("; not counted: it ends at the start, not at options.recovery_point" if elsewhere else ""))
+            back_ok = back_ok and not elsewhere
             if back_ok or recovery is None:
                 recovery, rec_ok, rec_report, rcerts = back, back_ok, back_report, back_certs
         if not rec_ok and len(factors) > 1:

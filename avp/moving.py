@@ -53,7 +53,17 @@ from .planner import STILL_SPEED, PlanStatus, planning_error
 from .platform import MovingTarget
 from .qp.moving import MovingQpBuilder, TerminalYaw, contact_point, objective
 from .replan import ReplanConfig, Replanner, ReplanStep, _step_time, _target_change
-from .safety import RESIDUAL_TOL, TOUCH_TOL, SafetyReport, certify_workspace, refinement_blocks
+from .safety import (
+    RESIDUAL_TOL,
+    TOUCH_TOL,
+    SafetyReport,
+    certify_workspace,
+    check_start,
+    contact_position,
+    outside,
+    refinement_blocks,
+    regions_for,
+)
 from .solve import solve_perching_qp
 from .trajectory import Trajectory
 from .types import PerchTarget, State
@@ -363,6 +373,9 @@ def plan_moving_detailed(
             raise ConfigError("state.position", f"lies on or behind the moving pad's plane at the start (margin {h0:.4g} m "
                               f"to the pad predicted at t = {state.time:.6g} s): no plan keeps its clearance; start "
                               "on the side the pad's normal s3 points to (or check the normal's sign and the pad's motion)")
+    # the static limits (ground, half-spaces, spheres, speed) as avp.plan checks them: the start,
+    # and the contact point of a pad that does not move (a moving one's is known per duration)
+    check_start(state, pad_now.static(), cfg.workspace, contact=target.is_static)
     evals: list[_Eval] = []
     solve_time = 0.0
     builder = MovingQpBuilder(state, cfg, mcfg.normal_speed, mcfg.slip_max, mcfg.slip_weight, mcfg.zero_jerk,
@@ -434,6 +447,7 @@ def plan_moving_detailed(
     if best is not None and best.traj is not None:
         return MovingPlanResult(status=PlanStatus.SOLVED, trajectory=best.traj, pad=best.pad, durations=best.traj.durations, bounds=best.report, clearance=best.clearance, score=best.score, candidates=candidates, log=tuple(log), solve_time=solve_time, total_time=total, contact=contact_errors(best.traj, target, mcfg, cfg.workspace.body_offset, cfg.limits.rotor_drag), safety=best.safety)
     last = evals[-1]
+    outside_note = _pad_outside(evals, cfg)
     if any(e.clearance is not None or e.safety is not None for e in evals):
         status = PlanStatus.WORKSPACE_NOT_CERTIFIED
     elif all(e.traj is None for e in evals):
@@ -443,8 +457,31 @@ def plan_moving_detailed(
         status = PlanStatus.BOUNDS_NOT_CERTIFIED
         speed = float(np.linalg.norm(target.velocity))
         log.append(f"no certified arrival time up to {max(e.T for e in evals):.2f} s (platform speed "
-                   f"{speed:.2f} m/s); the limits may not allow catching this platform")
+                   f"{speed:.2f} m/s)" + ("" if outside_note else "; the limits may not allow catching this platform"))
+    if outside_note is not None:  # the geometry, not the limits: said last (plan_moving's message ends with it)
+        log.append(outside_note)
     return MovingPlanResult(status=status, trajectory=None, pad=last.pad, durations=np.full(cfg.n_segments, last.T / cfg.n_segments), bounds=last.report, clearance=next((e.clearance for e in reversed(evals) if e.clearance is not None), None), score=math.inf, candidates=candidates, log=tuple(log), solve_time=solve_time, total_time=total, contact=None, safety=next((e.safety for e in reversed(evals) if e.safety is not None), None))
+
+
+def _pad_outside(evals: list[_Eval], cfg: PlannerConfig) -> str | None:
+    """A log line when the pad's contact point lay outside the static workspace limits (ground,
+    half-spaces, spheres) at every arrival time tried: no plan could reach it, whatever the
+    vehicle's limits (``None`` otherwise)."""
+    static = replace(cfg.workspace, perch_clearance=False)
+    names: set[str] = set()
+    for e in evals:
+        pad = e.pad.static()
+        p_c = contact_position(pad, static)
+        hit = [r.name for r in regions_for(pad, static) if r.kind != "speed" and outside(r, p_c, False) is not None]
+        if not hit:
+            return None
+        names.update(hit)
+    if not evals:
+        return None
+    Ts = [e.T for e in evals]
+    return (f"the pad's contact point lies outside the workspace limit(s) {', '.join(sorted(names))} at every "
+            f"arrival time tried ({min(Ts):.3g}-{max(Ts):.3g} s): check the pad's position and motion and the "
+            "workspace limits")
 
 
 def _search(run: Any, T1: float, mcfg: MovingConfig, log: list[str]) -> None:

@@ -17,7 +17,7 @@ with the approach direction (``docs/bounds.md``, "Workspace certificates").
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import lru_cache
 
 import numpy as np
@@ -40,7 +40,9 @@ __all__ = [
     "SafetyReport",
     "certify_workspace",
     "check_endpoints",
+    "check_start",
     "contact_position",
+    "outside",
     "refinement_blocks",
     "regions_for",
     "workspace_blocks",
@@ -120,34 +122,58 @@ def check_endpoints(state: State, target: PerchTarget, config: PlannerConfig) ->
     """Rejects a start or a contact point outside the workspace, and a requested contact speed
     at or above ``max_speed`` (:class:`ConfigError`)."""
     workspace = config.workspace
-    p_c = contact_position(target, workspace)
     wanted = config.contact_velocity.components(target.incline)
     if math.isfinite(workspace.max_speed):
         known = math.sqrt(sum(x * x for x in wanted if x is not None))
         if known >= workspace.max_speed:
             raise ConfigError("workspace.max_speed", f"{workspace.max_speed} m/s is not above the requested "
                               f"contact speed ({known:.3f} m/s); raise it or ask for a slower contact")
-    for r in regions_for(target, workspace):
+    _check_points(state, contact_position(target, workspace), regions_for(target, workspace))
+
+
+def check_start(state: State, pad: PerchTarget, workspace: Workspace, *, contact: bool) -> None:
+    """:func:`check_endpoints` for a moving pad, whose contact point is not known before its
+    duration: the start position and speed against the workspace limits other than the perch
+    plane (which moves with the pad), and with ``contact`` (a pad that does not move) the
+    contact point on ``pad`` too (:class:`ConfigError`)."""
+    static = replace(workspace, perch_clearance=False)
+    _check_points(state, contact_position(pad, static) if contact else None, regions_for(pad, static))
+
+
+def _check_points(state: State, p_c: Array | None, regions: tuple[Region, ...]) -> None:
+    """The start (and the contact point ``p_c`` unless ``None``) against ``regions``."""
+    points: tuple[tuple[str, Array, bool], ...] = (("state.position", state.position, True),)
+    if p_c is not None:
+        points += (("target.point", p_c, False),)
+    for r in regions:
         if r.kind == "speed":
             if float(np.linalg.norm(state.velocity)) >= r.offset:
                 raise ConfigError("state.velocity", f"speed {np.linalg.norm(state.velocity):.3f} m/s is not below "
                                   f"workspace.max_speed ({r.offset} m/s); raise the limit or start slower")
             continue
-        for label, p, strict in (("state.position", state.position, True), ("target.point", p_c, False)):
+        for label, p, strict in points:
+            gap = outside(r, p, strict)
+            if gap is None:
+                continue
             if r.kind == "half-space":
-                gap = float(r.normal @ p) - r.offset
-                bad = gap <= TOUCH_TOL if strict else gap < -TOUCH_TOL
                 where = "on or behind" if strict else "behind"
                 what = "the pad's outward side (s3)" if r.name == "perch plane" else "the allowed side"
             else:
-                gap = float(np.linalg.norm(p - r.normal)) - r.offset
-                bad = gap <= 0.0
                 where, what = "inside", "outside the keep-out sphere"
-            if bad:
-                fix = ("start on the side the pad's normal s3 points to (or check the normal's sign)"
-                       if r.name == "perch plane" and label == "state.position"
-                       else f"move it to {what} or change workspace limits")
-                raise ConfigError(label, f"lies {where} the workspace limit '{r.name}' (margin {gap:.4g} m); {fix}")
+            fix = ("start on the side the pad's normal s3 points to (or check the normal's sign)"
+                   if r.name == "perch plane" and label == "state.position"
+                   else f"move it to {what} or change workspace limits")
+            raise ConfigError(label, f"lies {where} the workspace limit '{r.name}' (margin {gap:.4g} m); {fix}")
+
+
+def outside(region: Region, p: Array, strict: bool) -> float | None:
+    """The margin (m) of point ``p`` when it is outside ``region`` (a half-space or a sphere;
+    ``strict``: on the plane counts as outside, as for a start), else ``None``."""
+    if region.kind == "half-space":
+        gap = float(region.normal @ p) - region.offset
+        return gap if (gap <= TOUCH_TOL if strict else gap < -TOUCH_TOL) else None
+    gap = float(np.linalg.norm(p - region.normal)) - region.offset
+    return gap if gap <= 0.0 else None
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -76,7 +76,7 @@ def test_terminal_conditions_and_clearance_on_random_lines(pitch: float, incline
     res = plan_line(avp.State.hover(start), line, with_ground(0.5))
     if pitch <= 90.0:
         assert res.status is LineStatus.SOLVED, res.log
-    if not res.status.has_trajectory:
+    if res.perch is None:
         return
     check_contact(res, line)
     if res.ok:
@@ -189,6 +189,44 @@ def test_certificate_rejects_a_path_through_the_clearance_radius() -> None:
     (cert,) = run_checks([PolyCheck("clearance", "t", 0, F, scale=scale)], {"t": traj.knots})
     assert cert.verdict is Certificate.VIOLATED
     assert 0.3 < cert.t < 0.7
+
+
+def test_an_uncertified_line_plan_does_not_claim_a_trajectory() -> None:
+    # A start right under the line: the last perch the search made comes within 0.1 mm of the
+    # line's axis (0.15 m is the clearance asked), so nothing is certified. Code that handles
+    # every planner's result alike (``if result.status.has_trajectory: fly(result.trajectory)``)
+    # must not fly it: has_trajectory means a certified plan, as for a pad.
+    line = LineTarget.segment([2.0, -1.5, 3.7], [2.0, 1.5, 3.7], pitch=0.0, gripper_offset=0.15)
+    res = plan_line(avp.State.hover([2.0, 0.0, 2.5]), line)
+    assert res.status is LineStatus.NOT_CERTIFIED and not res.ok
+    assert not res.status.has_trajectory
+    assert res.perch is not None  # kept for diagnostics
+    d = sampled_distance(res.perch, line)
+    assert d.min() < line.gripper_offset  # the reason: it does pass inside the clearance radius
+    assert [s.has_trajectory for s in LineStatus] == [s is LineStatus.SOLVED for s in LineStatus]
+
+
+@pytest.mark.parametrize("pitch,point", [
+    (math.pi, (5.0, 0.0, 3.0)),   # upside down: the perch flown backwards ends at the start, not here
+    (0.0, (2.0, 0.0, 3.7)),       # on the wire itself: no recovery can end there
+    (0.0, (2.0, 0.0, 4.5)),
+    (0.0, (0.0, 0.0, 2.5)),       # the start: the perch flown backwards does end there
+])
+def test_a_given_recovery_point_is_where_a_solved_recovery_ends(pitch: float, point: tuple[float, float, float]) -> None:
+    """``LineOptions.recovery_point`` is a request: a SOLVED plan's recovery ends there (checked
+    by evaluating the spline), or the status is not SOLVED. The perch flown backwards, which
+    ends at the perch's start, used to stand in for it with SOLVED."""
+    line = LineTarget.segment([2.0, -1.5, 3.7], [2.0, 1.5, 3.7], pitch=pitch, gripper_offset=0.15)
+    config = PlannerConfig(limits=VehicleLimits(mass=0.8, thrust_min=0.5, thrust_max=4 * 0.8 * 9.81))
+    res = plan_line(avp.State.hover([0.0, 0.0, 2.5]), line, config, LineOptions(recovery_point=point))
+    if point == (2.0, 0.0, 3.7):
+        assert res.status is LineStatus.NOT_CERTIFIED
+    else:  # each of the others has a certified recovery to the point
+        assert res.status is LineStatus.SOLVED, res.log
+    if res.ok:
+        assert res.recovery is not None
+        np.testing.assert_allclose(res.recovery.evaluate(res.recovery.tf)[:3], point, atol=1e-6)
+        np.testing.assert_allclose(res.recovery.evaluate(res.recovery.tf, 1)[:3], 0.0, atol=1e-6)  # at rest
 
 
 @settings(max_examples=10)

@@ -491,3 +491,52 @@ def test_fast_turns_cap_the_taylor_order_soundly(turn):
         assert h[:-1].min() > min(0.0, rep.contact_residual_lower) - 1e-12
     if h.min() < -1e-9:
         assert not rep.certified
+
+
+def test_a_start_or_a_stopped_pad_outside_the_static_workspace_is_bad_input():
+    """The static limits (ground, keep-out spheres, speed) are checked on the start, and on the
+    contact point of a pad that does not move, as the static planner checks them: the same typed
+    error on the same field as avp.plan for the pad's pose. They used to be searched for and
+    reported as 'the limits may not allow catching this platform'."""
+    ground = replace(CONFIG, workspace=avp.Workspace(ground_z=1.0))
+    cases = [
+        (avp.State(position=[-3.0, 0.0, 1.5]), MovingTarget.on_platform([0.0, 0.0, 0.5], incline=0.5, speed=0.0),
+         ground, "target.point"),
+        (avp.State(position=[-3.0, 0.0, 0.5]), MovingTarget.on_platform([0.0, 0.0, 1.5], incline=0.5, speed=1.0),
+         ground, "state.position"),
+        (avp.State(position=[-3.0, 0.0, 1.5]), MovingTarget.on_platform([0.0, 0.0, 1.5], incline=0.5, speed=1.0),
+         replace(CONFIG, workspace=avp.Workspace(spheres=(avp.Sphere(center=(-3.0, 0.0, 1.4), radius=0.5),))),
+         "state.position"),
+        (avp.State(position=[-3.0, 0.0, 1.5], velocity=[3.0, 0.0, 0.0]),
+         MovingTarget.on_platform([0.0, 0.0, 1.5], incline=0.5, speed=1.0),
+         replace(CONFIG, workspace=avp.Workspace(max_speed=2.0)), "state.velocity"),
+    ]
+    for state, pad, config, field in cases:
+        with pytest.raises(ConfigError) as exc:
+            plan_moving_detailed(state, pad, config)
+        assert exc.value.field == field, exc.value
+        if pad.is_static and field != "state.velocity":  # the static planner on the same pose says the same
+            with pytest.raises(ConfigError) as same:
+                avp.plan(state, pad.static(), config)
+            assert same.value.field == field
+
+
+def test_a_moving_pad_outside_the_workspace_at_every_arrival_time_is_said_so():
+    """A pad that moves below the ground: no arrival time can reach it whatever the limits, and
+    the result's log (and plan_moving's error) ends by saying so instead of blaming the limits."""
+    ground = replace(CONFIG, workspace=avp.Workspace(ground_z=1.0))
+    pad = MovingTarget.on_platform([0.0, 0.0, 0.5], incline=0.5, speed=1.0)
+    res = plan_moving_detailed(avp.State(position=[-3.0, 0.0, 1.5]), pad, ground)
+    assert not res.ok and res.trajectory is None
+    assert res.candidates
+    for c in res.candidates:  # independent of the planner's regions: the pad's height at each arrival time
+        at = pad.at(0.0, c.duration)
+        assert at.point[2] + CONFIG.workspace.body_offset * at.s3[2] < 1.0
+    assert "outside the workspace limit(s) ground at every arrival time tried" in res.log[-1]
+    assert "may not allow catching" not in "\n".join(res.log)
+    with pytest.raises(avp.PlanningError) as exc:
+        plan_moving(avp.State(position=[-3.0, 0.0, 1.5]), pad, ground)
+    assert str(exc.value).endswith("check the pad's position and motion and the workspace limits")
+    # above the ground the same pad is planned (the check does not fire on a reachable pad)
+    up = MovingTarget.on_platform([0.0, 0.0, 1.5], incline=0.5, speed=1.0)
+    assert plan_moving_detailed(avp.State(position=[-3.0, 0.0, 1.5]), up, ground).ok
