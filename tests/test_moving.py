@@ -255,6 +255,13 @@ def test_bad_input_is_a_config_error_naming_the_field():
         MovingConfig(slip_max=-1.0)
     with pytest.raises(avp.ConfigError, match="target"):
         plan_moving_detailed(avp.State.hover([0, 0, 1]), avp.PerchTarget.from_incline([1, 0, 1], 0.3), CONFIG)
+    pad = platform(0.5, 1.0)
+    for times in ([0.0, 1.0, "a"], [0.0, float("nan")], [True, False]):
+        with pytest.raises(avp.ConfigError) as exc:  # ValueError / NaN predictions before
+            pad.predict(times)
+        assert exc.value.field == "times"
+    points, _, _ = pad.predict([pad.time, pad.time + 1.0])
+    np.testing.assert_allclose(points[1] - points[0], pad.velocity, atol=1e-12)  # 1 s at constant velocity
 
 
 def test_a_fixed_duration_beyond_the_duration_limit_is_a_config_error():
