@@ -103,8 +103,9 @@ class LineOptions:
     recovery:
         Plan the recovery.
     recovery_point:
-        Hover point (m) the recovery ends at; ``None`` = ``recovery_distance`` along ``n`` from
-        the contact CoM (raised to ``config.workspace.ground_z + recovery_height_margin``). With
+        Hover point (m) the recovery ends at, above ``config.workspace.ground_z`` (``ConfigError``
+        otherwise); ``None`` = ``recovery_distance`` along ``n`` from the contact CoM (raised to
+        ``config.workspace.ground_z + recovery_height_margin``). With
         ``None`` a perch that ends upside down (or whose recovery QP fails) may recover by
         flying the perch backwards to its start; a point given here is not replaced by that
         (unless it is the start, within :data:`RECOVERY_POINT_TOL`): when no certified recovery
@@ -178,9 +179,10 @@ class LineStatus(Enum):
 
     @property
     def has_trajectory(self) -> bool:
-        """A certified perch and recovery were returned, as :attr:`avp.PlanStatus.has_trajectory`
-        means for a pad. A ``NOT_CERTIFIED`` result still carries its last perch and recovery
-        (``perch``, ``recovery``) for diagnostics; they are not to be flown."""
+        """A certified plan was returned (the perch, and its recovery when
+        ``LineOptions.recovery`` is on), as :attr:`avp.PlanStatus.has_trajectory` means for a
+        pad. A ``NOT_CERTIFIED`` result still carries its last perch and recovery (``perch``,
+        ``recovery``) for diagnostics; they are not to be flown."""
         return self is LineStatus.SOLVED
 
 
@@ -585,6 +587,9 @@ def plan_line(
     ground = cfg.workspace.ground_z
     if ground is not None and state.position[2] <= ground:
         raise ConfigError("state.position", f"is at or below the minimum height config.workspace.ground_z = {ground} m")
+    if ground is not None and opts.recovery_point is not None and opts.recovery_point[2] <= ground:
+        raise ConfigError("options.recovery_point", f"is at or below the minimum height config.workspace.ground_z = "
+                          f"{ground} m: give a hover point above it (or None for the default)")
     contact = line.contact(state.position, state.yaw)
     on_line = _start_on_line(state, line)
     if on_line is not None and cfg.n_segments < 2:
@@ -634,10 +639,12 @@ def plan_line(
                    "(give a longer duration)")
     elif opts.recovery:
         end = perch(perch.tf)
-        point = opts.recovery_point if opts.recovery_point is not None else end + opts.recovery_distance * contact.n
-        point = np.array(point, dtype=float)
-        if ground is not None:
-            point[2] = max(point[2], ground + opts.recovery_height_margin)
+        if opts.recovery_point is not None:  # the user's: as given (above the ground, checked above)
+            point = np.array(opts.recovery_point, dtype=float)
+        else:
+            point = end + opts.recovery_distance * contact.n
+            if ground is not None:
+                point[2] = max(point[2], ground + opts.recovery_height_margin)
         rT0 = np.full(cfg.n_segments, cfg.time_allocation.total(float(np.linalg.norm(point - end)), 0.0) / cfg.n_segments)
 
         def certify_recovery(traj: Trajectory) -> list[LineCertificate]:

@@ -448,7 +448,8 @@ def plan_moving_detailed(
         return MovingPlanResult(status=PlanStatus.SOLVED, trajectory=best.traj, pad=best.pad, durations=best.traj.durations, bounds=best.report, clearance=best.clearance, score=best.score, candidates=candidates, log=tuple(log), solve_time=solve_time, total_time=total, contact=contact_errors(best.traj, target, mcfg, cfg.workspace.body_offset, cfg.limits.rotor_drag), safety=best.safety)
     last = evals[-1]
     outside_note = _pad_outside(evals, cfg)
-    if any(e.clearance is not None or e.safety is not None for e in evals):
+    if outside_note is not None or any(e.clearance is not None or e.safety is not None for e in evals):
+        # (the pad out of the workspace at every arrival time: no trajectory keeps it, whatever the limits)
         status = PlanStatus.WORKSPACE_NOT_CERTIFIED
     elif all(e.traj is None for e in evals):
         status = PlanStatus.INFEASIBLE if any(e.note.startswith("infeasible") or "no solution" in e.note for e in evals) \
@@ -457,7 +458,7 @@ def plan_moving_detailed(
         status = PlanStatus.BOUNDS_NOT_CERTIFIED
         speed = float(np.linalg.norm(target.velocity))
         log.append(f"no certified arrival time up to {max(e.T for e in evals):.2f} s (platform speed "
-                   f"{speed:.2f} m/s)" + ("" if outside_note else "; the limits may not allow catching this platform"))
+                   f"{speed:.2f} m/s); the limits may not allow catching this platform")
     if outside_note is not None:  # the geometry, not the limits: said last (plan_moving's message ends with it)
         log.append(outside_note)
     return MovingPlanResult(status=status, trajectory=None, pad=last.pad, durations=np.full(cfg.n_segments, last.T / cfg.n_segments), bounds=last.report, clearance=next((e.clearance for e in reversed(evals) if e.clearance is not None), None), score=math.inf, candidates=candidates, log=tuple(log), solve_time=solve_time, total_time=total, contact=None, safety=next((e.safety for e in reversed(evals) if e.safety is not None), None))

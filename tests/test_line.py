@@ -229,6 +229,22 @@ def test_a_given_recovery_point_is_where_a_solved_recovery_ends(pitch: float, po
         np.testing.assert_allclose(res.recovery.evaluate(res.recovery.tf, 1)[:3], 0.0, atol=1e-6)  # at rest
 
 
+def test_a_given_recovery_point_is_not_moved_by_the_ground_margin() -> None:
+    """Only the default hover point is raised to ``ground_z + recovery_height_margin``: the start
+    given as the recovery point stays the start (the perch flown backwards ends there), and a
+    given point at or below the ground is bad input."""
+    line = LineTarget.segment([2.0, -1.5, 3.7], [2.0, 1.5, 3.7], pitch=math.pi, gripper_offset=0.15)
+    config = PlannerConfig(limits=VehicleLimits(mass=0.8, thrust_min=0.5, thrust_max=4 * 0.8 * 9.81),
+                           workspace=Workspace(ground_z=1.0))
+    start = (0.0, 0.0, 2.5)
+    res = plan_line(avp.State.hover(start), line, config, LineOptions(recovery_point=start, recovery_height_margin=1.6))
+    assert res.ok and res.recovery is not None, res.log
+    np.testing.assert_allclose(res.recovery.evaluate(res.recovery.tf)[:3], start, atol=1e-6)
+    with pytest.raises(ConfigError) as exc:
+        plan_line(avp.State.hover(start), line, config, LineOptions(recovery_point=(5.0, 0.0, 1.0)))
+    assert exc.value.field == "options.recovery_point"
+
+
 @settings(max_examples=10)
 @given(x0=st.floats(-1.0, 1.0), y0=st.floats(-0.6, 0.6), lo=st.floats(0.1, 0.4), width=st.floats(0.05, 0.3))
 def test_free_grasp_point_stays_on_the_segment(x0: float, y0: float, lo: float, width: float) -> None:

@@ -529,19 +529,20 @@ def test_a_start_or_a_stopped_pad_outside_the_static_workspace_is_bad_input():
 
 
 def test_a_moving_pad_outside_the_workspace_at_every_arrival_time_is_said_so():
-    """A pad that moves below the ground: no arrival time can reach it whatever the limits, and
-    the result's log (and plan_moving's error) ends by saying so instead of blaming the limits."""
+    """A pad that moves below the ground: no arrival time can reach it whatever the limits. The
+    status is WORKSPACE_NOT_CERTIFIED (not BOUNDS_NOT_CERTIFIED, which a replanner takes for a
+    duration problem) and the log (and plan_moving's error) ends by saying so."""
     ground = replace(CONFIG, workspace=avp.Workspace(ground_z=1.0))
     pad = MovingTarget.on_platform([0.0, 0.0, 0.5], incline=0.5, speed=1.0)
     res = plan_moving_detailed(avp.State(position=[-3.0, 0.0, 1.5]), pad, ground)
-    assert not res.ok and res.trajectory is None
+    assert res.status is avp.PlanStatus.WORKSPACE_NOT_CERTIFIED and res.trajectory is None  # not the limits
     assert res.candidates
     for c in res.candidates:  # independent of the planner's regions: the pad's height at each arrival time
         at = pad.at(0.0, c.duration)
         assert at.point[2] + CONFIG.workspace.body_offset * at.s3[2] < 1.0
     assert "outside the workspace limit(s) ground at every arrival time tried" in res.log[-1]
     assert "may not allow catching" not in "\n".join(res.log)
-    with pytest.raises(avp.PlanningError) as exc:
+    with pytest.raises(avp.WorkspaceNotCertifiedError) as exc:
         plan_moving(avp.State(position=[-3.0, 0.0, 1.5]), pad, ground)
     assert str(exc.value).endswith("check the pad's position and motion and the workspace limits")
     # above the ground the same pad is planned (the check does not fire on a reachable pad)
