@@ -52,7 +52,7 @@ from .qp.line import (
 )
 from .safety import certify_workspace, refinement_blocks, workspace_blocks
 from .solve import solve_perching_qp
-from .trajectory import Trajectory
+from .trajectory import Provenance, Trajectory
 from .types import PerchTarget, State
 
 __all__ = ["LineOptions", "LinePlanResult", "LineStatus", "perch_equivalent", "plan_line"]
@@ -692,6 +692,11 @@ def plan_line(
             log.append("recovery: no QP solution for any duration")
     t_rec = time.perf_counter() - t_rec0
     status = LineStatus.SOLVED if ok and rec_ok else LineStatus.NOT_CERTIFIED
+    for traj, bounds, label in ((perch, report, "perch"), (recovery, rec_report, "recovery")):
+        if traj is not None:  # the status and the certificates travel with each spline (exports included)
+            mine = [c for c in certs if c.trajectory == label]
+            traj.provenance = Provenance(status=status.value, bounds_certified=bool(bounds is not None and bounds.certified),
+                                         workspace_certified=bool(mine) and all(c.ok for c in mine))
     return LinePlanResult(status=status, perch=perch, recovery=recovery, contact=contact, grasp=grasp, certificates=tuple(certs), bounds=report, recovery_bounds=rec_report, log=tuple(log), timings={"perch": t_perch, "recovery": t_rec, "total": time.perf_counter() - t_start})
 
 

@@ -65,7 +65,7 @@ from .safety import (
     regions_for,
 )
 from .solve import solve_perching_qp
-from .trajectory import Trajectory
+from .trajectory import Provenance, Trajectory
 from .types import PerchTarget, State
 
 __all__ = [
@@ -445,6 +445,10 @@ def plan_moving_detailed(
     total = time.perf_counter() - t_start
     candidates = tuple(Candidate(e.T, e.score, e.objective, math.isfinite(e.score), e.note) for e in evals)
     if best is not None and best.traj is not None:
+        regions = [r for r in (best.clearance, best.safety) if r is not None]
+        best.traj.provenance = Provenance(  # travels with the trajectory (exports included), as avp.plan's
+            status=PlanStatus.SOLVED.value, bounds_certified=bool(best.report is not None and best.report.certified),
+            workspace_certified=bool(regions) and all(r.certified for r in regions))
         return MovingPlanResult(status=PlanStatus.SOLVED, trajectory=best.traj, pad=best.pad, durations=best.traj.durations, bounds=best.report, clearance=best.clearance, score=best.score, candidates=candidates, log=tuple(log), solve_time=solve_time, total_time=total, contact=contact_errors(best.traj, target, mcfg, cfg.workspace.body_offset, cfg.limits.rotor_drag), safety=best.safety)
     last = evals[-1]
     outside_note = _pad_outside(evals, cfg)

@@ -531,3 +531,24 @@ def test_closest_refuses_a_point_that_is_not_three_finite_numbers(point) -> None
     with pytest.raises(avp.ConfigError) as exc:
         line.closest(point)
     assert exc.value.field == "point"
+
+
+def test_line_plans_carry_their_provenance_into_exports() -> None:
+    """The status and certificates travel with each line spline, as with avp.plan's: an exported
+    perch says whether it was certified. An uncertified one, returned for diagnostics, said
+    nothing (``provenance`` None) and exported as a plain spline."""
+    line = LineTarget.segment([2.0, -1.5, 3.7], [2.0, 1.5, 3.7], pitch=0.0, gripper_offset=0.15)
+    good = plan_line(avp.State.hover([0.0, 0.0, 2.5]), line)
+    assert good.ok and good.recovery is not None
+    for traj, bounds, label in ((good.perch, good.bounds, "perch"), (good.recovery, good.recovery_bounds, "recovery")):
+        assert traj is not None and traj.provenance is not None and bounds is not None
+        assert traj.provenance.status == LineStatus.SOLVED.value
+        assert traj.provenance.bounds_certified == bounds.certified
+        assert traj.provenance.workspace_certified == all(c.ok for c in good.certificates if c.trajectory == label)
+        back = Trajectory.from_json(traj.to_json())
+        assert back.provenance == traj.provenance
+    bad = plan_line(avp.State.hover([2.0, 0.0, 2.5]), line)  # under the line: not certified
+    assert bad.status is LineStatus.NOT_CERTIFIED and bad.perch is not None and bad.perch.provenance is not None
+    assert bad.perch.provenance.status == LineStatus.NOT_CERTIFIED.value
+    assert not bad.perch.provenance.workspace_certified  # its clearance fails (the wire)
+    assert "NOT certified" in str(Trajectory.from_json(bad.perch.to_json()).provenance)

@@ -548,3 +548,18 @@ def test_a_moving_pad_outside_the_workspace_at_every_arrival_time_is_said_so():
     # above the ground the same pad is planned (the check does not fire on a reachable pad)
     up = MovingTarget.on_platform([0.0, 0.0, 1.5], incline=0.5, speed=1.0)
     assert plan_moving_detailed(avp.State(position=[-3.0, 0.0, 1.5]), up, ground).ok
+
+
+def test_moving_plans_carry_their_provenance_into_exports():
+    """A moving plan's trajectory carries its status and certificates, as avp.plan's (it had
+    ``provenance`` None, so an export did not say it was certified)."""
+    from avp.trajectory import Trajectory
+    tgt = platform(1.5, 2.0, 0.2)
+    res = plan_moving_detailed(behind(tgt), tgt, replace(CONFIG, workspace=avp.Workspace(ground_z=0.5)))
+    assert res.ok and res.trajectory is not None and res.bounds is not None
+    prov = res.trajectory.provenance
+    assert prov is not None and prov.status == avp.PlanStatus.SOLVED.value and not prov.relaxed
+    assert prov.bounds_certified == res.bounds.certified
+    regions = [r for r in (res.clearance, res.safety) if r is not None]
+    assert regions and prov.workspace_certified == all(r.certified for r in regions)
+    assert Trajectory.from_json(res.trajectory.to_json()).provenance == prov
