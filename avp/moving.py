@@ -574,10 +574,12 @@ def plan_moving(
     target: MovingTarget,
     config: PlannerConfig | None = None,
     moving: MovingConfig | None = None,
+    *,
+    duration: float | None = None,
 ) -> Trajectory:
-    """:func:`plan_moving_detailed`, returning the trajectory or raising a
-    :class:`~avp.errors.PlanningError` subclass with ``.result``."""
-    result = plan_moving_detailed(state, target, config, moving)
+    """:func:`plan_moving_detailed` (``duration`` as there: a fixed arrival time), returning the
+    trajectory or raising a :class:`~avp.errors.PlanningError` subclass with ``.result``."""
+    result = plan_moving_detailed(state, target, config, moving, duration=duration)
     if result.ok and result.trajectory is not None:
         return result.trajectory
     message = f"no perching trajectory on the moving pad: {result.status.value}; " + "; ".join(result.log[-2:])

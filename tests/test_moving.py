@@ -563,3 +563,14 @@ def test_moving_plans_carry_their_provenance_into_exports():
     regions = [r for r in (res.clearance, res.safety) if r is not None]
     assert regions and prov.workspace_certified == all(r.certified for r in regions)
     assert Trajectory.from_json(res.trajectory.to_json()).provenance == prov
+
+
+def test_plan_moving_takes_the_fixed_arrival_time_of_plan_moving_detailed():
+    """``plan_moving`` is the raising form of ``plan_moving_detailed`` and takes its ``duration``
+    (a TypeError before): the same plan, ending at the given arrival time."""
+    tgt = platform(0.5, 2.0)
+    detailed = plan_moving_detailed(behind(tgt), tgt, CONFIG, duration=2.5)
+    assert detailed.ok and detailed.trajectory is not None
+    traj = plan_moving(behind(tgt), tgt, CONFIG, duration=2.5)
+    assert traj.duration == pytest.approx(2.5, abs=1e-12)
+    np.testing.assert_array_equal(traj.coefficients, detailed.trajectory.coefficients)
