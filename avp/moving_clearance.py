@@ -238,6 +238,8 @@ class ClearanceReport:
         Enclosure of ``h(t_f)`` (m): the contact residual of the stored polynomials.
     taylor_order:
         ``K`` of the trigonometric expansions (0 for a non-turning platform: exact polynomial).
+    contact_tol:
+        How far (m) the contact residual may reach behind the pad's plane.
     """
 
     certified: bool
@@ -246,11 +248,16 @@ class ClearanceReport:
     contact_residual_lower: float
     contact_residual_upper: float
     taylor_order: int
+    contact_tol: float = RESIDUAL_TOL
 
     def summary(self) -> str:
         verdict = "certified" if self.certified else "NOT certified"
         cells = ", ".join("within" if s else "violated" for s in self.segments)
         extra = "" if math.isnan(self.violation_time) else f"; violation near t = {self.violation_time:.4g} s"
+        if all(self.segments) and self.contact_residual_lower < -self.contact_tol:  # every segment within: the end
+            extra += (f"; the contact point may end {-self.contact_residual_lower:.2e} m behind the pad's plane, "
+                      f"beyond the tolerance {self.contact_tol:.0e} m (the plan's rounding at contact; a shorter "
+                      "arrival time pins it closer)")
         return (f"moving-plane clearance: {verdict} ({cells}); contact residual in "
                 f"[{self.contact_residual_lower:.2e}, {self.contact_residual_upper:.2e}] m; "
                 f"Taylor order {self.taylor_order}{extra}")
@@ -300,4 +307,5 @@ def certify_moving_clearance(
         if code != 0 and math.isnan(t_bad):
             t_bad = traj.t0 + (tf - float(t_sig))
     ok = all(verdicts) and r_lo >= -contact_tol
-    return ClearanceReport(certified=ok, segments=tuple(verdicts), violation_time=t_bad, contact_residual_lower=r_lo, contact_residual_upper=r_hi, taylor_order=K)
+    return ClearanceReport(certified=ok, segments=tuple(verdicts), violation_time=t_bad, contact_residual_lower=r_lo,
+                           contact_residual_upper=r_hi, taylor_order=K, contact_tol=float(contact_tol))

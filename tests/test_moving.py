@@ -574,3 +574,20 @@ def test_plan_moving_takes_the_fixed_arrival_time_of_plan_moving_detailed():
     traj = plan_moving(behind(tgt), tgt, CONFIG, duration=2.5)
     assert traj.duration == pytest.approx(2.5, abs=1e-12)
     np.testing.assert_array_equal(traj.coefficients, detailed.trajectory.coefficients)
+
+
+def test_a_clearance_failing_only_at_contact_says_so():
+    """A 9000 s arrival time: every segment of the clearance is proven, but the plan's rounding
+    puts the contact point up to 2.5e-7 m behind the pad's plane, beyond the 1e-9 m tolerance.
+    The log said only "NOT certified (within, within, within)"; it now says why, and a
+    certified report does not."""
+    pad = MovingTarget.on_platform([0.0, 0.0, 1.5], incline=0.5, speed=1.0)
+    far = plan_moving_detailed(avp.State(position=[-3.0, 0.0, 1.5]), pad, avp.PlannerConfig(), duration=9000.0)
+    rep = far.clearance
+    assert far.status is avp.PlanStatus.WORKSPACE_NOT_CERTIFIED and rep is not None
+    assert all(rep.segments) and rep.contact_residual_lower < -rep.contact_tol
+    assert "behind the pad's plane, beyond the tolerance" in rep.summary()
+    assert "behind the pad's plane" in far.log[-1]
+    near = plan_moving_detailed(avp.State(position=[-3.0, 0.0, 1.5]), pad, avp.PlannerConfig(), duration=20.0)
+    assert near.ok and near.clearance is not None and near.clearance.certified
+    assert "behind the pad's plane" not in near.clearance.summary()
