@@ -35,6 +35,33 @@ def float_array(field: str, value: Any, expected: str) -> npt.NDArray[np.float64
         raise ConfigError(field, f"expected {expected}, got {value!r}") from exc
 
 
+def finite_times(field: str, t: Any) -> tuple[npt.NDArray[np.float64], float, float]:
+    """``t`` (a number or an array of them, s) as a float array, with its least and greatest
+    value; a :class:`ConfigError` on ``field`` when it holds no numbers (strings, ``None``, booleans,
+    complex numbers, dates) or NaN or inf."""
+    if isinstance(t, (list, tuple)) and holds_booleans(t):
+        raise ConfigError(field, f"expected times in s (numbers), got booleans in {t!r}")  # NumPy reads 1.0
+    try:
+        raw = t if isinstance(t, np.ndarray) else np.asarray(t)
+    except (TypeError, ValueError, OverflowError) as exc:
+        raise ConfigError(field, f"expected times in s, got {t!r}") from exc
+    if raw.dtype.kind == "O" and not any(isinstance(x, (str, bytes, bool, np.bool_)) or x is None
+                                         for x in raw.ravel().tolist()):
+        try:  # numbers held as objects (Fraction, Decimal): their float values
+            raw = raw.astype(float)
+        except (TypeError, ValueError, OverflowError) as exc:
+            raise ConfigError(field, f"expected times in s (numbers), got {t!r}") from exc
+    if raw.dtype.kind not in "fiu":  # strings, None, booleans: no time
+        raise ConfigError(field, f"expected times in s (numbers), got {t!r}")
+    arr = raw.astype(float, copy=False)
+    lo = hi = math.nan
+    if arr.size:
+        lo, hi = float(arr.min()), float(arr.max())  # NaN propagates to both
+        if not (math.isfinite(lo) and math.isfinite(hi)):
+            raise ConfigError(field, "contains NaN or inf")
+    return arr, lo, hi
+
+
 def frozen_array(field: str, value: Any, shape: tuple[int, ...]) -> npt.NDArray[np.float64]:
     """A finite float64 copy of ``value`` with exactly ``shape``, marked read-only (booleans are
     refused: ``True`` is no coordinate)."""

@@ -43,7 +43,7 @@ from . import _validate as v
 from ._typing import Array
 from ._validate import LIMITS
 from .bounds import BoundReport, certify_trajectory
-from .config import FovConfig, PlannerConfig
+from .config import FovConfig, PlannerConfig, Workspace
 from .errors import (
     ConfigError,
     InfeasibleError,
@@ -451,7 +451,7 @@ def plan_moving_detailed(
             workspace_certified=bool(regions) and all(r.certified for r in regions))
         return MovingPlanResult(status=PlanStatus.SOLVED, trajectory=best.traj, pad=best.pad, durations=best.traj.durations, bounds=best.report, clearance=best.clearance, score=best.score, candidates=candidates, log=tuple(log), solve_time=solve_time, total_time=total, contact=contact_errors(best.traj, target, mcfg, cfg.workspace.body_offset, cfg.limits.rotor_drag), safety=best.safety)
     last = evals[-1]
-    outside_note = _pad_outside(evals, cfg)
+    outside_note = _pad_outside(evals, static_cfg.workspace)
     if outside_note is not None or any(e.clearance is not None or e.safety is not None for e in evals):
         # (the pad out of the workspace at every arrival time: no trajectory keeps it, whatever the limits)
         status = PlanStatus.WORKSPACE_NOT_CERTIFIED
@@ -468,11 +468,12 @@ def plan_moving_detailed(
     return MovingPlanResult(status=status, trajectory=None, pad=last.pad, durations=np.full(cfg.n_segments, last.T / cfg.n_segments), bounds=last.report, clearance=next((e.clearance for e in reversed(evals) if e.clearance is not None), None), score=math.inf, candidates=candidates, log=tuple(log), solve_time=solve_time, total_time=total, contact=None, safety=next((e.safety for e in reversed(evals) if e.safety is not None), None))
 
 
-def _pad_outside(evals: list[_Eval], cfg: PlannerConfig) -> str | None:
-    """A log line when the pad's contact point lay outside the static workspace limits (ground,
-    half-spaces, spheres) at every arrival time tried: no plan could reach it, whatever the
-    vehicle's limits (``None`` otherwise)."""
-    static = replace(cfg.workspace, perch_clearance=False)
+def _pad_outside(evals: list[_Eval], static: Workspace) -> str | None:
+    """A log line when the pad's contact point lay outside the static workspace limits
+    (``static``: ground, half-spaces, spheres) at every arrival time tried: no plan could reach
+    it, whatever the vehicle's limits (``None`` otherwise)."""
+    if not evals:
+        return None
     names: set[str] = set()
     for e in evals:
         pad = e.pad.static()
@@ -481,8 +482,6 @@ def _pad_outside(evals: list[_Eval], cfg: PlannerConfig) -> str | None:
         if not hit:
             return None
         names.update(hit)
-    if not evals:
-        return None
     Ts = [e.T for e in evals]
     return (f"the pad's contact point lies outside the workspace limit(s) {', '.join(sorted(names))} at every "
             f"arrival time tried ({min(Ts):.3g}-{max(Ts):.3g} s): check the pad's position and motion and the "

@@ -169,12 +169,8 @@ class MovingTarget(PerchTarget):
         CTRV in closed form: ``rho(t) = rho_0 + v_h dt sinc(w dt / 2) (cos, sin)(theta_0 + w dt / 2)
         + v_v dt e3`` (the chord of the arc; ``w -> 0`` is the straight line without cancellation).
         """
-        if v.holds_booleans(times):
-            raise ConfigError("times", f"expected times (s), got booleans {times!r}")
-        t = np.atleast_1d(v.float_array("times", times, "times (s)"))
-        if not np.isfinite(t).all():
-            raise ConfigError("times", f"must be finite, got {t.tolist()}")
-        return self._predict(t - self.time)
+        t, _, _ = v.finite_times("times", times)
+        return self._predict(np.atleast_1d(t) - self.time)
 
     def _predict(self, dt: Array) -> tuple[Array, Array, Array]:
         """:meth:`predict` at ``dt`` (s) after ``time``."""

@@ -121,33 +121,6 @@ def _times_array(field: str, values: npt.ArrayLike, n: int) -> Array:
     return k
 
 
-def _finite_times(t: Any) -> tuple[Array, float, float]:
-    """``t`` (a number or an array of them, s) as a float array, with its least and greatest
-    value; a :class:`ConfigError` on ``t`` when it holds no numbers (strings, ``None``, booleans,
-    complex numbers, dates) or NaN or inf."""
-    if isinstance(t, (list, tuple)) and v.holds_booleans(t):
-        raise ConfigError("t", f"expected times in s (numbers), got booleans in {t!r}")  # NumPy reads 1.0
-    try:
-        raw = t if isinstance(t, np.ndarray) else np.asarray(t)
-    except (TypeError, ValueError, OverflowError) as exc:
-        raise ConfigError("t", f"expected times in s, got {t!r}") from exc
-    if raw.dtype.kind == "O" and not any(isinstance(x, (str, bytes, bool, np.bool_)) or x is None
-                                         for x in raw.ravel().tolist()):
-        try:  # numbers held as objects (Fraction, Decimal): their float values
-            raw = raw.astype(float)
-        except (TypeError, ValueError, OverflowError) as exc:
-            raise ConfigError("t", f"expected times in s (numbers), got {t!r}") from exc
-    if raw.dtype.kind not in "fiu":  # strings, None, booleans: no time
-        raise ConfigError("t", f"expected times in s (numbers), got {t!r}")
-    arr = raw.astype(float, copy=False)
-    lo = hi = math.nan
-    if arr.size:
-        lo, hi = float(arr.min()), float(arr.max())  # NaN propagates to both
-        if not (math.isfinite(lo) and math.isfinite(hi)):
-            raise ConfigError("t", "contains NaN or inf")
-    return arr, lo, hi
-
-
 class Trajectory:
     """A spline of ``S`` segments over the knots ``t0 < t1 < ... < tS``.
 
@@ -274,7 +247,7 @@ class Trajectory:
         t0, tf, tol = self._t0, self._tf, self._tol
         if isinstance(t, float) and t0 - tol <= t <= tf + tol:  # one time, in range
             return np.array([self.duration if t >= tf else max(t - t0, 0.0)]), ()
-        arr, lo, hi = _finite_times(t)
+        arr, lo, hi = v.finite_times("t", t)
         if arr.size and (lo < t0 - tol or hi > tf + tol):
             raise ConfigError("t", f"times must lie in [{t0}, {tf}] s, got [{lo}, {hi}]")
         return self._relative(arr), arr.shape
@@ -435,7 +408,7 @@ class RotorpyTrajectory:
         a boolean, ``None``, an array)."""
         tr = self.trajectory
         if type(t) is not float or not math.isfinite(t):  # the fast path: rotorpy's float clock
-            arr, lo, _ = _finite_times(t)
+            arr, lo, _ = v.finite_times("t", t)
             if arr.shape != ():
                 raise ConfigError("t", f"expected one time in s, got shape {arr.shape}")
             t = lo
