@@ -19,6 +19,7 @@ __all__ = [
     "fov_gradient",
     "fov_linearise",
     "fov_row_matrices",
+    "scaled_excess",
     "sturm_count",
     "trackability_rows",
     "visibility_fractions",
@@ -258,3 +259,26 @@ def certify_speed(
     exact: bool = True,
 ) -> tuple[npt.NDArray[np.int8], npt.NDArray[np.float64], float]:
     """``|v(t)| < v_max`` per segment; as :func:`certify_halfspace`."""
+
+# --- the time search's scaling law (time_scaling.rs) ------------------------------------------
+
+def scaled_excess(
+    coeffs: npt.NDArray[np.float64],
+    knots: npt.NDArray[np.float64],
+    per_segment: int,
+    s2: npt.NDArray[np.float64],
+    g: float,
+    *,
+    accel_max: float,
+    accel_min: float,
+    mass: float,
+    thrust_rate_max: float,
+    tilt_rate_max: float,
+    body_rate_max: float,
+) -> npt.NDArray[np.float64]:
+    """Worst relative excess ``max(value / limit) - 1`` over the thrust range (15), thrust rate
+    (21), tilt rate (22) and body rate (24) of the spline (``(segments, 4, coeffs)``: x, y, z,
+    yaw) time-scaled by each ``s`` with ``s2 = s^-2``, on ``per_segment`` midpoint samples per
+    segment; shape ``(len(s2),)``. The rate limits may be ``inf`` (not checked), ``accel_min``
+    ``0``. Raises ``KernelError`` on bad shapes, non-finite or non-positive ``s2``,
+    ``per_segment < 1`` or meaningless limits."""

@@ -21,7 +21,6 @@ the next duration; every returned plan is certified.
 from __future__ import annotations
 
 import math
-from functools import lru_cache
 
 import numpy as np
 
@@ -50,29 +49,23 @@ of :class:`DurationSearch`)."""
 SAMPLES_PER_SEGMENT = 16
 """Samples per segment of the plan whose scaling is predicted (midpoints)."""
 
-_BODY_RATE_A, _BODY_RATE_B = 3.0, 4.0  # the roll-level constants of (25), docs/bounds.md
 _ONE = np.ones(1)
 
 
-@lru_cache(maxsize=8)
-def _midpoints(per_segment: int) -> Array:
-    """Midpoints of ``per_segment`` equal parts of the unit interval (read-only)."""
-    u = (np.arange(per_segment) + 0.5) / per_segment
-    u.setflags(write=False)
-    return u
-
-
-def _samples(traj: Trajectory, per_segment: int, drag: float = 0.0) -> tuple[Array, Array, Array, Array]:
-    """``|a|^2``, ``a_z``, ``|j|^2`` and the yaw rate of ``traj`` at ``per_segment`` midpoints
-    of equal parts of every segment; with rotor ``drag`` ``a + d v`` and ``j + d a`` in place of
-    ``a`` and ``j`` (the thrust the certificate bounds, :func:`avp.bounds.drag_thrust_spline`)."""
-    knots = traj.knots_rel
-    t = (knots[:-1, None] + _midpoints(per_segment)[None, :] * (knots[1:] - knots[:-1])[:, None]).reshape(-1)
+def _excess(traj: Trajectory, limits: VehicleLimits, g: float, scales: Array,
+            per_segment: int = SAMPLES_PER_SEGMENT) -> Array:
+    """:func:`scaled_excess` by the Rust kernel (``time_scaling.rs``): it samples ``|a|^2``,
+    ``a_z``, ``|j|^2`` and the yaw rate at ``per_segment`` midpoints of equal parts of every
+    segment (with rotor drag ``a + d v`` and ``j + d a``, the thrust the certificate bounds,
+    :func:`avp.bounds.drag_thrust_spline`) and, per scale ``s``, takes ``|a/s^2 + g e3|^2 =
+    |a|^2 s^-4 + 2 g a_z s^-2 + g^2`` and ``|j/s^3|^2 = |j|^2 s^-6`` against the limits, in
+    NumPy's arithmetic; ``s^-2`` is NumPy's (the same bits as when all of it was NumPy)."""
+    drag = limits.rotor_drag
     coeffs = drag_thrust_spline(traj.coefficients, drag) if drag else traj.coefficients
-    # interior times of valid knots: the kernel directly, without the public range checks
-    d = _avp_rust.eval_spline(coeffs, knots, t, [1, 2, 3]).reshape(3, t.size, 4)
-    a, j = d[1, :, :3], d[2, :, :3]
-    return (a * a).sum(axis=1), a[:, 2].copy(), (j * j).sum(axis=1), d[0, :, 3]
+    return _avp_rust.scaled_excess(
+        coeffs, traj.knots_rel, per_segment, scales ** -2.0, g, accel_max=limits.accel_max,
+        accel_min=limits.accel_min, mass=limits.mass, thrust_rate_max=limits.thrust_rate_max,
+        tilt_rate_max=limits.tilt_rate_max, body_rate_max=limits.body_rate_max)
 
 
 def scaled_excess(traj: Trajectory, limits: VehicleLimits, g: float, scales: Array = SCALES,
@@ -84,47 +77,21 @@ def scaled_excess(traj: Trajectory, limits: VehicleLimits, g: float, scales: Arr
     polynomial at a sample (the tilt and body rates as the certificate bounds them; with rotor
     drag on the drag thrust, whose time scaling the other scales take as drag-free: a
     prediction, not a proof)."""
-    return _excess(_samples(traj, per_segment, limits.rotor_drag), limits, g, np.asarray(scales, dtype=float))
-
-
-def _excess(samples: tuple[Array, Array, Array, Array], limits: VehicleLimits, g: float, scales: Array) -> Array:
-    a2, a_z, j2, yaw_rate = samples
-    s2 = scales[:, None] ** -2.0
-    # |a/s^2 + g e3|^2 = |a|^2 s^-4 + 2 g a_z s^-2 + g^2;  |j/s^3|^2 = |j|^2 s^-6
-    f2 = np.maximum(a2[None, :] * s2 * s2 + (2.0 * g) * a_z[None, :] * s2 + g * g, 1e-24)
-    ratios = [np.sqrt(f2.max(axis=1)) / limits.accel_max]
-    if limits.accel_min > 0.0:
-        ratios.append(limits.accel_min / np.sqrt(f2.min(axis=1)))
-    if math.isfinite(limits.thrust_rate_max) or math.isfinite(limits.tilt_rate_max) or math.isfinite(limits.body_rate_max):
-        jj = j2[None, :] * (s2 * s2 * s2)
-        if math.isfinite(limits.thrust_rate_max):
-            ratios.append(np.sqrt(jj.max(axis=1)) * limits.mass / limits.thrust_rate_max)
-        tilt2 = jj / f2
-        if math.isfinite(limits.tilt_rate_max):
-            ratios.append(np.sqrt(tilt2.max(axis=1)) / limits.tilt_rate_max)
-        if math.isfinite(limits.body_rate_max):
-            w2 = _BODY_RATE_A * tilt2 + _BODY_RATE_B * (yaw_rate[None, :] ** 2) * s2
-            ratios.append(np.sqrt(w2.max(axis=1)) / limits.body_rate_max)
-    return np.max(ratios, axis=0) - 1.0
+    return _excess(traj, limits, g, np.asarray(scales, dtype=float).reshape(-1), per_segment)
 
 
 def predicted_factor(traj: Trajectory, limits: VehicleLimits, g: float, lo: float, hi: float) -> float | None:
     """The relative time-scale factor in ``[lo, hi]`` closest to 1 (in ratio) at which ``traj``,
     scaled, meets every bound with :data:`MARGIN` on the samples; ``None`` when there is none."""
-    return _predict(_samples(traj, SAMPLES_PER_SEGMENT, limits.rotor_drag), limits, g, lo, hi)
+    return _predict_with_excess(traj, limits, g, lo, hi)[0]
 
 
-def _predict(samples: tuple[Array, Array, Array, Array], limits: VehicleLimits, g: float,
-             lo: float, hi: float) -> float | None:
-    return _predict_with_excess(samples, limits, g, lo, hi)[0]
-
-
-def _predict_with_excess(samples: tuple[Array, Array, Array, Array], limits: VehicleLimits, g: float,
+def _predict_with_excess(traj: Trajectory, limits: VehicleLimits, g: float,
                          lo: float, hi: float) -> tuple[float | None, float]:
-    """:func:`_predict` and the excess at scale 1, from one evaluation of :func:`_excess` (each
-    scale's excess is computed on its own row: the same values as separate calls)."""
+    """:func:`predicted_factor` and the excess at scale 1, from one call of the kernel (each
+    scale's excess is computed on its own: the same values as separate calls)."""
     scales = SCALES[(SCALES >= lo) & (SCALES <= hi)]
-    excess = _excess(samples, limits, g, np.concatenate((_ONE, scales)))
+    excess = _excess(traj, limits, g, np.concatenate((_ONE, scales)))
     at_one = float(excess[0])
     if scales.size == 0:
         return None, at_one
@@ -188,9 +155,8 @@ class DurationSearch:
         if self.predicted >= self.policy.max_steps:
             return None
         current = self.current
-        samples = _samples(traj, SAMPLES_PER_SEGMENT, limits.rotor_drag)
         if not self.measured:  # the scaling law of this plan
-            s, excess = _predict_with_excess(samples, limits, g, self.lo / current, self.hi / current)
+            s, excess = _predict_with_excess(traj, limits, g, self.lo / current, self.hi / current)
             self.measured.append((math.log(current), excess))
             if s is None:
                 return None
@@ -198,7 +164,7 @@ class DurationSearch:
                 s = 1.03 if s >= 1.0 else 1.0 / 1.03
             self.direction = 1 if s > 1.0 else -1
             return self._step(current * s)
-        self.measured.append((math.log(current), float(_excess(samples, limits, g, _ONE)[0])))
+        self.measured.append((math.log(current), float(_excess(traj, limits, g, _ONE)[0])))
         k = self._secant()
         return k if k is not None else self._reach()
 

@@ -119,3 +119,85 @@ def test_the_documented_policy_keeps_given_durations(search) -> None:
     result = avp.plan_detailed(state, target, cfg, durations=[0.4] * 3)
     assert result.trajectory is not None and not result.bounds.certified
     np.testing.assert_allclose(result.trajectory.durations, [0.4] * 3, rtol=0, atol=1e-12)
+
+
+def _numpy_excess(traj: avp.Trajectory, limits: avp.VehicleLimits, g: float, scales: np.ndarray,
+                  per_segment: int) -> np.ndarray:
+    """The scaling law in NumPy, as ``avp.time_search`` computed it before its Rust kernel:
+    samples from ``Trajectory.derivatives``, then the formula of the module's docs."""
+    k = traj.knots
+    u = (np.arange(per_segment) + 0.5) / per_segment
+    t = (k[:-1, None] + u[None, :] * (k[1:] - k[:-1])[:, None]).reshape(-1)
+    d = traj.derivatives(t, [1, 2, 3])
+    a, j, yaw_rate = d[1, :, :3], d[2, :, :3], d[0, :, 3]
+    a2, a_z, j2 = (a * a).sum(axis=1), a[:, 2].copy(), (j * j).sum(axis=1)
+    s2 = scales[:, None] ** -2.0
+    f2 = np.maximum(a2[None, :] * s2 * s2 + (2.0 * g) * a_z[None, :] * s2 + g * g, 1e-24)
+    ratios = [np.sqrt(f2.max(axis=1)) / limits.accel_max]
+    if limits.accel_min > 0.0:
+        ratios.append(limits.accel_min / np.sqrt(f2.min(axis=1)))
+    jj = j2[None, :] * (s2 * s2 * s2)
+    tilt2 = jj / f2
+    if math.isfinite(limits.thrust_rate_max):
+        ratios.append(np.sqrt(jj.max(axis=1)) * limits.mass / limits.thrust_rate_max)
+    if math.isfinite(limits.tilt_rate_max):
+        ratios.append(np.sqrt(tilt2.max(axis=1)) / limits.tilt_rate_max)
+    if math.isfinite(limits.body_rate_max):
+        w2 = 3.0 * tilt2 + 4.0 * (yaw_rate[None, :] ** 2) * s2
+        ratios.append(np.sqrt(w2.max(axis=1)) / limits.body_rate_max)
+    return np.max(ratios, axis=0) - 1.0
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.integers(1, 4), st.integers(4, 10), st.integers(0, 2**32 - 1), st.integers(1, 20),
+       st.sampled_from([math.inf, 40.0]), st.sampled_from([math.inf, 3.0]), st.sampled_from([math.inf, 6.0]),
+       st.floats(0.0, 4.0))
+def test_the_kernel_computes_numpys_bits(segments, coeffs, seed, per_segment, thrust_rate, tilt_rate,
+                                         body_rate, thrust_min) -> None:
+    """The Rust kernel against the NumPy formula, value for value (``==``): the time search
+    takes the same steps it took when the formula was NumPy, on any spline and any limits."""
+    rng = np.random.default_rng(seed)
+    c = rng.normal(size=(segments, 4, coeffs)) * 10.0 ** rng.uniform(-3.0, 2.0, size=(1, 1, coeffs))
+    knots = np.concatenate([[0.0], np.cumsum(rng.uniform(0.05, 3.0, size=segments))])
+    traj = avp.Trajectory(c, knots)
+    limits = avp.VehicleLimits(mass=float(rng.uniform(0.2, 4.0)), thrust_min=thrust_min, thrust_max=30.0,
+                               thrust_rate_max=thrust_rate, tilt_rate_max=tilt_rate, body_rate_max=body_rate)
+    scales = np.concatenate([[1.0], rng.uniform(0.25, 4.0, size=5)])
+    expected = _numpy_excess(traj, limits, traj.g, scales, per_segment)
+    got = scaled_excess(traj, limits, traj.g, scales, per_segment=per_segment)
+    assert np.array_equal(got, expected), np.max(np.abs(got - expected))
+
+
+def test_the_tilt_rate_term_is_the_jerk_over_the_thrust() -> None:
+    """At s = 1 with only a tilt-rate limit (and a thrust range that cannot bind), the excess is
+    ``max |j| / |a + g e3|`` over the samples divided by the limit, minus 1: recomputed from the
+    trajectory's jerk and thrust, not from the kernel's samples."""
+    sc = standard(90, 3.5)
+    traj = avp.plan(sc.state, sc.target, avp.PlannerConfig(bounds=avp.BoundsPolicy(certify=False)))
+    limits = avp.VehicleLimits(mass=1.0, thrust_min=0.0, thrust_max=1e4, tilt_rate_max=0.5)
+    u = (np.arange(SAMPLES_PER_SEGMENT) + 0.5) / SAMPLES_PER_SEGMENT
+    t = np.concatenate([a + u * (b - a) for a, b in zip(traj.knots[:-1], traj.knots[1:], strict=True)])
+    jerk = np.linalg.norm(traj.derivatives(t, [3])[0, :, :3], axis=1)
+    expected = float((jerk / traj.thrust(t)).max()) / 0.5 - 1.0
+    assert scaled_excess(traj, limits, traj.g, np.ones(1))[0] == pytest.approx(expected, rel=1e-12)
+
+
+@pytest.mark.parametrize(("kwargs", "arg"), [
+    (dict(per_segment=0), "per_segment"),
+    (dict(s2=np.array([0.0])), "s2"),
+    (dict(s2=np.array([np.nan])), "s2"),
+    (dict(accel_max=math.inf), "limits"),
+    (dict(mass=0.0), "limits"),
+    (dict(coeffs=np.zeros((1, 3, 4))), "coeffs"),
+    (dict(knots=np.array([0.0, 0.0])), "knots"),
+])
+def test_the_kernel_names_a_bad_argument(kwargs, arg) -> None:
+    from avp import _avp_rust
+
+    call = dict(coeffs=np.zeros((1, 4, 4)), knots=np.array([0.0, 1.0]), per_segment=2, s2=np.ones(1), g=9.81,
+                accel_max=20.0, accel_min=0.0, mass=1.0, thrust_rate_max=math.inf, tilt_rate_max=math.inf,
+                body_rate_max=math.inf)
+    call.update(kwargs)
+    with pytest.raises(_avp_rust.KernelError) as info:
+        _avp_rust.scaled_excess(**call)
+    assert info.value.arg == arg

@@ -2,9 +2,9 @@
 //!
 //! Pure functions on plain slices: spline evaluation ([`spline`]), polynomial algebra ([`poly`]),
 //! Sturm sequences and bound certificates (`sturm`, `certify`, `exact`), workspace
-//! certificates (`regions`), and the anticipation
-//! step (6) of the replanner (`anticipation`). The PyO3 wrappers live in `python` behind the
-//! `python` feature, so `cargo test` runs without linking libpython.
+//! certificates (`regions`), the anticipation step (6) of the replanner (`anticipation`) and
+//! the time search's scaling law (`time_scaling`). The PyO3 wrappers live in `python` behind
+//! the `python` feature, so `cargo test` runs without linking libpython.
 //!
 //! Conventions: polynomial coefficients are stored in **ascending** powers (the constant
 //! coefficient comes first); spline coefficients have shape `(segments, axes, coeffs)` in
@@ -25,6 +25,7 @@ pub mod regions;
 pub mod roll;
 pub mod spline;
 pub mod sturm;
+pub mod time_scaling;
 pub mod trackability;
 
 #[cfg(feature = "python")]

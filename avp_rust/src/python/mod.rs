@@ -1,7 +1,7 @@
-//! Thin PyO3 wrappers, one module per kernel family (`spline`, `fov`, `bounds`, `regions`),
-//! sharing only [`common`]: convert NumPy arrays to slices, call a kernel, convert back. Every
-//! kernel error becomes `KernelError` (a `ValueError` with `.arg` and `.detail`); kernels
-//! return `Result` and do not panic on input paths.
+//! Thin PyO3 wrappers, one module per kernel family (`spline`, `fov`, `bounds`, `regions`,
+//! `time_scaling`), sharing only [`common`]: convert NumPy arrays to slices, call a kernel,
+//! convert back. Every kernel error becomes `KernelError` (a `ValueError` with `.arg` and
+//! `.detail`); kernels return `Result` and do not panic on input paths.
 use pyo3::prelude::*;
 
 mod bounds;
@@ -9,6 +9,7 @@ mod common;
 mod fov;
 mod regions;
 mod spline;
+mod time_scaling;
 
 #[pymodule]
 pub fn _avp_rust(m: &Bound<'_, PyModule>) -> PyResult<()> {
@@ -18,5 +19,6 @@ pub fn _avp_rust(m: &Bound<'_, PyModule>) -> PyResult<()> {
     fov::register(m)?;
     bounds::register(m)?;
     regions::register(m)?;
+    time_scaling::register(m)?;
     Ok(())
 }
