@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from enum import Enum
 from typing import Any
@@ -183,8 +184,39 @@ def _certify(traj: Trajectory, cfg: PlannerConfig) -> BoundReport:
     return certify_trajectory(traj, cfg.limits, cfg.g)
 
 
+_DERIVED: dict[tuple[int, object], tuple[PlannerConfig, PlannerConfig]] = {}
+"""Configurations :func:`plan_detailed` derives from another (a stage's, one without FoV rows),
+by the identity of the one they derive from and what was changed (:func:`_derived`)."""
+
+_DERIVED_SIZE = 64
+"""Entries of :data:`_DERIVED` kept (all are dropped when it is full)."""
+
+
+def _derived(cfg: PlannerConfig, change: object, make: Callable[[], PlannerConfig]) -> PlannerConfig:
+    """``make()``, a configuration derived from ``cfg`` by ``change``, built once per ``cfg``
+    object. ``dataclasses.replace`` validates every field again (about 50 us a call); the
+    replanner passes the same configuration at every step, so its stages' configurations are
+    the same objects at every call. The entry keeps ``cfg`` alive, so its ``id`` is not reused
+    while it is cached; a frozen configuration derives the same values every time."""
+    key = (id(cfg), change)
+    hit = _DERIVED.get(key)
+    if hit is not None and hit[0] is cfg:
+        return hit[1]
+    out = make()
+    if len(_DERIVED) >= _DERIVED_SIZE:
+        _DERIVED.clear()
+    _DERIVED[key] = (cfg, out)
+    return out
+
+
 def _relax(cfg: PlannerConfig, relaxation: Relaxation, target: PerchTarget) -> PlannerConfig:
-    """``cfg`` with one more :class:`Relaxation` applied."""
+    """``cfg`` with one more :class:`Relaxation` applied (cached per ``cfg``, :func:`_derived`;
+    ``ALPHA_RANGE`` depends on the pad's incline too)."""
+    change = (relaxation, target.incline) if relaxation is Relaxation.ALPHA_RANGE else relaxation
+    return _derived(cfg, change, lambda: _relaxed(cfg, relaxation, target))
+
+
+def _relaxed(cfg: PlannerConfig, relaxation: Relaxation, target: PerchTarget) -> PlannerConfig:
     if relaxation is Relaxation.ALPHA_RANGE:
         alpha = cfg.contact_alpha(target.incline)
         # Around the nominal alpha (min-snap otherwise drives it to an extreme) and strictly
@@ -348,9 +380,7 @@ def plan_detailed(
     for stage in stages:
         if stage is _WITHOUT_WAYPOINT:
             # the waypoint off; the band as asked (flip.enabled off would also drop cone_band's cone)
-            cone = cfg.pre_impact is PreImpactMode.PAPER and cfg.flip.cone_band
-            stage_cfg = replace(cfg, flip=replace(cfg.flip, enabled=False),
-                                pre_impact=PreImpactMode.CONE if cone else cfg.pre_impact)
+            stage_cfg = _without_waypoint(cfg)
             log.append("overhang: searching again without the horizontal-thrust waypoint (a planner heuristic; "
                        "nothing the request asked is relaxed)")
         elif isinstance(stage, Relaxation):
@@ -378,8 +408,7 @@ def plan_detailed(
             # once a duration certifies (they change the plan little and cost 2-3 QPs each).
             first = stage is None and factor == 1.0
             if not first and search_cfg is None:
-                search_cfg = stage_cfg if not stage_cfg.fov.enabled else replace(
-                    stage_cfg, fov=replace(stage_cfg.fov, enabled=False))
+                search_cfg = stage_cfg if not stage_cfg.fov.enabled else _without_fov(stage_cfg)
             attempt_cfg = stage_cfg if first or search_cfg is None else search_cfg
             t_attempt = time.perf_counter()
             attempt = solve_at(state, target, attempt_cfg, T, previous=previous, initvals=initvals,
@@ -452,6 +481,21 @@ def plan_detailed(
     log.append(f"no duration in the search and no relaxation gave certified bounds ({attempts} solves); "
                + _measured(last.trajectory, target, cfg))
     return finish(PlanStatus.BOUNDS_NOT_CERTIFIED, last, last.trajectory.durations)
+
+
+def _without_waypoint(cfg: PlannerConfig) -> PlannerConfig:
+    """``cfg`` without :class:`~avp.config.OverhangFlip`'s waypoint and the band as asked
+    (``flip.enabled`` off would also drop ``cone_band``'s cone); cached per ``cfg``
+    (:func:`_derived`)."""
+    def make() -> PlannerConfig:
+        cone = cfg.pre_impact is PreImpactMode.PAPER and cfg.flip.cone_band
+        return replace(cfg, flip=replace(cfg.flip, enabled=False), pre_impact=PreImpactMode.CONE if cone else cfg.pre_impact)
+    return _derived(cfg, _WITHOUT_WAYPOINT, make)
+
+
+def _without_fov(cfg: PlannerConfig) -> PlannerConfig:
+    """``cfg`` without the FoV rows (the time search's; cached per ``cfg``, :func:`_derived`)."""
+    return _derived(cfg, "without FoV", lambda: replace(cfg, fov=replace(cfg.fov, enabled=False)))
 
 
 _WITHOUT_WAYPOINT = "without the overhang waypoint"
