@@ -187,7 +187,7 @@ def _factor(A: Array, P: Array) -> _Factor:
     G = Z.T @ PZ
     # Scale the objective to unit Hessian diagonal: the minimiser is unchanged and the
     # back-ends' absolute dual tolerances become meaningful (raw entries reach 1e7).
-    scale = 1.0 / max(float(np.max(np.abs(np.diag(G)))) if G.size else 1.0, 1e-300)
+    scale = _unit_diagonal_scale(G)
     H = (0.5 * scale) * (G + G.T)
     A_kept = A if _owned(A) else A.copy()  # stacked equality matrices are read-only, cached ones shared
     P_kept = P if not P.flags.writeable else P.copy()  # the cached cost matrices are read-only
@@ -230,6 +230,15 @@ class _Within:
     Z1: Array  # null space of B
     Z: Array  # Z0 Z1
     G: Array  # Z1^T G0 Z1, not scaled
+
+    @cached_property
+    def scaled(self) -> tuple[float, Array]:
+        """``(scale, H)``: ``1 / max |G_ii|`` and the Hessian ``(0.5 scale) (G + G^T)`` without
+        a slip cost (read-only), computed once per entry."""
+        scale = _unit_diagonal_scale(self.G)
+        H = (0.5 * scale) * (self.G + self.G.T)
+        H.setflags(write=False)
+        return scale, H
 
 
 _WITHIN: OrderedDict[tuple[object, ...], _Within] = OrderedDict()
@@ -325,14 +334,21 @@ def eliminate_within(Z0: Array, c0: Array, G0: Array, P: Array, A_t: Array, b_t:
         raise InfeasibleError(inconsistent.format(residual))
     Z = w.Z
     c_p = c0 + Z0 @ w_p
-    H = w.G
     Pc = P @ c_p
-    if M is not None:
-        MZ = M @ Z
-        H = H + MZ.T @ MZ
-        Pc = Pc + M.T @ (M @ c_p)
-    scale = 1.0 / max(float(np.max(np.abs(np.diag(H)))) if H.size else 1.0, 1e-300)
+    if M is None:  # the cost's Hessian in the null space, scaled, is the cached entry's
+        scale, H = w.scaled
+        return Z, c_p, H, scale * (Z.T @ Pc)
+    MZ = M @ Z
+    H = w.G + MZ.T @ MZ
+    Pc = Pc + M.T @ (M @ c_p)
+    scale = _unit_diagonal_scale(H)
     return Z, c_p, (0.5 * scale) * (H + H.T), scale * (Z.T @ Pc)
+
+
+def _unit_diagonal_scale(H: Array) -> float:
+    """``1 / max |H_ii|`` (1 for an empty ``H``; at most ``1e300``): the cost's scale to a unit
+    largest Hessian diagonal."""
+    return 1.0 / max(float(np.max(np.abs(np.diag(H)))) if H.size else 1.0, 1e-300)
 
 
 @dataclass(frozen=True)
