@@ -359,3 +359,26 @@ def test_a_vehicle_that_cannot_hover_is_refused(thrust_max: float) -> None:
         avp.PlannerConfig(limits=avp.VehicleLimits(thrust_max=thrust_max))
     assert exc.value.field == "limits.thrust_max"
     assert avp.PlannerConfig(limits=avp.VehicleLimits(thrust_max=0.5 * avp.PlannerConfig().g * 1.01)).limits.thrust_max > 0
+
+
+def test_a_derived_stage_configuration_is_the_relaxed_configuration() -> None:
+    """The stage configurations are cached per configuration object: each equals the one
+    ``_relaxed`` builds for that object and that pad, the alpha range follows the pad's incline,
+    and an equal but distinct configuration gets its own entry."""
+    from avp import planner
+
+    cfg = avp.PlannerConfig()
+    steep, flat = avp.PerchTarget.from_incline([3.0, 0.0, 1.5], math.radians(90)), \
+        avp.PerchTarget.from_incline([3.0, 0.0, 1.5], math.radians(30))
+    for relaxation in avp.Relaxation:
+        for target in (steep, flat):
+            got = planner._relax(cfg, relaxation, target)
+            assert got == planner._relaxed(cfg, relaxation, target)
+            assert planner._relax(cfg, relaxation, target) is got  # built once
+    assert planner._relax(cfg, avp.Relaxation.ALPHA_RANGE, steep).alpha_range \
+        != planner._relax(cfg, avp.Relaxation.ALPHA_RANGE, flat).alpha_range
+    twin = avp.PlannerConfig()
+    assert planner._without_fov(twin) is not planner._without_fov(cfg)
+    assert planner._without_fov(twin) == planner._without_fov(cfg) and not planner._without_fov(cfg).fov.enabled
+    waypoint_off = planner._without_waypoint(avp.PlannerConfig(flip=avp.OverhangFlip(cone_band=True)))
+    assert not waypoint_off.flip.enabled and waypoint_off.pre_impact is avp.PreImpactMode.CONE
