@@ -77,6 +77,8 @@ class Attempt:
         trajectory).
     relaxations:
         Set by the planner: what was relaxed for this attempt.
+    waypoint:
+        Set by the planner: the QP had :class:`~avp.config.OverhangFlip`'s waypoint rows.
     refined:
         Solved with workspace refinement rows, not the initial rows only.
     rows, rounds:
@@ -101,6 +103,7 @@ class Attempt:
     log: tuple[str, ...] = ()
     safety: SafetyReport | None = None
     relaxations: tuple[Relaxation, ...] = ()
+    waypoint: bool = False
     refined: bool = False
     rows: tuple[ConstraintBlock, ...] = ()
     rounds: int = 0

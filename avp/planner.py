@@ -30,7 +30,7 @@ from .frames import MAX_CONTACT_ROLL, thrust_vector
 from .platform import MovingTarget
 from .qp.assemble import ConstraintBlock
 from .qp.layout import DecisionLayout, layout_for
-from .qp.perching import is_overhang
+from .qp.perching import flip_time, is_overhang
 from .request import check_request
 from .safety import SafetyReport, check_endpoints
 from .solve import WARM_START_SOLVERS, QpOutcome
@@ -275,7 +275,11 @@ def plan_detailed(
     previous:
         The committed plan when replanning. It marks the call as a replan: the FoV stage then
         takes one SQP step on the new plan's FoV-free solution and keeps it without a visibility
-        score (:mod:`avp.attempt`); the plan's coefficients are not used.
+        score (:mod:`avp.attempt`); the plan's coefficients are not used. On an overhang, a
+        committed plan planned without :class:`~avp.config.OverhangFlip`'s waypoint (its
+        ``provenance.overhang_waypoint`` is false) is replanned without it: a wall estimate
+        that tips past ``flip.min_incline`` mid-flight does not start a search with a
+        waypoint the committed plan never had.
     warm_start:
         A plan whose shape seeds the back-end's initial guess (ProxQP, OSQP; DAQP ignores it).
     deadline:
@@ -336,6 +340,7 @@ def plan_detailed(
                 bounds_certified=bool(report is not None and report.certified and status.has_trajectory),
                 workspace_certified=bool(attempt is not None and attempt.safe and attempt.safety is not None),
                 fov_dropped=bool(attempt and attempt.fov_dropped),
+                overhang_waypoint=bool(attempt and attempt.waypoint),
             )
         return PlanResult(
             status=status, trajectory=traj, durations=T, qp=attempt.outcome if attempt else None,
@@ -363,9 +368,15 @@ def plan_detailed(
     # Stages: as asked; on an overhang, without the horizontal-thrust waypoint (a planner
     # heuristic, not a user constraint: a plan found without it is still SOLVED); then the
     # relaxations, cumulatively on the configuration as asked.
+    # A replan of a committed plan planned without the waypoint (its pad was no overhang, or the
+    # waypoint was dropped) starts without it: the waypoint stage would repeat that search.
     stages: list[Relaxation | str | None] = [None]
     if cfg.bounds.certify and is_overhang(target, cfg):
-        stages.append(_WITHOUT_WAYPOINT)
+        prov = previous.provenance if previous is not None else None
+        if prov is not None and not prov.overhang_waypoint:
+            stages = [_WITHOUT_WAYPOINT]
+        else:
+            stages.append(_WITHOUT_WAYPOINT)
     if cfg.bounds.certify:
         # The band relaxations that relax nothing are not run: CONE_BAND where the band is the
         # cone already (CONE, or an overhang's PAPER band with OverhangFlip.cone_band), where it
@@ -381,8 +392,9 @@ def plan_detailed(
         if stage is _WITHOUT_WAYPOINT:
             # the waypoint off; the band as asked (flip.enabled off would also drop cone_band's cone)
             stage_cfg = _without_waypoint(cfg)
-            log.append("overhang: searching again without the horizontal-thrust waypoint (a planner heuristic; "
-                       "nothing the request asked is relaxed)")
+            log.append(("overhang: searching again without the horizontal-thrust waypoint" if stage is not stages[0]
+                        else "overhang: the committed plan has no horizontal-thrust waypoint: replanning without it")
+                       + " (a planner heuristic; nothing the request asked is relaxed)")
         elif isinstance(stage, Relaxation):
             stage_cfg = _relax(cfg if not relaxed else stage_cfg, stage, target)
             relaxed.append(stage)
@@ -406,7 +418,7 @@ def plan_detailed(
                     initvals = None
             # The search runs without the FoV rows after the first solve; the rows are added back
             # once a duration certifies (they change the plan little and cost 2-3 QPs each).
-            first = stage is None and factor == 1.0
+            first = stage is stages[0] and factor == 1.0
             if not first and search_cfg is None:
                 search_cfg = stage_cfg if not stage_cfg.fov.enabled else _without_fov(stage_cfg)
             attempt_cfg = stage_cfg if first or search_cfg is None else search_cfg
@@ -418,6 +430,7 @@ def plan_detailed(
             cut_short = cut_short or attempt.out_of_time
             log.extend(attempt.log)
             attempt.relaxations = tuple(relaxed)
+            attempt.waypoint = stage is not _WITHOUT_WAYPOINT and flip_time(target, stage_cfg, float(T.cumsum()[-1])) is not None
             attempts += 1
             build += attempt.build
             solve += attempt.solve
@@ -448,7 +461,7 @@ def plan_detailed(
                 elif attempt_cfg is not stage_cfg:
                     with_fov, fov_report = _with_fov(state, target, stage_cfg, T, log, previous, initvals, attempt,
                                                      report, ws_rows, deadline_at)
-                    with_fov.relaxations = attempt.relaxations
+                    with_fov.relaxations, with_fov.waypoint = attempt.relaxations, attempt.waypoint
                     attempts += 1
                     build, solve, certify = (build + with_fov.build, solve + with_fov.solve,
                                              certify + with_fov.certify + fov_report[1])

@@ -73,6 +73,10 @@ class Provenance:
         The actuator bounds / workspace limits were proven over the whole trajectory.
     fov_dropped:
         The field-of-view rows were dropped (16), or, with a deadline, for lack of time.
+    overhang_waypoint:
+        Planned through :class:`~avp.config.OverhangFlip`'s horizontal-thrust waypoint (a
+        planner heuristic, not a relaxation). A replan of a committed plan without it is
+        planned without it (:func:`avp.plan_detailed`, ``previous``).
     """
 
     status: str
@@ -80,6 +84,7 @@ class Provenance:
     bounds_certified: bool = False
     workspace_certified: bool = False
     fov_dropped: bool = False
+    overhang_waypoint: bool = False
 
     @property
     def relaxed(self) -> bool:

@@ -157,3 +157,58 @@ def test_band_relaxations_are_not_tried_without_a_band():
     res = avp.plan_detailed(avp.State.hover([0.0, 0.0, 2.0]), target, cfg)
     assert any(line.startswith("relaxing") for line in res.log)  # the relaxations were reached
     assert not {avp.Relaxation.CONE_BAND, avp.Relaxation.NO_BAND} & set(res.relaxations)
+
+
+def _replan_state(traj: avp.Trajectory, fraction: float) -> avp.State:
+    """The flat state of ``traj`` a ``fraction`` of the way along it (a replan's start)."""
+    t = traj.t0 + fraction * traj.duration
+    d = traj.derivatives(np.array([t]), [0, 1, 2, 3])[:, 0, :]
+    return avp.State(position=d[0, :3], velocity=d[1, :3], acceleration=d[2, :3], jerk=d[3, :3],
+                     yaw=float(d[0, 3]), yaw_rate=float(d[1, 3]), time=t)
+
+
+def test_provenance_says_whether_the_plan_went_through_the_waypoint() -> None:
+    """A ceiling plans through the waypoint; a wall has none; the barely overhanging estimate is
+    solved without it; the flag is what the plan's thrust shows: horizontal at ``t_w`` or not."""
+    state, target = ceiling_case(150.0)
+    through = avp.plan_detailed(state, target, avp.PlannerConfig())
+    assert through.ok and through.trajectory.provenance.overhang_waypoint
+    wall = avp.plan_detailed(avp.State.hover([0.0, 0.0, 1.5]), avp.PerchTarget.from_incline([3.0, 0.0, 1.5], math.pi / 2))
+    assert wall.ok and not wall.trajectory.provenance.overhang_waypoint
+    noisy = avp.plan_detailed(avp.State(position=[0.0, 0.0, 1.5]),
+                              avp.PerchTarget(point=[7.9238, -0.0769, 1.7418], R_WS=NOISY_WALL_R_WS))
+    assert noisy.ok and not noisy.trajectory.provenance.overhang_waypoint
+    cfg = avp.PlannerConfig()
+    for res, tgt in ((through, target), (noisy, avp.PerchTarget(point=[7.9238, -0.0769, 1.7418], R_WS=NOISY_WALL_R_WS))):
+        traj = res.trajectory
+        t_w = flip_time(tgt, cfg, traj.duration)
+        assert t_w is not None
+        f_z = float(traj(traj.t0 + t_w, 2)[2] + cfg.g)
+        assert (abs(f_z) < 1e-6) == traj.provenance.overhang_waypoint
+
+
+def test_a_replan_of_a_plan_without_the_waypoint_does_not_search_with_it() -> None:
+    """A wall whose estimate turns into an overhang mid-flight (past ``min_incline``): the
+    committed plan has no waypoint, so the replan starts without it, one stage instead of a
+    failed search with the waypoint first; from a committed plan through the waypoint, or with
+    no provenance (a plan from elsewhere), the waypoint is tried first as before."""
+    overhang = avp.PerchTarget(point=[7.9238, -0.0769, 1.7418], R_WS=NOISY_WALL_R_WS)
+    wall = avp.PerchTarget.from_incline([7.9238, -0.0769, 1.7418], math.pi / 2)
+    committed = avp.plan(avp.State(position=[0.0, 0.0, 1.5]), wall)
+    assert not committed.provenance.overhang_waypoint
+    start = _replan_state(committed, 0.2)
+    replan = avp.plan_detailed(start, overhang, previous=committed)
+    assert replan.status is avp.PlanStatus.SOLVED and not replan.trajectory.provenance.overhang_waypoint
+    assert any("committed plan has no horizontal-thrust waypoint" in line for line in replan.log)
+    assert not any("searching again without" in line for line in replan.log)
+    assert replan.duration_scale_steps == 0  # one attempt
+    foreign = avp.Trajectory(committed.coefficients, committed.knots)  # no provenance
+    again = avp.plan_detailed(start, overhang, previous=foreign)
+    assert any("searching again without" in line for line in again.log)
+    assert again.duration_scale_steps > replan.duration_scale_steps
+    state, ceiling = ceiling_case(150.0)
+    through = avp.plan(state, ceiling)
+    assert through.provenance.overhang_waypoint
+    onward = avp.plan_detailed(_replan_state(through, 0.2), ceiling, previous=through)
+    assert onward.ok and onward.trajectory.provenance.overhang_waypoint
+    assert not any("committed plan has no" in line for line in onward.log)
