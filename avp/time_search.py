@@ -25,9 +25,11 @@ import math
 import numpy as np
 
 from . import _avp_rust
+from . import _validate as v
 from ._typing import Array
 from .bounds import drag_thrust_spline
 from .config import BoundsPolicy, TimeSearch, VehicleLimits
+from .errors import ConfigError
 from .trajectory import Trajectory
 
 __all__ = ["MARGIN", "STALL", "DurationSearch", "predicted_factor", "scaled_excess"]
@@ -48,6 +50,9 @@ of :class:`DurationSearch`)."""
 
 SAMPLES_PER_SEGMENT = 16
 """Samples per segment of the plan whose scaling is predicted (midpoints)."""
+
+MAX_SAMPLES_PER_SEGMENT = 100_000
+"""The most samples per segment :func:`scaled_excess` takes (the kernel's own bound)."""
 
 _ONE = np.ones(1)
 
@@ -76,8 +81,14 @@ def scaled_excess(traj: Trajectory, limits: VehicleLimits, g: float, scales: Arr
     sample within). A positive excess at scale 1 is a proven violation of the certified
     polynomial at a sample (the tilt and body rates as the certificate bounds them; with rotor
     drag on the drag thrust, whose time scaling the other scales take as drag-free: a
-    prediction, not a proof)."""
-    return _excess(traj, limits, g, np.asarray(scales, dtype=float).reshape(-1), per_segment)
+    prediction, not a proof). Bad arguments raise :class:`~avp.errors.ConfigError` naming them
+    (``per_segment`` an integer in ``[1, MAX_SAMPLES_PER_SEGMENT]``, ``scales`` finite and
+    positive, ``g`` finite)."""
+    per_segment = v.integer("per_segment", per_segment, 1, MAX_SAMPLES_PER_SEGMENT)
+    s = v.float_array("scales", scales, "time-scale factors").reshape(-1)
+    if not (np.isfinite(s).all() and (s > 0.0).all()):
+        raise ConfigError("scales", "time-scale factors must be finite and positive")
+    return _excess(traj, limits, v.finite_float("g", g), s, per_segment)
 
 
 def predicted_factor(traj: Trajectory, limits: VehicleLimits, g: float, lo: float, hi: float) -> float | None:

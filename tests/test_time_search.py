@@ -201,3 +201,22 @@ def test_the_kernel_names_a_bad_argument(kwargs, arg) -> None:
     with pytest.raises(_avp_rust.KernelError) as info:
         _avp_rust.scaled_excess(**call)
     assert info.value.arg == arg
+
+
+@pytest.mark.parametrize(("kwargs", "field"), [
+    (dict(per_segment=0), "per_segment"),
+    (dict(per_segment=-3), "per_segment"),
+    (dict(per_segment=2.0), "per_segment"),
+    (dict(scales=np.array([1.0, 0.0])), "scales"),
+    (dict(scales=np.array([np.inf])), "scales"),
+    (dict(scales="fast"), "scales"),
+    (dict(g=float("nan")), "g"),
+])
+def test_scaled_excess_names_a_bad_argument(kwargs, field) -> None:
+    sc = standard(60, 3.5)
+    traj = avp.plan(sc.state, sc.target, avp.PlannerConfig(bounds=avp.BoundsPolicy(certify=False)))
+    call = dict(traj=traj, limits=LIMITS, g=traj.g, scales=np.ones(1), per_segment=4)
+    call.update(kwargs)
+    with pytest.raises(avp.ConfigError) as info:
+        scaled_excess(**call)
+    assert info.value.field == field

@@ -61,6 +61,9 @@ impl ScalingLimits {
 const BODY_RATE_A: f64 = 3.0;
 const BODY_RATE_B: f64 = 4.0;
 
+/// The most samples per segment (`avp.time_search.MAX_SAMPLES_PER_SEGMENT`).
+pub const MAX_PER_SEGMENT: usize = 100_000;
+
 /// Smallest squared thrust the ratios divide by.
 const MIN_THRUST_SQUARED: f64 = 1e-24;
 
@@ -113,10 +116,10 @@ pub fn scaled_excess(
     g: f64,
     limits: &ScalingLimits,
 ) -> Result<Vec<f64>> {
-    if per_segment == 0 {
+    if per_segment == 0 || per_segment > MAX_PER_SEGMENT {
         return Err(Error::Invalid {
             arg: "per_segment",
-            detail: "must be at least 1".into(),
+            detail: format!("must be in [1, {MAX_PER_SEGMENT}], got {per_segment}"),
         });
     }
     check_finite("s2", s2)?;
@@ -235,6 +238,7 @@ mod tests {
                 .arg()
         };
         assert_eq!(err(0, &[1.0], LIMITS), "per_segment");
+        assert_eq!(err(MAX_PER_SEGMENT + 1, &[1.0], LIMITS), "per_segment");
         assert_eq!(err(2, &[0.0], LIMITS), "s2");
         assert_eq!(err(2, &[f64::NAN], LIMITS), "s2");
         let no_thrust = ScalingLimits {
