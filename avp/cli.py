@@ -326,6 +326,8 @@ def _check_demo_flags(args: argparse.Namespace) -> None:
     :func:`_export_format`, :func:`_check_outputs`); fill in :data:`DEMO_DEFAULTS` for a pad perch."""
     if args.export_rate is not None and args.export is None:
         raise ConfigError("--export-rate", "samples the --export file: give --export FILE too, or drop it")
+    if args.export_rate is not None and not (math.isfinite(args.export_rate) and args.export_rate > 0):
+        raise ConfigError("--export-rate", f"must be a positive sample rate in Hz, got {args.export_rate:g}")
     if args.export is not None:
         _export_format(args.export)
         _check_outputs(args, ("export",))

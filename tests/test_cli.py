@@ -571,6 +571,21 @@ def test_an_export_rate_error_names_the_flag(tmp_path, capsys) -> None:
     assert json.loads(capsys.readouterr().out)["field"] == "--export-rate" and not out.exists()
 
 
+@pytest.mark.parametrize("rate", ["0", "-5", "nan", "inf"])
+def test_a_meaningless_export_rate_is_refused_before_planning(tmp_path, capsys, monkeypatch, rate) -> None:
+    """The rate was checked only when the plan was written, after planning; a rate that is no
+    positive number is a usage error on its flag before the planner runs."""
+    import avp.planner as planner
+
+    def never(*args, **kwargs):
+        raise AssertionError("planned before the flags were checked")
+
+    monkeypatch.setattr(planner, "plan_detailed", never)
+    out = tmp_path / "x.json"
+    assert main(["demo", "--no-plot", "--json", "--export", str(out), "--export-rate", rate]) == EXIT_USAGE
+    assert json.loads(capsys.readouterr().out)["field"] == "--export-rate" and not out.exists()
+
+
 @pytest.mark.parametrize("command,flag", [("simulate", "--gif"), ("simulate", "--output-dir"),
                                           ("campaign", "--results"), ("campaign", "--summary-plot")])
 def test_an_unusable_output_path_stops_before_any_trial(tmp_path, capsys, monkeypatch, command, flag) -> None:
