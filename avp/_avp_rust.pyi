@@ -279,6 +279,8 @@ def scaled_excess(
     """Worst relative excess ``max(value / limit) - 1`` over the thrust range (15), thrust rate
     (21), tilt rate (22) and body rate (24) of the spline (``(segments, 4, coeffs)``: x, y, z,
     yaw) time-scaled by each ``s`` with ``s2 = s^-2``, on ``per_segment`` midpoint samples per
-    segment; shape ``(len(s2),)``. The rate limits may be ``inf`` (not checked), ``accel_min``
-    ``0``. Raises ``KernelError`` on bad shapes, non-finite or non-positive ``s2``,
-    ``per_segment < 1`` or meaningless limits."""
+    segment; shape ``(len(s2),)``, NaN where a sample's arithmetic gives NaN (as NumPy's). The
+    rate limits may be ``inf`` (not checked), ``accel_min`` ``0``. Raises ``KernelError``
+    naming the argument on bad shapes, non-finite or non-positive ``s2``, a non-finite ``g``,
+    ``per_segment`` outside ``[1, 100000]`` or a meaningless limit (``accel_max``,
+    ``accel_min``, ``mass``, ``thrust_rate_max``, ``tilt_rate_max``, ``body_rate_max``)."""

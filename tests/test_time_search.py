@@ -124,11 +124,16 @@ def test_the_documented_policy_keeps_given_durations(search) -> None:
 def _numpy_excess(traj: avp.Trajectory, limits: avp.VehicleLimits, g: float, scales: np.ndarray,
                   per_segment: int) -> np.ndarray:
     """The scaling law in NumPy, as ``avp.time_search`` computed it before its Rust kernel:
-    samples from ``Trajectory.derivatives``, then the formula of the module's docs."""
-    k = traj.knots
+    the spline evaluator at midpoints of the plan's relative knots (on the drag thrust's spline
+    with rotor drag), then the formula of the module's docs."""
+    from avp import _avp_rust
+    from avp.bounds import drag_thrust_spline
+
+    k = traj.knots_rel
     u = (np.arange(per_segment) + 0.5) / per_segment
     t = (k[:-1, None] + u[None, :] * (k[1:] - k[:-1])[:, None]).reshape(-1)
-    d = traj.derivatives(t, [1, 2, 3])
+    coeffs = drag_thrust_spline(traj.coefficients, limits.rotor_drag) if limits.rotor_drag else traj.coefficients
+    d = _avp_rust.eval_spline(coeffs, k, t, [1, 2, 3]).reshape(3, t.size, 4)
     a, j, yaw_rate = d[1, :, :3], d[2, :, :3], d[0, :, 3]
     a2, a_z, j2 = (a * a).sum(axis=1), a[:, 2].copy(), (j * j).sum(axis=1)
     s2 = scales[:, None] ** -2.0
@@ -151,21 +156,26 @@ def _numpy_excess(traj: avp.Trajectory, limits: avp.VehicleLimits, g: float, sca
 @settings(max_examples=200, deadline=None)
 @given(st.integers(1, 4), st.integers(4, 10), st.integers(0, 2**32 - 1), st.integers(1, 20),
        st.sampled_from([math.inf, 40.0]), st.sampled_from([math.inf, 3.0]), st.sampled_from([math.inf, 6.0]),
-       st.floats(0.0, 4.0))
+       st.floats(0.0, 4.0), st.sampled_from([0.0, 0.35]), st.sampled_from([9.81, 3.71, 0.0]),
+       st.sampled_from([(-3.0, 2.0), (150.0, 160.0)]))
 def test_the_kernel_computes_numpys_bits(segments, coeffs, seed, per_segment, thrust_rate, tilt_rate,
-                                         body_rate, thrust_min) -> None:
-    """The Rust kernel against the NumPy formula, value for value (``==``): the time search
-    takes the same steps it took when the formula was NumPy, on any spline and any limits."""
+                                         body_rate, thrust_min, drag, g, magnitude) -> None:
+    """The Rust kernel against the NumPy formula, value for value (``==``, NaN equal to NaN):
+    the time search takes the same steps it took when the formula was NumPy, on any spline
+    (starting at any time; absurd coefficients whose squares overflow included), limits,
+    rotor drag and gravity."""
     rng = np.random.default_rng(seed)
-    c = rng.normal(size=(segments, 4, coeffs)) * 10.0 ** rng.uniform(-3.0, 2.0, size=(1, 1, coeffs))
-    knots = np.concatenate([[0.0], np.cumsum(rng.uniform(0.05, 3.0, size=segments))])
-    traj = avp.Trajectory(c, knots)
+    c = rng.normal(size=(segments, 4, coeffs)) * 10.0 ** rng.uniform(*magnitude, size=(1, 1, coeffs))
+    knots = float(rng.uniform(-5.0, 50.0)) + np.concatenate([[0.0], np.cumsum(rng.uniform(0.05, 3.0, size=segments))])
+    traj = avp.Trajectory(c, knots, g=g) if g else avp.Trajectory(c, knots)
     limits = avp.VehicleLimits(mass=float(rng.uniform(0.2, 4.0)), thrust_min=thrust_min, thrust_max=30.0,
-                               thrust_rate_max=thrust_rate, tilt_rate_max=tilt_rate, body_rate_max=body_rate)
+                               thrust_rate_max=thrust_rate, tilt_rate_max=tilt_rate, body_rate_max=body_rate,
+                               rotor_drag=drag)
     scales = np.concatenate([[1.0], rng.uniform(0.25, 4.0, size=5)])
-    expected = _numpy_excess(traj, limits, traj.g, scales, per_segment)
-    got = scaled_excess(traj, limits, traj.g, scales, per_segment=per_segment)
-    assert np.array_equal(got, expected), np.max(np.abs(got - expected))
+    with np.errstate(over="ignore", invalid="ignore"):
+        expected = _numpy_excess(traj, limits, g, scales, per_segment)
+    got = scaled_excess(traj, limits, g, scales, per_segment=per_segment)
+    assert np.array_equal(got, expected, equal_nan=True), (got, expected)
 
 
 def test_the_tilt_rate_term_is_the_jerk_over_the_thrust() -> None:
@@ -186,8 +196,13 @@ def test_the_tilt_rate_term_is_the_jerk_over_the_thrust() -> None:
     (dict(per_segment=0), "per_segment"),
     (dict(s2=np.array([0.0])), "s2"),
     (dict(s2=np.array([np.nan])), "s2"),
-    (dict(accel_max=math.inf), "limits"),
-    (dict(mass=0.0), "limits"),
+    (dict(per_segment=-1), "per_segment"),
+    (dict(per_segment=100_001), "per_segment"),
+    (dict(g=math.nan), "g"),
+    (dict(accel_max=math.inf), "accel_max"),
+    (dict(accel_min=30.0), "accel_min"),
+    (dict(mass=0.0), "mass"),
+    (dict(tilt_rate_max=-1.0), "tilt_rate_max"),
     (dict(coeffs=np.zeros((1, 3, 4))), "coeffs"),
     (dict(knots=np.array([0.0, 0.0])), "knots"),
 ])
@@ -209,6 +224,8 @@ def test_the_kernel_names_a_bad_argument(kwargs, arg) -> None:
     (dict(per_segment=2.0), "per_segment"),
     (dict(scales=np.array([1.0, 0.0])), "scales"),
     (dict(scales=np.array([np.inf])), "scales"),
+    (dict(scales=np.array([1e200])), "scales"),  # s^-2 underflows to 0
+    (dict(scales=np.array([1e-160])), "scales"),  # s^-2 overflows
     (dict(scales="fast"), "scales"),
     (dict(g=float("nan")), "g"),
 ])

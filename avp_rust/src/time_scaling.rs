@@ -9,7 +9,8 @@
 //! The arithmetic is NumPy's, operation by operation (`avp.time_search` computed it with NumPy
 //! before this kernel): `|a/s^2 + g e3|^2 = (|a|^2 s2) s2 + (2 g a_z) s2 + g^2` with
 //! `s2 = s^-2` given by the caller, `|j/s^3|^2 = |j|^2 ((s2 s2) s2)`, the squared norms summed
-//! left to right. The same inputs give the same bits, so the time search takes the same steps.
+//! left to right, NaN propagated as NumPy's `maximum` and `max` propagate it. The same inputs
+//! give the same bits, so the time search takes the same steps.
 use crate::error::{check_finite, Error, Result};
 use crate::spline::{evaluate, SplineView};
 
@@ -32,28 +33,55 @@ pub struct ScalingLimits {
 
 impl ScalingLimits {
     fn check(&self) -> Result<()> {
-        let bad = |detail: &str| {
+        let bad = |arg: &'static str, detail: &str| {
             Err(Error::Invalid {
-                arg: "limits",
+                arg,
                 detail: detail.into(),
             })
         };
         if !(self.accel_max.is_finite() && self.accel_max > 0.0) {
-            return bad("accel_max must be positive and finite");
+            return bad("accel_max", "must be positive and finite (m/s^2)");
         }
         if !(self.accel_min.is_finite() && self.accel_min >= 0.0 && self.accel_min < self.accel_max)
         {
-            return bad("accel_min must be finite, at least 0 and below accel_max");
+            return bad(
+                "accel_min",
+                "must be finite, at least 0 and below accel_max (m/s^2)",
+            );
         }
         if !(self.mass.is_finite() && self.mass > 0.0) {
-            return bad("mass must be positive and finite");
+            return bad("mass", "must be positive and finite (kg)");
         }
-        for rate in [self.thrust_rate_max, self.tilt_rate_max, self.body_rate_max] {
+        for (arg, rate) in [
+            ("thrust_rate_max", self.thrust_rate_max),
+            ("tilt_rate_max", self.tilt_rate_max),
+            ("body_rate_max", self.body_rate_max),
+        ] {
             if rate.is_nan() || rate <= 0.0 {
-                return bad("the rate limits must be positive (inf: not checked)");
+                return bad(arg, "must be positive (inf: not checked)");
             }
         }
         Ok(())
+    }
+}
+
+/// NumPy's `maximum`: NaN when either is NaN (`f64::max` would drop the NaN).
+#[inline]
+fn nan_max(a: f64, b: f64) -> f64 {
+    if a.is_nan() || b.is_nan() {
+        f64::NAN
+    } else {
+        a.max(b)
+    }
+}
+
+/// NumPy's `minimum`: NaN when either is NaN.
+#[inline]
+fn nan_min(a: f64, b: f64) -> f64 {
+    if a.is_nan() || b.is_nan() {
+        f64::NAN
+    } else {
+        a.min(b)
     }
 }
 
@@ -146,30 +174,33 @@ pub fn scaled_excess(
             (f64::NEG_INFINITY, f64::NEG_INFINITY, f64::NEG_INFINITY);
         let s6 = s * s * s;
         for i in 0..smp.a2.len() {
-            let f2 = (smp.a2[i] * s * s + two_g * smp.a_z[i] * s + g2).max(MIN_THRUST_SQUARED);
-            f2_max = f2_max.max(f2);
-            f2_min = f2_min.min(f2);
+            let f2 = nan_max(
+                smp.a2[i] * s * s + two_g * smp.a_z[i] * s + g2,
+                MIN_THRUST_SQUARED,
+            );
+            f2_max = nan_max(f2_max, f2);
+            f2_min = nan_min(f2_min, f2);
             if rates {
                 let jj = smp.j2[i] * s6;
                 let tilt2 = jj / f2;
-                jj_max = jj_max.max(jj);
-                tilt2_max = tilt2_max.max(tilt2);
+                jj_max = nan_max(jj_max, jj);
+                tilt2_max = nan_max(tilt2_max, tilt2);
                 let y = smp.yaw_rate[i];
-                w2_max = w2_max.max(BODY_RATE_A * tilt2 + BODY_RATE_B * (y * y) * s);
+                w2_max = nan_max(w2_max, BODY_RATE_A * tilt2 + BODY_RATE_B * (y * y) * s);
             }
         }
         let mut worst = f2_max.sqrt() / limits.accel_max;
         if limits.accel_min > 0.0 {
-            worst = worst.max(limits.accel_min / f2_min.sqrt());
+            worst = nan_max(worst, limits.accel_min / f2_min.sqrt());
         }
         if limits.thrust_rate_max.is_finite() {
-            worst = worst.max(jj_max.sqrt() * limits.mass / limits.thrust_rate_max);
+            worst = nan_max(worst, jj_max.sqrt() * limits.mass / limits.thrust_rate_max);
         }
         if limits.tilt_rate_max.is_finite() {
-            worst = worst.max(tilt2_max.sqrt() / limits.tilt_rate_max);
+            worst = nan_max(worst, tilt2_max.sqrt() / limits.tilt_rate_max);
         }
         if limits.body_rate_max.is_finite() {
-            worst = worst.max(w2_max.sqrt() / limits.body_rate_max);
+            worst = nan_max(worst, w2_max.sqrt() / limits.body_rate_max);
         }
         out.push(worst - 1.0);
     }
@@ -229,6 +260,21 @@ mod tests {
     }
 
     #[test]
+    fn a_nan_sample_makes_the_excess_nan_as_in_numpy() {
+        // a_z = -1e307 and |a|^2 = inf: |f|^2 = inf - inf = NaN at every scale
+        let mut c = vec![0.0; 4 * 3];
+        c[8] = -0.5e307; // z = -0.5e307 t^2 (axis 2, coefficient 2): a_z = -1e307
+        let k = vec![0.0, 1.0];
+        let view = SplineView::new(&c, (1, 4, 3), &k).unwrap();
+        let limits = ScalingLimits {
+            accel_min: 0.0,
+            ..LIMITS
+        };
+        let out = scaled_excess(&view, 2, &[1.0], 9.81, &limits).unwrap();
+        assert!(out[0].is_nan(), "{out:?}");
+    }
+
+    #[test]
     fn bad_arguments_are_named() {
         let (c, k) = cubic();
         let view = SplineView::new(&c, (1, 4, 4), &k).unwrap();
@@ -245,7 +291,12 @@ mod tests {
             accel_max: f64::INFINITY,
             ..LIMITS
         };
-        assert_eq!(err(2, &[1.0], no_thrust), "limits");
+        assert_eq!(err(2, &[1.0], no_thrust), "accel_max");
+        let no_tilt = ScalingLimits {
+            tilt_rate_max: 0.0,
+            ..LIMITS
+        };
+        assert_eq!(err(2, &[1.0], no_tilt), "tilt_rate_max");
         let three = vec![0.0; 3 * 4];
         let view3 = SplineView::new(&three, (1, 3, 4), &k).unwrap();
         let e = scaled_excess(&view3, 2, &[1.0], 9.81, &LIMITS).unwrap_err();

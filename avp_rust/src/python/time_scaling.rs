@@ -3,7 +3,7 @@
 use numpy::{IntoPyArray, PyArray1, PyReadonlyArray1, PyReadonlyArray3};
 use pyo3::prelude::*;
 
-use super::common::{contiguous, spline_view, to_py_err};
+use super::common::{contiguous, kernel_err, spline_view, to_py_err};
 use crate::error::guarded;
 use crate::time_scaling::{self, ScalingLimits};
 
@@ -17,7 +17,7 @@ fn scaled_excess_py<'py>(
     py: Python<'py>,
     coeffs: PyReadonlyArray3<'py, f64>,
     knots: PyReadonlyArray1<'py, f64>,
-    per_segment: usize,
+    per_segment: i64,
     s2: PyReadonlyArray1<'py, f64>,
     g: f64,
     accel_max: f64,
@@ -27,6 +27,12 @@ fn scaled_excess_py<'py>(
     tilt_rate_max: f64,
     body_rate_max: f64,
 ) -> PyResult<Bound<'py, PyArray1<f64>>> {
+    let per_segment = usize::try_from(per_segment).map_err(|_| {
+        kernel_err(
+            "per_segment",
+            format!("must be at least 1, got {per_segment}"),
+        )
+    })?;
     let view = spline_view(&coeffs, &knots)?;
     let s2 = contiguous("s2", &s2)?;
     let limits = ScalingLimits {
