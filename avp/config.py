@@ -256,8 +256,8 @@ class OverhangFlip:
         before relaxing anything (noisy wall estimates that tip just
         past ``min_incline`` otherwise planned only with relaxations: 2 of 20 first plans at 7.5 m
         in the realistic simulator). A replan of a committed plan made without it (its
-        ``provenance.overhang_waypoint`` is false: the pad was no overhang then, or the waypoint
-        was dropped) starts without it.
+        ``provenance.overhang_waypoint`` is ``False``: the pad was no overhang then, or the
+        waypoint was dropped) searches without it first, then with it.
     min_incline:
         Pads steeper than this (rad) count as overhangs.
     cone_band:

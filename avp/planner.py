@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import functools
 import math
 import time
 from collections.abc import Callable
@@ -148,6 +149,13 @@ class PlanResult:
         return f"PlanResult({', '.join(parts)})"
 
 
+@functools.cache
+def _default_config() -> PlannerConfig:
+    """The paper-default configuration of a call without one: one frozen object, so the stage
+    configurations derived from it are cached across calls (:func:`_derived`)."""
+    return PlannerConfig()
+
+
 def _check_inputs(state: Any, target: Any, config: Any) -> PlannerConfig:
     if not isinstance(state, State):
         raise ConfigError("state", f"expected avp.State, got {type(state).__name__}")
@@ -156,7 +164,7 @@ def _check_inputs(state: Any, target: Any, config: Any) -> PlannerConfig:
     if isinstance(target, MovingTarget) and not target.is_static:
         raise ConfigError("target", "is a moving pad: plan with avp.plan_moving (or pass target.static())")
     if config is None:
-        config = PlannerConfig()
+        config = _default_config()
     if not isinstance(config, PlannerConfig):
         raise ConfigError("config", f"expected avp.PlannerConfig, got {type(config).__name__}")
     distance = float(np.linalg.norm(target.point - state.position))
@@ -277,9 +285,11 @@ def plan_detailed(
         takes one SQP step on the new plan's FoV-free solution and keeps it without a visibility
         score (:mod:`avp.attempt`); the plan's coefficients are not used. On an overhang, a
         committed plan planned without :class:`~avp.config.OverhangFlip`'s waypoint (its
-        ``provenance.overhang_waypoint`` is false) is replanned without it: a wall estimate
-        that tips past ``flip.min_incline`` mid-flight does not start a search with a
-        waypoint the committed plan never had.
+        ``provenance.overhang_waypoint`` is ``False``) is replanned without it first, then
+        with it, before any relaxation: a wall estimate that tips past ``flip.min_incline``
+        mid-flight does not start with a search through a waypoint the committed plan never
+        had. A plan found without it records ``False`` again, so this holds for the rest of
+        a flight whose first plan had no waypoint, for as long as such plans certify.
     warm_start:
         A plan whose shape seeds the back-end's initial guess (ProxQP, OSQP; DAQP ignores it).
     deadline:
@@ -369,12 +379,12 @@ def plan_detailed(
     # heuristic, not a user constraint: a plan found without it is still SOLVED); then the
     # relaxations, cumulatively on the configuration as asked.
     # A replan of a committed plan planned without the waypoint (its pad was no overhang, or the
-    # waypoint was dropped) starts without it: the waypoint stage would repeat that search.
+    # waypoint was dropped) searches without it first, then with it; both before any relaxation.
     stages: list[Relaxation | str | None] = [None]
     if cfg.bounds.certify and is_overhang(target, cfg):
         prov = previous.provenance if previous is not None else None
-        if prov is not None and not prov.overhang_waypoint:
-            stages = [_WITHOUT_WAYPOINT]
+        if prov is not None and prov.overhang_waypoint is False:
+            stages = [_WITHOUT_WAYPOINT, None]
         else:
             stages.append(_WITHOUT_WAYPOINT)
     if cfg.bounds.certify:
@@ -395,6 +405,10 @@ def plan_detailed(
             log.append(("overhang: searching again without the horizontal-thrust waypoint" if stage is not stages[0]
                         else "overhang: the committed plan has no horizontal-thrust waypoint: replanning without it")
                        + " (a planner heuristic; nothing the request asked is relaxed)")
+        elif stage is None and stage is not stages[0]:
+            stage_cfg = cfg
+            log.append("overhang: searching again with the horizontal-thrust waypoint (nothing the request "
+                       "asked is relaxed)")
         elif isinstance(stage, Relaxation):
             stage_cfg = _relax(cfg if not relaxed else stage_cfg, stage, target)
             relaxed.append(stage)

@@ -74,9 +74,10 @@ class Provenance:
     fov_dropped:
         The field-of-view rows were dropped (16), or, with a deadline, for lack of time.
     overhang_waypoint:
-        Planned through :class:`~avp.config.OverhangFlip`'s horizontal-thrust waypoint (a
-        planner heuristic, not a relaxation). A replan of a committed plan without it is
-        planned without it (:func:`avp.plan_detailed`, ``previous``).
+        Whether :func:`avp.plan_detailed` planned it through :class:`~avp.config.OverhangFlip`'s
+        horizontal-thrust waypoint (a planner heuristic, not a relaxation); ``None``: not known
+        (other planners, exports written before the field). A replan of a committed plan with
+        ``False`` searches without the waypoint first (:func:`avp.plan_detailed`, ``previous``).
     """
 
     status: str
@@ -84,7 +85,7 @@ class Provenance:
     bounds_certified: bool = False
     workspace_certified: bool = False
     fov_dropped: bool = False
-    overhang_waypoint: bool = False
+    overhang_waypoint: bool | None = None
 
     @property
     def relaxed(self) -> bool:

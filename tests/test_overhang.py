@@ -3,6 +3,8 @@ through the horizontal while it stays above thrust_min, every bound certified.""
 
 from __future__ import annotations
 
+import dataclasses
+import json
 import math
 
 import numpy as np
@@ -172,12 +174,12 @@ def test_provenance_says_whether_the_plan_went_through_the_waypoint() -> None:
     solved without it; the flag is what the plan's thrust shows: horizontal at ``t_w`` or not."""
     state, target = ceiling_case(150.0)
     through = avp.plan_detailed(state, target, avp.PlannerConfig())
-    assert through.ok and through.trajectory.provenance.overhang_waypoint
+    assert through.ok and through.trajectory.provenance.overhang_waypoint is True
     wall = avp.plan_detailed(avp.State.hover([0.0, 0.0, 1.5]), avp.PerchTarget.from_incline([3.0, 0.0, 1.5], math.pi / 2))
-    assert wall.ok and not wall.trajectory.provenance.overhang_waypoint
+    assert wall.ok and wall.trajectory.provenance.overhang_waypoint is False
     noisy = avp.plan_detailed(avp.State(position=[0.0, 0.0, 1.5]),
                               avp.PerchTarget(point=[7.9238, -0.0769, 1.7418], R_WS=NOISY_WALL_R_WS))
-    assert noisy.ok and not noisy.trajectory.provenance.overhang_waypoint
+    assert noisy.ok and noisy.trajectory.provenance.overhang_waypoint is False
     cfg = avp.PlannerConfig()
     for res, tgt in ((through, target), (noisy, avp.PerchTarget(point=[7.9238, -0.0769, 1.7418], R_WS=NOISY_WALL_R_WS))):
         traj = res.trajectory
@@ -195,7 +197,7 @@ def test_a_replan_of_a_plan_without_the_waypoint_does_not_search_with_it() -> No
     overhang = avp.PerchTarget(point=[7.9238, -0.0769, 1.7418], R_WS=NOISY_WALL_R_WS)
     wall = avp.PerchTarget.from_incline([7.9238, -0.0769, 1.7418], math.pi / 2)
     committed = avp.plan(avp.State(position=[0.0, 0.0, 1.5]), wall)
-    assert not committed.provenance.overhang_waypoint
+    assert committed.provenance.overhang_waypoint is False
     start = _replan_state(committed, 0.2)
     replan = avp.plan_detailed(start, overhang, previous=committed)
     assert replan.status is avp.PlanStatus.SOLVED and not replan.trajectory.provenance.overhang_waypoint
@@ -212,3 +214,36 @@ def test_a_replan_of_a_plan_without_the_waypoint_does_not_search_with_it() -> No
     onward = avp.plan_detailed(_replan_state(through, 0.2), ceiling, previous=through)
     assert onward.ok and onward.trajectory.provenance.overhang_waypoint
     assert not any("committed plan has no" in line for line in onward.log)
+
+
+def test_a_replan_without_the_waypoint_still_tries_it_before_relaxing() -> None:
+    """A committed wall plan and a pad re-estimated as a 150 deg overhang: without the waypoint
+    no duration certifies, so the search goes on with it, and the replan is SOLVED with nothing
+    relaxed, as a replan from a plan without provenance is (found by a review: the stage with
+    the waypoint had been left out, and the replan relaxed the request)."""
+    wall = avp.PerchTarget.from_incline([6.0, 0.0, 2.0], math.pi / 2)
+    committed = avp.plan(avp.State.hover([0.0, 0.0, 1.5]), wall)
+    start = _replan_state(committed, 0.15)
+    overhang = avp.PerchTarget.from_incline([6.0, 0.0, 2.0], math.radians(150))
+    replan = avp.plan_detailed(start, overhang, previous=committed)
+    assert replan.status is avp.PlanStatus.SOLVED and replan.relaxations == ()
+    assert replan.trajectory.provenance.overhang_waypoint is True
+    assert any("searching again with the horizontal-thrust waypoint" in line for line in replan.log)
+    foreign = avp.plan_detailed(start, overhang, previous=avp.Trajectory(committed.coefficients, committed.knots))
+    assert foreign.status is avp.PlanStatus.SOLVED and foreign.relaxations == ()
+
+
+def test_an_unknown_waypoint_provenance_tries_the_waypoint_first() -> None:
+    """``overhang_waypoint=None`` (other planners, exports written before the field) is not read
+    as "no waypoint": the replan starts with the waypoint, as without provenance."""
+    overhang = avp.PerchTarget(point=[7.9238, -0.0769, 1.7418], R_WS=NOISY_WALL_R_WS)
+    committed = avp.plan(avp.State(position=[0.0, 0.0, 1.5]),
+                         avp.PerchTarget.from_incline([7.9238, -0.0769, 1.7418], math.pi / 2))
+    unknown = avp.Trajectory(committed.coefficients, committed.knots)
+    unknown.provenance = dataclasses.replace(committed.provenance, overhang_waypoint=None)
+    replan = avp.plan_detailed(_replan_state(committed, 0.2), overhang, previous=unknown)
+    assert any("searching again without" in line for line in replan.log)
+    assert not any("committed plan has no" in line for line in replan.log)
+    data = json.loads(committed.to_json())  # an export written before the field reads back as unknown
+    assert data["provenance"].pop("overhang_waypoint") is False
+    assert avp.Trajectory.from_json(json.dumps(data)).provenance.overhang_waypoint is None
