@@ -282,5 +282,5 @@ def scaled_excess(
     segment; shape ``(len(s2),)``, NaN where a sample's arithmetic gives NaN (as NumPy's). The
     rate limits may be ``inf`` (not checked), ``accel_min`` ``0``. Raises ``KernelError``
     naming the argument on bad shapes, non-finite or non-positive ``s2``, a non-finite ``g``,
-    ``per_segment`` outside ``[1, 100000]`` or a meaningless limit (``accel_max``,
+    ``per_segment`` outside ``[1, 100000]`` (``OverflowError`` beyond 64 bits) or a meaningless limit (``accel_max``,
     ``accel_min``, ``mass``, ``thrust_rate_max``, ``tilt_rate_max``, ``body_rate_max``)."""

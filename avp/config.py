@@ -856,6 +856,8 @@ class PlannerConfig:
 
 @lru_cache(maxsize=1)
 def _default_planner_config() -> PlannerConfig:
+    """The paper-default ``PlannerConfig()``, one frozen object (what :meth:`PlannerConfig.changed`
+    compares with, and what a planning call without a configuration plans with)."""
     return PlannerConfig()
 
 

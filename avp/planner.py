@@ -3,7 +3,6 @@
 
 from __future__ import annotations
 
-import functools
 import math
 import time
 from collections.abc import Callable
@@ -17,7 +16,7 @@ from . import _validate as v
 from ._typing import Array
 from .attempt import Attempt, no_time_for, solve_at
 from .bounds import BoundReport, certify_trajectory
-from .config import PlannerConfig, PreImpactMode, Relaxation
+from .config import PlannerConfig, PreImpactMode, Relaxation, _default_planner_config
 from .errors import (
     BoundsNotCertifiedError,
     ConfigError,
@@ -149,13 +148,6 @@ class PlanResult:
         return f"PlanResult({', '.join(parts)})"
 
 
-@functools.cache
-def _default_config() -> PlannerConfig:
-    """The paper-default configuration of a call without one: one frozen object, so the stage
-    configurations derived from it are cached across calls (:func:`_derived`)."""
-    return PlannerConfig()
-
-
 def _check_inputs(state: Any, target: Any, config: Any) -> PlannerConfig:
     if not isinstance(state, State):
         raise ConfigError("state", f"expected avp.State, got {type(state).__name__}")
@@ -163,8 +155,8 @@ def _check_inputs(state: Any, target: Any, config: Any) -> PlannerConfig:
         raise ConfigError("target", f"expected avp.PerchTarget, got {type(target).__name__}")
     if isinstance(target, MovingTarget) and not target.is_static:
         raise ConfigError("target", "is a moving pad: plan with avp.plan_moving (or pass target.static())")
-    if config is None:
-        config = _default_config()
+    if config is None:  # one shared frozen default: its stage configurations are cached (_derived)
+        config = _default_planner_config()
     if not isinstance(config, PlannerConfig):
         raise ConfigError("config", f"expected avp.PlannerConfig, got {type(config).__name__}")
     distance = float(np.linalg.norm(target.point - state.position))
@@ -420,7 +412,7 @@ def plan_detailed(
             if out_of_time():
                 return stopped()
             T = T0 * factor
-            if factor != 1.0 or stage is not None:
+            if factor != 1.0 or stage is not stages[0]:
                 log.append(f"durations x{factor:.4g}: total {T.sum():.3f} s")
             initvals = None
             if warm_start is not None and cfg.solver in WARM_START_SOLVERS:

@@ -83,14 +83,15 @@ def scaled_excess(traj: Trajectory, limits: VehicleLimits, g: float, scales: Arr
     drag on the drag thrust, whose time scaling the other scales take as drag-free: a
     prediction, not a proof). Bad arguments raise :class:`~avp.errors.ConfigError` naming them
     (``per_segment`` an integer in ``[1, MAX_SAMPLES_PER_SEGMENT]``, ``scales`` finite and
-    positive with a finite, nonzero ``s^-2``, ``g`` finite)."""
+    positive with a finite, nonzero ``s^-2``, ``g`` finite). A sample whose arithmetic overflows
+    (absurd coefficients, extreme scales) gives NaN, as NumPy's arithmetic does."""
     per_segment = v.integer("per_segment", per_segment, 1, MAX_SAMPLES_PER_SEGMENT)
     s = v.float_array("scales", scales, "time-scale factors").reshape(-1)
     with np.errstate(over="ignore", divide="ignore", invalid="ignore"):
         s2 = s ** -2.0
     if not (np.isfinite(s).all() and (s > 0.0).all() and np.isfinite(s2).all() and (s2 > 0.0).all()):
-        raise ConfigError("scales", "time-scale factors must be finite and positive, with a finite, "
-                                    "nonzero s^-2 (between about 1e-154 and 1e154)")
+        raise ConfigError("scales", "time-scale factors must be finite and positive, with s^-2 a finite, "
+                                    "nonzero float (s between about 1e-154 and 4e161)")
     return _excess(traj, limits, v.finite_float("g", g), s, per_segment)
 
 
