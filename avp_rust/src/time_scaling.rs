@@ -75,16 +75,6 @@ fn nan_max(a: f64, b: f64) -> f64 {
     }
 }
 
-/// NumPy's `minimum`: NaN when either is NaN.
-#[inline]
-fn nan_min(a: f64, b: f64) -> f64 {
-    if a.is_nan() || b.is_nan() {
-        f64::NAN
-    } else {
-        a.min(b)
-    }
-}
-
 /// The roll-level constants of the body-rate bound (25): `|w|^2 <= A tilt^2 + B yaw_rate^2`.
 const BODY_RATE_A: f64 = 3.0;
 const BODY_RATE_B: f64 = 4.0;
@@ -172,22 +162,37 @@ pub fn scaled_excess(
         let (mut f2_max, mut f2_min) = (f64::NEG_INFINITY, f64::INFINITY);
         let (mut jj_max, mut tilt2_max, mut w2_max) =
             (f64::NEG_INFINITY, f64::NEG_INFINITY, f64::NEG_INFINITY);
+        // NaN anywhere in a quantity makes NumPy's maximum of it NaN: flagged here, the maxima
+        // themselves taken without NaN (a flagged quantity's maximum is not used)
+        let (mut nan_f2, mut nan_jj, mut nan_tilt2, mut nan_w2) = (false, false, false, false);
         let s6 = s * s * s;
         for i in 0..smp.a2.len() {
-            let f2 = nan_max(
-                smp.a2[i] * s * s + two_g * smp.a_z[i] * s + g2,
-                MIN_THRUST_SQUARED,
-            );
-            f2_max = nan_max(f2_max, f2);
-            f2_min = nan_min(f2_min, f2);
+            let raw = smp.a2[i] * s * s + two_g * smp.a_z[i] * s + g2;
+            nan_f2 |= raw.is_nan();
+            let f2 = raw.max(MIN_THRUST_SQUARED);
+            f2_max = f2_max.max(f2);
+            f2_min = f2_min.min(f2);
             if rates {
                 let jj = smp.j2[i] * s6;
                 let tilt2 = jj / f2;
-                jj_max = nan_max(jj_max, jj);
-                tilt2_max = nan_max(tilt2_max, tilt2);
                 let y = smp.yaw_rate[i];
-                w2_max = nan_max(w2_max, BODY_RATE_A * tilt2 + BODY_RATE_B * (y * y) * s);
+                let w2 = BODY_RATE_A * tilt2 + BODY_RATE_B * (y * y) * s;
+                nan_jj |= jj.is_nan();
+                nan_tilt2 |= tilt2.is_nan();
+                nan_w2 |= w2.is_nan();
+                jj_max = jj_max.max(jj);
+                tilt2_max = tilt2_max.max(tilt2);
+                w2_max = w2_max.max(w2);
             }
+        }
+        // a NaN f2 is NaN in NumPy's tilt and body rates too (here it was replaced by 1e-24)
+        let nan = nan_f2
+            || (limits.thrust_rate_max.is_finite() && nan_jj)
+            || (limits.tilt_rate_max.is_finite() && nan_tilt2)
+            || (limits.body_rate_max.is_finite() && nan_w2);
+        if nan {
+            out.push(f64::NAN);
+            continue;
         }
         let mut worst = f2_max.sqrt() / limits.accel_max;
         if limits.accel_min > 0.0 {
