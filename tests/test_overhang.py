@@ -247,3 +247,16 @@ def test_an_unknown_waypoint_provenance_tries_the_waypoint_first() -> None:
     data = json.loads(committed.to_json())  # an export written before the field reads back as unknown
     assert data["provenance"].pop("overhang_waypoint") is False
     assert avp.Trajectory.from_json(json.dumps(data)).provenance.overhang_waypoint is None
+
+
+def test_provenance_flags_are_truth_values() -> None:
+    """``overhang_waypoint`` decides how a replan starts: a 0 or a string would read as unknown,
+    so only True, False, None (and NumPy booleans, stored as Python's) are accepted."""
+    assert avp.Provenance("solved", overhang_waypoint=np.False_).overhang_waypoint is False
+    for bad in (0, 1, "no"):
+        with pytest.raises(avp.ConfigError) as info:
+            avp.Provenance("solved", overhang_waypoint=bad)
+        assert info.value.field == "provenance.overhang_waypoint"
+    with pytest.raises(avp.ConfigError) as info:
+        avp.Provenance("solved", bounds_certified="yes")
+    assert info.value.field == "provenance.bounds_certified"
