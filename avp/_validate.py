@@ -195,15 +195,18 @@ def positive_float(field: str, value: Any, *, allow_inf: bool = False) -> float:
 def flags(prefix: str, obj: Any) -> None:
     """Every field of the dataclass ``obj`` annotated ``bool`` holds ``True`` or ``False`` (a
     NumPy boolean is stored as Python's): a string such as ``"no"``, a number or ``None`` is
-    refused, since its truth value would silently switch the option. ``obj`` is frozen or not."""
+    refused, since its truth value would silently switch the option. A field annotated
+    ``bool | None`` may also hold ``None`` (not known). ``obj`` is frozen or not."""
     for f in dataclasses.fields(obj):
-        if f.type not in ("bool", bool):
+        optional = f.type == "bool | None"
+        if f.type not in ("bool", bool) and not optional:
             continue
         value = getattr(obj, f.name)
         if isinstance(value, np.bool_):
             object.__setattr__(obj, f.name, bool(value))
-        elif not isinstance(value, bool):
-            raise ConfigError(f"{prefix}.{f.name}", f"expected True or False, got {value!r} ({type(value).__name__})")
+        elif not isinstance(value, bool) and not (optional and value is None):
+            allowed = "True, False or None" if optional else "True or False"
+            raise ConfigError(f"{prefix}.{f.name}", f"expected {allowed}, got {value!r} ({type(value).__name__})")
 
 
 _EYE3 = np.eye(3)

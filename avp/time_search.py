@@ -57,18 +57,19 @@ MAX_SAMPLES_PER_SEGMENT = 100_000
 _ONE = np.ones(1)
 
 
-def _excess(traj: Trajectory, limits: VehicleLimits, g: float, scales: Array,
+def _excess(traj: Trajectory, limits: VehicleLimits, g: float, s2: Array,
             per_segment: int = SAMPLES_PER_SEGMENT) -> Array:
     """:func:`scaled_excess` by the Rust kernel (``time_scaling.rs``): it samples ``|a|^2``,
     ``a_z``, ``|j|^2`` and the yaw rate at ``per_segment`` midpoints of equal parts of every
     segment (with rotor drag ``a + d v`` and ``j + d a``, the thrust the certificate bounds,
     :func:`avp.bounds.drag_thrust_spline`) and, per scale ``s``, takes ``|a/s^2 + g e3|^2 =
     |a|^2 s^-4 + 2 g a_z s^-2 + g^2`` and ``|j/s^3|^2 = |j|^2 s^-6`` against the limits, in
-    NumPy's arithmetic; ``s^-2`` is NumPy's (the same bits as when all of it was NumPy)."""
+    NumPy's arithmetic. ``s2`` is ``scales ** -2.0`` computed by the caller in NumPy (the same
+    bits as when all of it was NumPy)."""
     drag = limits.rotor_drag
     coeffs = drag_thrust_spline(traj.coefficients, drag) if drag else traj.coefficients
     return _avp_rust.scaled_excess(
-        coeffs, traj.knots_rel, per_segment, scales ** -2.0, g, accel_max=limits.accel_max,
+        coeffs, traj.knots_rel, per_segment, s2, g, accel_max=limits.accel_max,
         accel_min=limits.accel_min, mass=limits.mass, thrust_rate_max=limits.thrust_rate_max,
         tilt_rate_max=limits.tilt_rate_max, body_rate_max=limits.body_rate_max)
 
@@ -92,7 +93,7 @@ def scaled_excess(traj: Trajectory, limits: VehicleLimits, g: float, scales: Arr
     if not (np.isfinite(s).all() and (s > 0.0).all() and np.isfinite(s2).all() and (s2 > 0.0).all()):
         raise ConfigError("scales", "time-scale factors must be finite and positive, with s^-2 a finite, "
                                     "nonzero float (s between about 1e-154 and 4e161)")
-    return _excess(traj, limits, v.finite_float("g", g), s, per_segment)
+    return _excess(traj, limits, v.finite_float("g", g), s2, per_segment)
 
 
 def predicted_factor(traj: Trajectory, limits: VehicleLimits, g: float, lo: float, hi: float) -> float | None:
@@ -106,7 +107,7 @@ def _predict_with_excess(traj: Trajectory, limits: VehicleLimits, g: float,
     """:func:`predicted_factor` and the excess at scale 1, from one call of the kernel (each
     scale's excess is computed on its own: the same values as separate calls)."""
     scales = SCALES[(SCALES >= lo) & (SCALES <= hi)]
-    excess = _excess(traj, limits, g, np.concatenate((_ONE, scales)))
+    excess = _excess(traj, limits, g, np.concatenate((_ONE, scales)) ** -2.0)
     at_one = float(excess[0])
     if scales.size == 0:
         return None, at_one
@@ -179,7 +180,7 @@ class DurationSearch:
                 s = 1.03 if s >= 1.0 else 1.0 / 1.03
             self.direction = 1 if s > 1.0 else -1
             return self._step(current * s)
-        self.measured.append((math.log(current), float(_excess(traj, limits, g, _ONE)[0])))
+        self.measured.append((math.log(current), float(_excess(traj, limits, g, _ONE)[0])))  # 1^-2 = 1
         k = self._secant()
         return k if k is not None else self._reach()
 

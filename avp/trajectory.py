@@ -90,11 +90,6 @@ class Provenance:
     def __post_init__(self) -> None:
         # a truth value of another type would silently read as "unknown" (None is not False)
         v.flags("provenance", self)
-        w = self.overhang_waypoint
-        if isinstance(w, np.bool_):
-            object.__setattr__(self, "overhang_waypoint", bool(w))
-        elif w is not None and not isinstance(w, bool):
-            raise ConfigError("provenance.overhang_waypoint", f"expected True, False or None, got {w!r} ({type(w).__name__})")
 
     @property
     def relaxed(self) -> bool:
