@@ -19,6 +19,8 @@ __all__ = [
     "fov_gradient",
     "fov_linearise",
     "fov_row_matrices",
+    "kkt_residuals",
+    "max_violation",
     "scaled_excess",
     "sturm_count",
     "trackability_rows",
@@ -284,3 +286,34 @@ def scaled_excess(
     naming the argument on bad shapes, non-finite or non-positive ``s2``, a non-finite ``g``,
     ``per_segment`` outside ``[1, 100000]`` (``OverflowError`` beyond 64 bits) or a meaningless limit (``accel_max``,
     ``accel_min``, ``mass``, ``thrust_rate_max``, ``tilt_rate_max``, ``body_rate_max``)."""
+
+# --- a QP solution's acceptance checks (qp_check.rs) ------------------------------------------
+
+def max_violation(
+    c: npt.NDArray[np.float64],
+    a: npt.NDArray[np.float64],
+    b: npt.NDArray[np.float64],
+    g: npt.NDArray[np.float64],
+    lower: npt.NDArray[np.float64],
+    upper: npt.NDArray[np.float64],
+) -> float:
+    """Largest relative violation at ``c`` of ``a c = b`` and ``lower <= g c <= upper``: the
+    maximum of 0, ``|a_i c - b_i| / max(1, |b_i|)`` and ``(g_i c - upper_i) / max(1,
+    |upper_i|)``, ``(lower_i - g_i c) / max(1, |lower_i|)`` (an infinite bound scales by 1); NaN
+    when a residual is NaN. Row-major ``a`` ``(len(b), len(c))`` and ``g`` ``(len(lower),
+    len(c))``; ``KernelError`` naming the argument on a wrong shape or a column-major array."""
+
+def kkt_residuals(
+    h: npt.NDArray[np.float64],
+    q: npt.NDArray[np.float64],
+    g: npt.NDArray[np.float64],
+    x: npt.NDArray[np.float64],
+    lam: npt.NDArray[np.float64],
+    lower: npt.NDArray[np.float64],
+    upper: npt.NDArray[np.float64],
+) -> tuple[float, float]:
+    """``(dual residual, duality gap)`` of ``min 1/2 x^T h x + q^T x`` s.t. ``lower <= g x <=
+    upper`` at ``x`` with signed multipliers ``lam`` (``> 0``: upper bound active): ``max |h x +
+    q + g^T lam|`` (0 for an empty ``x``) and ``|x^T h x + q^T x + sum_{lam > 0} upper lam +
+    sum_{lam < 0} lower lam|``; NaN propagates. ``KernelError`` naming the argument on a wrong
+    shape or a column-major array."""

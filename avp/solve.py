@@ -27,10 +27,11 @@ import numpy as np
 import qpsolvers
 import scipy.sparse
 
+from . import _avp_rust
 from ._typing import Array
 from .config import PlannerConfig, QpForm
 from .errors import AvpError, ConfigError, SolverError
-from .qp.assemble import PerchingQp, ReducedQp
+from .qp.assemble import LeastDistanceQp, PerchingQp, ReducedQp
 
 __all__ = [
     "BACKENDS",
@@ -196,36 +197,43 @@ class TwoSidedSolution(qpsolvers.Solution):
         Gx = self.G @ self.x
         return float(max(0.0, float(np.max(Gx - self.upper)), float(np.max(self.lower - Gx))))
 
-    def _Px(self) -> Array:
-        """``P x``, computed once per ``x`` and ``P`` object (the dual residual and the duality
-        gap both need it; nothing writes ``x`` in place: a new ``x`` is a new array)."""
-        x, P = self.x, self.problem.P
-        cached = self.__dict__.get("_Px_cache")
-        if cached is None or cached[0] is not x or cached[1] is not P:
-            cached = (x, P, P @ x)
-            self.__dict__["_Px_cache"] = cached
-        return cached[2]
+    def _kkt(self) -> tuple[float, float]:
+        """``(dual residual, duality gap)`` by the Rust kernel, computed once per ``x``, ``lam``
+        and ``P`` objects (nothing writes them in place: a new ``x`` is a new array)."""
+        x, lam, P = self.x, self.lam, self.problem.P
+        cached = self.__dict__.get("_kkt_cache")
+        if cached is None or cached[0] is not x or cached[1] is not lam or cached[2] is not P:
+            assert x is not None and lam is not None and self.G is not None  # the callers check
+            assert self.lower is not None and self.upper is not None
+            f64 = functools.partial(np.ascontiguousarray, dtype=np.float64)
+            residuals = _avp_rust.kkt_residuals(f64(P), f64(self.problem.q), f64(self.G), f64(x), f64(lam),
+                                                 f64(self.lower), f64(self.upper))
+            cached = (x, lam, P, residuals)
+            self.__dict__["_kkt_cache"] = cached
+        return cached[3]
 
     def dual_residual(self) -> float:
-        q = self.problem.q
+        """``max |P x + q + G^T lam|`` (0 for an empty ``x``)."""
         if not self.found or self.x is None or self.lam is None or self.G is None:
             return math.inf
-        return float(np.abs(self._Px() + q + self.G.T @ self.lam).max()) if self.x.size else 0.0
+        return self._kkt()[0]
 
     def duality_gap(self) -> float:
-        q = self.problem.q
+        """``|x^T P x + q^T x + upper^T lam^+ + lower^T lam^-|``: only active sides carry
+        multipliers, so an infinite bound never multiplies a nonzero one."""
         if not self.found or self.x is None or self.lam is None or self.lower is None or self.upper is None:
             return math.inf
-        up = np.maximum(self.lam, 0.0)
-        lo = np.minimum(self.lam, 0.0)
-        # only active sides carry multipliers, so infinite bounds never multiply a nonzero one
-        bound = float(np.where(up > 0.0, self.upper, 0.0) @ up + np.where(lo < 0.0, self.lower, 0.0) @ lo)
-        return abs(float(self.x @ self._Px()) + float(q @ self.x) + bound)
+        return self._kkt()[1]
 
 
 def _solve_two_sided(H: Array, g: Array, G: Array, lower: Array, upper: Array,
-                     options: dict[str, Any]) -> TwoSidedSolution:
-    """``min 1/2 z^T H z + g^T z`` s.t. ``lower <= G z <= upper`` by ``daqp.solve`` directly."""
+                     options: dict[str, Any], ldp: LeastDistanceQp | None = None) -> TwoSidedSolution:
+    """``min 1/2 z^T H z + g^T z`` s.t. ``lower <= G z <= upper`` by ``daqp.solve`` directly.
+
+    ``ldp``: the same QP as a least-distance problem (:meth:`PerchingQp.least_distance`), which
+    DAQP is then given (an identity Hessian: it skips the factorisation and row transformation
+    it would otherwise do at every call); the solution is mapped back, ``z = R^-1 u``, and
+    judged in ``z`` as always. The multipliers are those of the same rows."""
     import daqp  # type: ignore[import-not-found]
 
     options = {k: v for k, v in options.items() if k != "verbose"}  # a qpsolvers keyword
@@ -233,11 +241,14 @@ def _solve_two_sided(H: Array, g: Array, G: Array, lower: Array, upper: Array,
     bl = np.where(np.isfinite(lower), lower, -_INF)
     sense = np.zeros(G.shape[0], dtype=np.intc)
     t0 = time.perf_counter()
-    x, obj, exitflag, info = daqp.solve(np.array(H), g, np.ascontiguousarray(G), bu, bl, sense, **options)
+    if ldp is not None:
+        x, obj, exitflag, info = daqp.solve(np.eye(H.shape[0]), ldp.v, ldp.M, bu, bl, sense, **options)
+    else:
+        x, obj, exitflag, info = daqp.solve(np.array(H), g, np.ascontiguousarray(G), bu, bl, sense, **options)
     solution = TwoSidedSolution(qpsolvers.Problem(P=H, q=g), G=G, lower=lower, upper=upper)
     solution.found = exitflag > 0
     if solution.found:
-        solution.x, solution.obj = x, obj
+        solution.x, solution.obj = (ldp.R_inv @ x if ldp is not None else x), obj
         solution.lam = info["lam"]
         solution.z = np.concatenate([np.maximum(solution.lam, 0.0), -np.minimum(solution.lam, 0.0)])
     solution.solve_time = time.perf_counter() - t0
@@ -321,10 +332,11 @@ def solve_perching_qp(qp: PerchingQp, config: PlannerConfig, initvals: Array | N
     facts = backend(config.solver)
     if config.qp_form is QpForm.REDUCED and facts.two_sided:
         two = qp.reduce()
+        ldp = qp.least_distance()
         build_time = time.perf_counter() - t_build
         t_solve = time.perf_counter()
         try:
-            solution: qpsolvers.Solution = _solve_two_sided(two.H, two.g, two.G, two.lower, two.upper, _options(config))
+            solution: qpsolvers.Solution = _solve_two_sided(two.H, two.g, two.G, two.lower, two.upper, _options(config), ldp)
         except Exception as exc:  # back-end errors must not leak (one hierarchy)
             raise _backend_error(config, exc) from exc
         solve_time = time.perf_counter() - t_solve
@@ -372,11 +384,7 @@ def _outcome(qp: PerchingQp, config: PlannerConfig, red: ReducedQp | None, solut
 
 def _max_violation(qp: PerchingQp, c_hat: Array, G: Array, lo: Array, hi: Array) -> float:
     """Largest relative violation of the equalities and inequalities at ``c_hat`` (each row's
-    residual over ``max(1, |bound|)``; an infinite bound is never violated)."""
+    residual over ``max(1, |bound|)``; an infinite bound is never violated), by the Rust kernel:
+    NaN when a residual is NaN (then not SOLVED)."""
     A, b = qp.stacked_equalities()
-    inv_b, inv_lo, inv_hi = qp.violation_scales()
-    worst = float((np.abs(A @ c_hat - b) * inv_b).max()) if b.size else 0.0
-    if G.shape[0]:
-        Gc = G @ c_hat
-        worst = max(worst, float(((Gc - hi) * inv_hi).max()), float(((lo - Gc) * inv_lo).max()))
-    return max(0.0, worst)
+    return float(_avp_rust.max_violation(np.ascontiguousarray(c_hat, dtype=np.float64), A, b, G, lo, hi))

@@ -196,12 +196,17 @@ def test_incremental_reduction_equals_a_fresh_one() -> None:
         np.testing.assert_allclose(getattr(a, name), getattr(b, name), rtol=1e-13, atol=1e-13, err_msg=name)
     for x, y in zip(child.stacked_inequalities(), fresh.stacked_inequalities(), strict=True):
         assert np.array_equal(x, y)
-    # the relative violation scales too: the parent's (computed by the solve) plus the new rows'
-    assert "_violation_scales" in base.__dict__
-    for x, y in zip(child.violation_scales(), fresh.violation_scales(), strict=True):
-        assert x.tobytes() == y.tobytes()
-    same = base.with_inequalities()  # no new rows: the parent's scales
-    assert all(x is y for x, y in zip(same.violation_scales(), base.violation_scales(), strict=True))
+    # the least-distance form too: the parent's transformed rows (computed by the solve) plus
+    # the new rows', the same as a fresh QP's to rounding, with the parent's factor
+    assert "_least_distance" in base.__dict__
+    la, lb = child.least_distance(), fresh.least_distance()
+    assert la is not None and lb is not None and la.R_inv is base.least_distance().R_inv
+    np.testing.assert_allclose(la.M, lb.M, rtol=1e-12, atol=1e-12 * float(np.abs(lb.M).max()))
+    np.testing.assert_allclose(la.v, lb.v, rtol=1e-12, atol=1e-12 * float(np.abs(lb.v).max()))
+    parent = base.least_distance()
+    assert la.M[:parent.M.shape[0]].tobytes() == parent.M.tobytes() and la.v is parent.v
+    same = base.with_inequalities()  # no new rows: the parent's rows
+    assert same.least_distance().M is base.least_distance().M
 
 
 @settings(max_examples=200, deadline=None)

@@ -6,6 +6,8 @@ from __future__ import annotations
 import dataclasses
 
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from scenarios import standard
 
 import avp
@@ -77,8 +79,142 @@ def test_direct_two_sided_daqp_matches_the_qpsolvers_path(incline) -> None:
     # P x is computed once per x: another x gets its own (the residuals from scratch)
     direct.x = direct.x + 1e-3
     Px = red.H @ direct.x
-    assert direct.dual_residual() == float(np.abs(Px + red.g + red.G.T @ direct.lam).max())
+    # (the Rust kernel sums in its order, NumPy's BLAS in its own: rounding apart)
+    assert direct.dual_residual() == pytest.approx(float(np.abs(Px + red.g + red.G.T @ direct.lam).max()),
+                                                   rel=1e-12, abs=1e-14)
     assert direct.duality_gap() > 0.0 and direct.duality_gap() == pytest.approx(
         abs(direct.x @ Px + red.g @ direct.x + float(np.where(direct.lam > 0, red.upper, 0.0) @ np.maximum(direct.lam, 0.0)
                                                     + np.where(direct.lam < 0, red.lower, 0.0) @ np.minimum(direct.lam, 0.0))),
         rel=1e-12)
+    # DAQP given the same QP as a least-distance problem (the planner's path): the same minimiser
+    # and multipliers, to the rounding of the transformation
+    ldp = qp.with_inequalities(*lin.blocks).least_distance()
+    assert ldp is not None
+    via_ldp = solve._solve_two_sided(red.H, red.g, red.G, red.lower, red.upper, {}, ldp)
+    assert via_ldp.found
+    np.testing.assert_allclose(via_ldp.x, reference.x, rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(via_ldp.lam, solve._solve_two_sided(red.H, red.g, red.G, red.lower, red.upper, {}).lam,
+                               rtol=1e-7, atol=1e-9)
+    assert via_ldp.dual_residual() < 1e-8 and via_ldp.duality_gap() < 1e-8 and via_ldp.primal_residual() < 1e-8
+
+
+def _exact_dot(row, x):
+    from fractions import Fraction
+
+    return sum((Fraction(a) * Fraction(b) for a, b in zip(row, x, strict=True)), Fraction(0))
+
+
+_finite = st.floats(-1e3, 1e3, allow_nan=False, allow_infinity=False)
+
+
+@settings(max_examples=300, deadline=None)
+@given(data=st.data(), n=st.integers(0, 6), m_eq=st.integers(0, 5), m_in=st.integers(0, 6))
+def test_max_violation_kernel_against_exact_arithmetic(data, n, m_eq, m_in) -> None:
+    """``_avp_rust.max_violation``: the largest relative violation, checked against the same
+    quantity in exact rational arithmetic (to the rounding of the products), with infinite
+    bounds never violated."""
+    import math
+    from fractions import Fraction
+
+    import numpy as np
+
+    from avp import _avp_rust
+
+    def arr(k):
+        return np.array(data.draw(st.lists(_finite, min_size=k, max_size=k)), dtype=float)
+
+    def bounds(k):
+        return np.array(data.draw(st.lists(st.one_of(_finite, st.sampled_from([math.inf, -math.inf])),
+                                           min_size=k, max_size=k)), dtype=float)
+
+    c, A, b = arr(n), arr(m_eq * n).reshape(m_eq, n), arr(m_eq)
+    G = arr(m_in * n).reshape(m_in, n)
+    lo, hi = bounds(m_in), bounds(m_in)
+    lo = np.where(lo == math.inf, -math.inf, lo)  # a lower bound of +inf is no request anyone makes
+    hi = np.where(hi == -math.inf, math.inf, hi)
+    got = _avp_rust.max_violation(c, A, b, G, lo, hi)
+    exact, slack = Fraction(0), 0.0
+    for i in range(m_eq):
+        r = _exact_dot(A[i], c) - Fraction(b[i])
+        exact = max(exact, abs(r) / max(1, abs(Fraction(b[i]))))
+        slack = max(slack, float(np.abs(A[i] * c).sum() + abs(b[i])) / max(1.0, abs(b[i])))
+    for i in range(m_in):
+        r = _exact_dot(G[i], c)
+        mag = float(np.abs(G[i] * c).sum())
+        if math.isfinite(hi[i]):
+            exact = max(exact, (r - Fraction(hi[i])) / max(1, abs(Fraction(hi[i]))))
+            slack = max(slack, (mag + abs(hi[i])) / max(1.0, abs(hi[i])))
+        if math.isfinite(lo[i]):
+            exact = max(exact, (Fraction(lo[i]) - r) / max(1, abs(Fraction(lo[i]))))
+            slack = max(slack, (mag + abs(lo[i])) / max(1.0, abs(lo[i])))
+    assert got >= 0.0
+    assert abs(got - float(exact)) <= 8 * (n + 2) * 2.0**-52 * slack
+
+
+@settings(max_examples=300, deadline=None)
+@given(data=st.data(), n=st.integers(0, 6), m=st.integers(0, 6))
+def test_kkt_residuals_kernel_against_exact_arithmetic(data, n, m) -> None:
+    """``_avp_rust.kkt_residuals``: the dual residual and duality gap of a two-sided QP, checked
+    against exact rational arithmetic (to the rounding of the products); only the active side
+    of a row carries its multiplier, so an infinite bound with a zero multiplier adds nothing."""
+    import math
+    from fractions import Fraction
+
+    import numpy as np
+
+    from avp import _avp_rust
+
+    def arr(k):
+        return np.array(data.draw(st.lists(_finite, min_size=k, max_size=k)), dtype=float)
+
+    H, q, G, x = arr(n * n).reshape(n, n), arr(n), arr(m * n).reshape(m, n), arr(n)
+    lam = np.array(data.draw(st.lists(st.one_of(_finite, st.just(0.0)), min_size=m, max_size=m)), dtype=float)
+    lo = np.where(lam < 0, arr(m), -math.inf)  # an infinite bound only on the inactive side
+    hi = np.where(lam > 0, arr(m), math.inf)
+    dual, gap = _avp_rust.kkt_residuals(H, q, G, x, lam, lo, hi)
+    F = Fraction
+    Hx = [_exact_dot(H[i], x) for i in range(n)]
+    stat = [Hx[i] + F(q[i]) + sum((F(G[j, i]) * F(lam[j]) for j in range(m)), F(0)) for i in range(n)]
+    exact_dual = max((abs(s) for s in stat), default=F(0))
+    exact_gap = abs(sum((F(x[i]) * Hx[i] + F(q[i]) * F(x[i]) for i in range(n)), F(0))
+                    + sum((F(hi[j]) * F(lam[j]) for j in range(m) if lam[j] > 0), F(0))
+                    + sum((F(lo[j]) * F(lam[j]) for j in range(m) if lam[j] < 0), F(0)))
+    mag_dual = float(np.abs(H).sum() * (np.abs(x).max() if n else 0) + np.abs(q).sum()
+                     + np.abs(G).sum() * (np.abs(lam).max() if m else 0)) + 1.0
+    mag_gap = float(np.abs(x) @ np.abs(H) @ np.abs(x) + np.abs(q) @ np.abs(x)
+                    + np.where(np.isfinite(hi), np.abs(hi), 0) @ np.abs(lam)
+                    + np.where(np.isfinite(lo), np.abs(lo), 0) @ np.abs(lam)) + 1.0
+    assert abs(dual - float(exact_dual)) <= 16 * (n + m + 2) * 2.0**-52 * mag_dual
+    assert abs(gap - float(exact_gap)) <= 16 * (n + m + 2) * 2.0**-52 * mag_gap
+
+
+@pytest.mark.parametrize("call", [
+    lambda r, np: r.max_violation(np.zeros(2), np.zeros((1, 3)), np.zeros(1), np.zeros((0, 2)), np.zeros(0), np.zeros(0)),
+    lambda r, np: r.max_violation(np.zeros(2), np.zeros((0, 2)), np.zeros(0), np.zeros((1, 2)), np.zeros(1), np.zeros(2)),
+    lambda r, np: r.kkt_residuals(np.eye(2), np.zeros(2), np.zeros((1, 2)), np.zeros(2), np.zeros(2), np.zeros(1),
+                                  np.zeros(1)),
+    lambda r, np: r.max_violation(np.zeros(2), np.zeros((2, 2), order="F"), np.zeros(2), np.zeros((0, 2)),
+                                  np.zeros(0), np.zeros(0)),
+], ids=["a columns", "upper length", "g rows", "column-major a"])
+def test_qp_check_kernels_name_a_bad_argument(call) -> None:
+    import numpy as np
+
+    from avp import _avp_rust
+
+    with pytest.raises(_avp_rust.KernelError) as exc:
+        call(_avp_rust, np)
+    assert exc.value.arg in {"a", "upper", "g"}
+
+
+def test_a_nan_residual_is_a_violation_not_a_pass() -> None:
+    """A residual that overflows to NaN (``inf - inf``) is not dropped by the maximum: the
+    point counts as violating (before the kernel, Python's ``max`` skipped a NaN)."""
+    import math
+
+    import numpy as np
+
+    from avp import _avp_rust
+
+    v = _avp_rust.max_violation(np.array([1e308, 1e308]), np.zeros((0, 2)), np.zeros(0), np.ones((1, 2)),
+                                np.array([-math.inf]), np.array([math.inf]))
+    assert math.isnan(v) and not v <= solve.FEASIBILITY_TOL

@@ -345,6 +345,54 @@ def eliminate_within(Z0: Array, c0: Array, G0: Array, P: Array, A_t: Array, b_t:
     return Z, c_p, (0.5 * scale) * (H + H.T), scale * (Z.T @ Pc)
 
 
+_INVERSE_CHOLESKY: OrderedDict[int, tuple[Array, Array | None]] = OrderedDict()
+"""``R^-1`` of cached reduced Hessians by identity (:func:`inverse_cholesky`); each entry keeps
+its Hessian alive, so an id is not reused while it is here."""
+
+
+def inverse_cholesky(H: Array) -> Array | None:
+    """``R^-1`` (upper triangular, read-only) with ``H = R^T R`` the Cholesky factorisation, by
+    LAPACK potrf and trtri; ``None`` when ``H`` is empty or not numerically positive definite.
+
+    With ``u = R z`` the reduced QP ``min 1/2 z^T H z + g^T z`` s.t. ``lower <= G z <= upper``
+    is the least-distance problem ``min 1/2 |u|^2 + (R^-T g)^T u`` s.t. ``lower <= G R^-1 u <=
+    upper``: DAQP's own form (Arnström, Bemporad and Axehill, "A dual active-set solver for
+    embedded quadratic programming using recursive LDL^T updates"), which it otherwise builds
+    from ``H`` at every call. Computed once per read-only Hessian that owns its data (the
+    elimination's cached ones: every QP of a time search, of an SQP and of a replan at the same
+    durations shares it)."""
+    if H.size == 0:
+        return None
+    owned = _owned(H)
+    if owned:
+        with _FACTORS_LOCK:
+            hit = _INVERSE_CHOLESKY.get(id(H))
+            if hit is not None and hit[0] is H:
+                _INVERSE_CHOLESKY.move_to_end(id(H))
+                return hit[1]
+    R, info = scipy.linalg.lapack.dpotrf(H, lower=0, clean=1)
+    Rinv: Array | None = None
+    if info == 0:
+        Rinv, info = scipy.linalg.lapack.dtrtri(R, lower=0)
+        Rinv = _read_only(np.ascontiguousarray(Rinv)) if info == 0 and np.isfinite(Rinv).all() else None
+    if owned:
+        with _FACTORS_LOCK:
+            _INVERSE_CHOLESKY[id(H)] = (H, Rinv)
+            while len(_INVERSE_CHOLESKY) > ELIMINATION_CACHE_SIZE:
+                _INVERSE_CHOLESKY.popitem(last=False)
+    return Rinv
+
+
+@dataclass(frozen=True)
+class LeastDistanceQp:
+    """The reduced QP in ``u = R z`` (:func:`inverse_cholesky`): ``min 1/2 |u|^2 + v^T u`` s.t.
+    ``lower <= M u <= upper`` (the reduced QP's bounds), with ``z = R_inv u``."""
+
+    R_inv: Array
+    M: Array  # G R^-1
+    v: Array  # R^-T g
+
+
 def _unit_diagonal_scale(H: Array) -> float:
     """``1 / max |H_ii|`` (1 for an empty ``H``; at most ``1e300``): the cost's scale to a unit
     largest Hessian diagonal."""
@@ -432,30 +480,6 @@ class PerchingQp:
             _read_only(np.concatenate([b.upper for b in self.inequalities])),
         )
 
-    def violation_scales(self) -> tuple[Array, Array, Array]:
-        """``1 / max(1, |bound|)`` of the equality right-hand sides and of the inequality lower
-        and upper bounds (1 for an infinite bound), for the relative feasibility check."""
-        return self._violation_scales
-
-    @cached_property
-    def _violation_scales(self) -> tuple[Array, Array, Array]:
-        def inv(x: Array) -> Array:
-            return np.where(np.isfinite(x), 1.0 / np.maximum(1.0, np.abs(x)), 1.0)
-
-        parent = self.__dict__.get("_parent")
-        if parent is not None and "_violation_scales" in parent.__dict__:
-            # a copy with more blocks (same equalities): the parent's scales, then the new rows'
-            inv_b, inv_lo0, inv_hi0 = parent._violation_scales
-            _, lo, hi = self.stacked_inequalities()
-            k = inv_lo0.size
-            if k == lo.size:
-                return inv_b, inv_lo0, inv_hi0
-            return (inv_b, _read_only(np.concatenate([inv_lo0, inv(lo[k:])])),
-                    _read_only(np.concatenate([inv_hi0, inv(hi[k:])])))
-        _, b = self.stacked_equalities()
-        _, lo, hi = self.stacked_inequalities()
-        return _read_only(inv(b)), _read_only(inv(lo)), _read_only(inv(hi))
-
     @cached_property
     def _increasing(self) -> bool:
         """Whether :attr:`knots_rel` increases strictly (the trajectory's own check)."""
@@ -536,6 +560,27 @@ class PerchingQp:
         Computed once per QP; a copy made by :meth:`with_inequalities` reduces only its new rows
         when this QP's reduction exists."""
         return self._reduced
+
+    def least_distance(self) -> LeastDistanceQp | None:
+        """The reduced QP as a least-distance problem (:class:`LeastDistanceQp`), or ``None``
+        when its Hessian has no Cholesky factor. Computed once per QP; a copy made by
+        :meth:`with_inequalities` transforms only its new rows when this QP's exists."""
+        return self._least_distance
+
+    @cached_property
+    def _least_distance(self) -> LeastDistanceQp | None:
+        red = self._reduced
+        R_inv = inverse_cholesky(red.H)
+        if R_inv is None:
+            return None
+        parent = self.__dict__.get("_parent")
+        if parent is not None and parent.__dict__.get("_least_distance") is not None:
+            p = parent._least_distance
+            k = p.M.shape[0]
+            if p.R_inv is R_inv and parent._reduced.g is red.g and k <= red.G.shape[0]:
+                M = p.M if k == red.G.shape[0] else np.concatenate([p.M, red.G[k:] @ R_inv], axis=0)
+                return LeastDistanceQp(R_inv, M, p.v)
+        return LeastDistanceQp(R_inv, red.G @ R_inv, R_inv.T @ red.g)
 
     @cached_property
     def _reduced(self) -> ReducedQp:

@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from functools import cached_property
+from functools import cached_property, lru_cache
 
 import numpy as np
 import numpy.typing as npt
@@ -133,6 +133,26 @@ class FovRowInputs:
     rotor_drag: float = 0.0  # 1/s: the rows' acceleration variable is a + d v (fov_blocks)
 
 
+@lru_cache(maxsize=64)
+def _point_basis(layout: DecisionLayout, knots_rel: bytes, times: bytes,
+                 rotor_drag: float) -> tuple[npt.NDArray[np.int64], Array, Array]:
+    """``(segment, position basis, acceleration basis)`` of the points at ``times`` (relative,
+    as bytes) on ``knots_rel`` (bytes), read-only and row-major (:func:`fov_rows`). The SQP steps
+    of one plan place their rows at the same times on the same knots: computed once for them."""
+    knots = np.frombuffer(knots_rel, dtype=float)
+    t = np.frombuffer(times, dtype=float)
+    seg, u = layout.locate(knots, t)
+    T = knots[seg + 1] - knots[seg]
+    p0 = layout.basis(0, u)  # (k, C) position basis
+    p2 = layout.basis(2, u) / (T**2)[:, None]  # (k, C) acceleration basis
+    if rotor_drag:  # the basis of a + d v (fov_blocks)
+        p2 = p2 + rotor_drag * layout.basis(1, u) / T[:, None]
+    out = (np.ascontiguousarray(seg, dtype=np.int64), np.ascontiguousarray(p0), np.ascontiguousarray(p2))
+    for arr in out:
+        arr.setflags(write=False)
+    return out
+
+
 def fov_rows(inp: FovRowInputs) -> tuple[ConstraintBlock, ...]:
     """Blocks ``"fov rows (8)"`` and ``"fov trust region (9) x|a|yaw"`` of the placed points.
 
@@ -146,14 +166,9 @@ def fov_rows(inp: FovRowInputs) -> tuple[ConstraintBlock, ...]:
     if k == 0:
         return ()
     fov, layout = inp.fov, inp.layout
-    seg, u = layout.locate(inp.knots_rel, inp.times)
-    T = inp.knots_rel[seg + 1] - inp.knots_rel[seg]
-    p0 = layout.basis(0, u)  # (k, C) position basis
-    p2 = layout.basis(2, u) / (T**2)[:, None]  # (k, C) acceleration basis
-    if inp.rotor_drag:  # the basis of a + d v (fov_blocks)
-        p2 = p2 + inp.rotor_drag * layout.basis(1, u) / T[:, None]
+    seg, p0, p2 = _point_basis(layout, inp.knots_rel.tobytes(), inp.times.tobytes(), float(inp.rotor_drag))
     row8, Rx, Ra, Ryaw = _avp_rust.fov_row_matrices(
-        layout.n_segments, np.ascontiguousarray(seg, dtype=np.int64), np.ascontiguousarray(p0), np.ascontiguousarray(p2),
+        layout.n_segments, seg, p0, p2,
         np.ascontiguousarray(inp.gx), np.ascontiguousarray(inp.ga), np.ascontiguousarray(inp.gp),
     )
     blocks = [ConstraintBlock(f"{FOV_PREFIX} rows (8)", row8, np.full(k, -np.inf), inp.rhs)]

@@ -94,7 +94,6 @@ pub fn guarded<T>(kernel: impl FnOnce() -> Result<T>) -> Result<T> {
     })
 }
 
-/// Fails with [`Error::NonFinite`] when any value is NaN or infinite.
 /// A [`Error::Shape`] naming `arg` unless it holds exactly `expected` values.
 pub fn check_len(arg: &'static str, len: usize, expected: usize) -> Result<()> {
     if len == expected {
@@ -107,6 +106,7 @@ pub fn check_len(arg: &'static str, len: usize, expected: usize) -> Result<()> {
     }
 }
 
+/// Fails with [`Error::NonFinite`] when any value is NaN or infinite.
 pub fn check_finite(arg: &'static str, values: &[f64]) -> Result<()> {
     if values.iter().all(|v| v.is_finite()) {
         Ok(())

@@ -1,5 +1,5 @@
 //! Thin PyO3 wrappers, one module per kernel family (`spline`, `fov`, `bounds`, `regions`,
-//! `time_scaling`), sharing only [`common`]: convert NumPy arrays to slices, call a kernel,
+//! `time_scaling`, `qp_check`), sharing only [`common`]: convert NumPy arrays to slices, call a kernel,
 //! convert back. Every kernel error becomes `KernelError` (a `ValueError` with `.arg` and
 //! `.detail`); kernels return `Result` and do not panic on input paths.
 use pyo3::prelude::*;
@@ -7,6 +7,7 @@ use pyo3::prelude::*;
 mod bounds;
 mod common;
 mod fov;
+mod qp_check;
 mod regions;
 mod spline;
 mod time_scaling;
@@ -20,5 +21,6 @@ pub fn _avp_rust(m: &Bound<'_, PyModule>) -> PyResult<()> {
     bounds::register(m)?;
     regions::register(m)?;
     time_scaling::register(m)?;
+    qp_check::register(m)?;
     Ok(())
 }

@@ -1,0 +1,78 @@
+//! PyO3 wrappers of a QP solution's acceptance checks (`qp_check`).
+#![allow(clippy::useless_conversion)]
+use numpy::{PyReadonlyArray1, PyReadonlyArray2, PyUntypedArrayMethods};
+use pyo3::prelude::*;
+
+use super::common::{contiguous, kernel_err, to_py_err};
+use crate::error::guarded;
+use crate::qp_check;
+
+fn columns(arg: &'static str, m: &PyReadonlyArray2<'_, f64>, n: usize) -> PyResult<()> {
+    let shape = m.shape();
+    if shape[1] == n || shape[0] == 0 {
+        Ok(())
+    } else {
+        Err(kernel_err(
+            arg,
+            format!("wrong shape: expected {n} columns, got {:?}", shape),
+        ))
+    }
+}
+
+/// Largest relative violation at `c` of `a c = b` and `lower <= g c <= upper` (0 at least;
+/// NaN when a residual is NaN).
+#[pyfunction(name = "max_violation")]
+fn max_violation_py(
+    c: PyReadonlyArray1<'_, f64>,
+    a: PyReadonlyArray2<'_, f64>,
+    b: PyReadonlyArray1<'_, f64>,
+    g: PyReadonlyArray2<'_, f64>,
+    lower: PyReadonlyArray1<'_, f64>,
+    upper: PyReadonlyArray1<'_, f64>,
+) -> PyResult<f64> {
+    let cs = contiguous("c", &c)?;
+    columns("a", &a, cs.len())?;
+    columns("g", &g, cs.len())?;
+    let (a_s, bs, gs) = (
+        contiguous("a", &a)?,
+        contiguous("b", &b)?,
+        contiguous("g", &g)?,
+    );
+    let (lo, hi) = (contiguous("lower", &lower)?, contiguous("upper", &upper)?);
+    guarded(|| qp_check::max_violation(cs, a_s, bs, gs, lo, hi)).map_err(to_py_err)
+}
+
+/// `(dual residual, duality gap)` of `min 1/2 x^T h x + q^T x` s.t. `lower <= g x <= upper` at
+/// `x` with signed multipliers `lam`.
+#[pyfunction(name = "kkt_residuals")]
+#[allow(clippy::too_many_arguments)]
+fn kkt_residuals_py(
+    h: PyReadonlyArray2<'_, f64>,
+    q: PyReadonlyArray1<'_, f64>,
+    g: PyReadonlyArray2<'_, f64>,
+    x: PyReadonlyArray1<'_, f64>,
+    lam: PyReadonlyArray1<'_, f64>,
+    lower: PyReadonlyArray1<'_, f64>,
+    upper: PyReadonlyArray1<'_, f64>,
+) -> PyResult<(f64, f64)> {
+    let xs = contiguous("x", &x)?;
+    columns("h", &h, xs.len())?;
+    columns("g", &g, xs.len())?;
+    let (hs, qs, gs) = (
+        contiguous("h", &h)?,
+        contiguous("q", &q)?,
+        contiguous("g", &g)?,
+    );
+    let (ls, lo, hi) = (
+        contiguous("lam", &lam)?,
+        contiguous("lower", &lower)?,
+        contiguous("upper", &upper)?,
+    );
+    guarded(|| qp_check::kkt_residuals(hs, qs, gs, xs, ls, lo, hi)).map_err(to_py_err)
+}
+
+pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_function(wrap_pyfunction!(max_violation_py, m)?)?;
+    m.add_function(wrap_pyfunction!(kkt_residuals_py, m)?)?;
+    Ok(())
+}
