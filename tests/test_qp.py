@@ -384,3 +384,26 @@ def test_proxqp_meets_the_reduced_optimum_in_the_full_form_where_daqp_did_not():
     reduced = snap_cost()
     assert avp.solve.backend("proxqp").full_form
     assert snap_cost(solver="proxqp", qp_form=avp.QpForm.FULL) == pytest.approx(reduced, rel=1e-3)
+
+
+@settings(max_examples=100, deadline=None)
+@given(n=st.integers(1, 12), seed=st.integers(0, 2**32 - 1), shift=st.floats(1e-3, 10.0))
+def test_inverse_cholesky_whitens_the_hessian(n, seed, shift) -> None:
+    """``inverse_cholesky(H)`` is ``R^-1`` with ``H = R^T R``: upper triangular, and
+    ``R^-T H R^-1 = I`` to rounding (scaled by ``H``'s condition number); computed once per
+    read-only Hessian that owns its data, and ``None`` for a matrix with no Cholesky factor."""
+    import numpy as np
+
+    from avp.qp.assemble import inverse_cholesky
+
+    rng = np.random.default_rng(seed)
+    B = rng.standard_normal((n, n))
+    H = B @ B.T + shift * np.eye(n)
+    H.setflags(write=False)
+    R_inv = inverse_cholesky(H)
+    assert R_inv is not None and not R_inv.flags.writeable
+    assert np.array_equal(R_inv, np.triu(R_inv))
+    np.testing.assert_allclose(R_inv.T @ H @ R_inv, np.eye(n), atol=1e-12 * np.linalg.cond(H))
+    assert inverse_cholesky(H) is R_inv  # cached
+    assert inverse_cholesky(-H) is None  # negative definite: no factor
+    assert inverse_cholesky(np.zeros((0, 0))) is None
