@@ -105,12 +105,19 @@ def visibility_many(
     cam = Camera() if camera is None else camera
     step = v.positive_float("dt", dt)
     drag = v.nonnegative_float("limits.rotor_drag", rotor_drag)
+    return _visibility_checked(trajectories, target, cam, step, drag)
+
+
+def _visibility_checked(trajectories: Sequence[Trajectory], target: PerchTarget, cam: Camera, step: float,
+                        drag: float) -> list[Visibility]:
+    """:func:`visibility_many` of arguments it has checked (the planner's SQP score calls it
+    directly with its own plans and validated configuration)."""
     if not trajectories:
         return []
     first = trajectories[0]
     if any(not np.array_equal(tr.knots_rel, first.knots_rel) or tr.t0 != first.t0 or tr.g != first.g
            for tr in trajectories[1:]):
-        return [visibility_many((tr,), target, cam, step, rotor_drag=drag)[0] for tr in trajectories]
+        return [_visibility_checked((tr,), target, cam, step, drag)[0] for tr in trajectories]
     k = len(trajectories)
     t = first._sample_rel(step)  # since the plans' start: exact durations at any clock value
     t0 = first.t0

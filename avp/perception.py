@@ -22,7 +22,7 @@ import numpy as np
 from ._typing import Array
 from .config import PlannerConfig
 from .frames import drag_acceleration
-from .metrics import visibility_many
+from .metrics import _visibility_checked
 from .qp.assemble import ConstraintBlock, PerchingQp
 from .qp.fov import FovLinearisation, fov_blocks, fov_times
 from .solve import ITERATIVE_SOLVERS, KKT_TOL, backend, incompatibility
@@ -89,8 +89,7 @@ def _scores(trajs: tuple[Trajectory, ...], target: PerchTarget, cfg: PlannerConf
     camera = cfg.fov.score_camera
     if camera is None:  # no direction meets the rows: nothing to gain
         return [0.0] * len(trajs)
-    vis = visibility_many(trajs, target, camera, dt=trajs[0].duration / _SCORE_GRID,
-                          rotor_drag=cfg.limits.rotor_drag)
+    vis = _visibility_checked(trajs, target, camera, trajs[0].duration / _SCORE_GRID, cfg.limits.rotor_drag)
     return [v.time_fraction + v.path_fraction for v in vis]
 
 

@@ -1,7 +1,8 @@
 """Cost of every ``Replanner.step`` inside the simulated 30 Hz closed loop, in CPU time.
 
     python benchmarks/bench_replan.py [--seeds 40] [--distances 1.5 4.5 7.5] [--inclines 90 45]
-                                      [--previous] [--gc-freeze] [--stages] [--evict-mb MB]
+                                      [--previous] [--gc-freeze] [--gc-between-steps] [--stages]
+                                      [--evict-mb MB]
                                       [--deadline-ms MS] [--adapt-latency] [--no-retime-backoff]
                                       [--realistic] [--backend avp|rotorpy] [--alpha-range LO HI]
                                       [--free-velocity slope|normal|lateral] [--save FILE] [--compare FILE]
@@ -10,7 +11,9 @@ Runs ``avp.sim.run.simulate`` in ``Mode.AVP`` for every seed, distance and incli
 ``Replanner`` the loop builds replaced by a subclass that times each :meth:`step` call with
 ``time.thread_time`` (CPU of the calling thread: the machine is shared, so wall time carries the
 scheduler's slices; the wall figures are printed too) and counts the garbage collections that ran
-inside it. Every step is reported, the initial plan apart: the ``HELD`` and
+inside it. ``--gc-between-steps`` turns the cyclic collector off inside each step and on again
+after it: a collection that falls due then runs at the loop's next allocation, between steps, as
+a real-time loop schedules it (the README, "Replanning in a loop"). Every step is reported, the initial plan apart: the ``HELD`` and
 ``FROZEN_NEAR_CONTACT`` steps that need no solve are real cycles of the 30 Hz loop. Then the
 steps that solve, with their solves per step, by action.
 
@@ -83,12 +86,20 @@ class TimedReplanner(Replanner):
     records: ClassVar[list[dict[str, Any]]] = []
     calls: ClassVar[list[tuple[int, tuple[Any, ...]]]] = []
 
+    collect_between_steps: ClassVar[bool] = False
+    """``--gc-between-steps``: the collector is off inside each step and back on after it."""
+
     def step(self, t: float, odometry: Any, target_estimate: Any = None) -> Any:
         gc0, gc2 = _GC[0], _GC[1]
         _STAGE_ON[0] = _STAGE_CPU if self.trajectory is not None else None  # replans only
+        between = TimedReplanner.collect_between_steps and gc.isenabled()
+        if between:
+            gc.disable()
         w0, c0 = time.perf_counter(), time.thread_time()
         s = super().step(t, odometry, target_estimate)
         c1, w1 = time.thread_time(), time.perf_counter()
+        if between:  # a collection that fell due runs at the next allocation, outside the step
+            gc.enable()
         _STAGE_ON[0] = None
         traj = self.trajectory
         TimedReplanner.records.append(dict(
@@ -223,6 +234,9 @@ def main() -> None:
     ap.add_argument("--inclines", type=float, nargs="+", default=[90.0, 45.0], help="degrees")
     ap.add_argument("--gc-freeze", action="store_true",
                     help="gc.freeze() after the imports and a first run, as a real-time loop would after its setup")
+    ap.add_argument("--gc-between-steps", action="store_true",
+                    help="the cyclic garbage collector off inside each step and on again after it, so that a "
+                         "collection that falls due runs between steps, as a real-time loop schedules it")
     ap.add_argument("--previous", action="store_true",
                     help="the previous code paths: Fraction snap coefficients, threaded BLAS in the step")
     ap.add_argument("--evict-mb", type=float, default=0.0,
@@ -249,6 +263,7 @@ def main() -> None:
         _EVICT.append(np.zeros(int(args.evict_mb * 2**20 / 8)))
     gc.callbacks.append(_count_gc)
     sim_run.Replanner = TimedReplanner  # type: ignore[misc]  # the loop builds this class
+    TimedReplanner.collect_between_steps = args.gc_between_steps
     replan_cfg = replan_config(args)
     def planner_cfg(sc: SimScenario) -> PlannerConfig | None:
         """The planner configuration of ``sc`` (``None``: the simulation's own, as the default

@@ -590,11 +590,16 @@ class PerchingQp:
             r0 = parent._reduced
             new = self.inequalities[len(parent.inequalities):]
             if new:
-                Gn = np.concatenate([b.matrix for b in new], axis=0)
+                k = r0.G.shape[0]
+                if "_stacked_inequalities" in self.__dict__:  # the new rows are already stacked: views
+                    G_all, lo_all, hi_all = self._stacked_inequalities
+                    Gn, lo_n, hi_n = G_all[k:], lo_all[k:], hi_all[k:]
+                else:
+                    Gn = np.concatenate([b.matrix for b in new], axis=0)
+                    lo_n, hi_n = np.concatenate([b.lower for b in new]), np.concatenate([b.upper for b in new])
                 Gc = Gn @ c_p
                 return ReducedQp(H=H, g=g, G=np.concatenate([r0.G, Gn @ Z], axis=0),
-                                 lower=np.concatenate([r0.lower, np.concatenate([b.lower for b in new]) - Gc]),
-                                 upper=np.concatenate([r0.upper, np.concatenate([b.upper for b in new]) - Gc]),
+                                 lower=np.concatenate([r0.lower, lo_n - Gc]), upper=np.concatenate([r0.upper, hi_n - Gc]),
                                  Z=Z, c_p=c_p)
             return replace(r0)
         G, lo, hi = self.stacked_inequalities()
