@@ -315,5 +315,6 @@ def kkt_residuals(
     """``(dual residual, duality gap)`` of ``min 1/2 x^T h x + q^T x`` s.t. ``lower <= g x <=
     upper`` at ``x`` with signed multipliers ``lam`` (``> 0``: upper bound active): ``max |h x +
     q + g^T lam|`` (0 for an empty ``x``) and ``|x^T h x + q^T x + sum_{lam > 0} upper lam +
-    sum_{lam < 0} lower lam|``; NaN propagates. ``KernelError`` naming the argument on a wrong
-    shape or a column-major array."""
+    sum_{lam < 0} lower lam|``; NaN propagates, except from a row of ``g`` whose multiplier is
+    zero (not read). ``KernelError`` naming the argument on a wrong shape or a column-major
+    array."""

@@ -175,6 +175,11 @@ def known_solvers() -> tuple[str, ...]:
 _INF = 1e30
 """DAQP's infinity for a missing bound."""
 
+_VARIABLE_OPTIONS = frozenset({"primal_start", "eps_prox"})
+"""DAQP settings whose meaning depends on the variables (a primal guess, a proximal term): with
+one of them in ``config.solver_options`` DAQP is given the reduced QP in ``z`` as asked, not its
+least-distance form."""
+
 
 @dataclass(frozen=False)
 class TwoSidedSolution(qpsolvers.Solution):
@@ -198,19 +203,23 @@ class TwoSidedSolution(qpsolvers.Solution):
         return float(max(0.0, float(np.max(Gx - self.upper)), float(np.max(self.lower - Gx))))
 
     def _kkt(self) -> tuple[float, float]:
-        """``(dual residual, duality gap)`` by the Rust kernel, computed once per ``x``, ``lam``
-        and ``P`` objects (nothing writes them in place: a new ``x`` is a new array)."""
-        x, lam, P = self.x, self.lam, self.problem.P
+        """``(dual residual, duality gap)`` by the Rust kernel, computed once per set of array
+        objects it reads (nothing writes them in place: a new ``x`` is a new array). Missing
+        bounds read as infinite: only the gap needs them, and it is not asked for then."""
+        x, lam, G = self.x, self.lam, self.G
+        assert x is not None and lam is not None and G is not None  # the callers check
+        inputs = (self.problem.P, self.problem.q, G, x, lam, self.lower, self.upper)
         cached = self.__dict__.get("_kkt_cache")
-        if cached is None or cached[0] is not x or cached[1] is not lam or cached[2] is not P:
-            assert x is not None and lam is not None and self.G is not None  # the callers check
-            assert self.lower is not None and self.upper is not None
+        if cached is None or any(a is not b for a, b in zip(cached[0], inputs, strict=True)):
+            m = lam.shape[0]
+            lower = self.lower if self.lower is not None else np.full(m, -np.inf)
+            upper = self.upper if self.upper is not None else np.full(m, np.inf)
             f64 = functools.partial(np.ascontiguousarray, dtype=np.float64)
-            residuals = _avp_rust.kkt_residuals(f64(P), f64(self.problem.q), f64(self.G), f64(x), f64(lam),
-                                                 f64(self.lower), f64(self.upper))
-            cached = (x, lam, P, residuals)
+            residuals = _avp_rust.kkt_residuals(f64(self.problem.P), f64(self.problem.q), f64(G), f64(x), f64(lam),
+                                                 f64(lower), f64(upper))
+            cached = (inputs, residuals)
             self.__dict__["_kkt_cache"] = cached
-        return cached[3]
+        return cached[1]
 
     def dual_residual(self) -> float:
         """``max |P x + q + G^T lam|`` (0 for an empty ``x``)."""
@@ -221,7 +230,8 @@ class TwoSidedSolution(qpsolvers.Solution):
     def duality_gap(self) -> float:
         """``|x^T P x + q^T x + upper^T lam^+ + lower^T lam^-|``: only active sides carry
         multipliers, so an infinite bound never multiplies a nonzero one."""
-        if not self.found or self.x is None or self.lam is None or self.lower is None or self.upper is None:
+        if not self.found or self.x is None or self.lam is None or self.G is None or self.lower is None \
+                or self.upper is None:
             return math.inf
         return self._kkt()[1]
 
@@ -233,7 +243,8 @@ def _solve_two_sided(H: Array, g: Array, G: Array, lower: Array, upper: Array,
     ``ldp``: the same QP as a least-distance problem (:meth:`PerchingQp.least_distance`), which
     DAQP is then given (an identity Hessian: it skips the factorisation and row transformation
     it would otherwise do at every call); the solution is mapped back, ``z = R^-1 u``, and
-    judged in ``z`` as always. The multipliers are those of the same rows."""
+    judged in ``z`` as always. The multipliers are those of the same rows. A DAQP setting that
+    lives in the variables' space (:data:`_VARIABLE_OPTIONS`) sends the QP in ``z`` instead."""
     import daqp  # type: ignore[import-not-found]
 
     options = {k: v for k, v in options.items() if k != "verbose"}  # a qpsolvers keyword
@@ -241,6 +252,8 @@ def _solve_two_sided(H: Array, g: Array, G: Array, lower: Array, upper: Array,
     bl = np.where(np.isfinite(lower), lower, -_INF)
     sense = np.zeros(G.shape[0], dtype=np.intc)
     t0 = time.perf_counter()
+    if ldp is not None and not _VARIABLE_OPTIONS.isdisjoint(options):
+        ldp = None  # a primal start or proximal term is given in z: DAQP gets the QP in z
     if ldp is not None:
         x, obj, exitflag, info = daqp.solve(np.eye(H.shape[0]), ldp.v, ldp.M, bu, bl, sense, **options)
     else:
@@ -248,7 +261,7 @@ def _solve_two_sided(H: Array, g: Array, G: Array, lower: Array, upper: Array,
     solution = TwoSidedSolution(qpsolvers.Problem(P=H, q=g), G=G, lower=lower, upper=upper)
     solution.found = exitflag > 0
     if solution.found:
-        solution.x, solution.obj = (ldp.R_inv @ x if ldp is not None else x), obj
+        solution.x, solution.obj = (ldp.reduced(x) if ldp is not None else x), obj
         solution.lam = info["lam"]
         solution.z = np.concatenate([np.maximum(solution.lam, 0.0), -np.minimum(solution.lam, 0.0)])
     solution.solve_time = time.perf_counter() - t0
@@ -294,7 +307,8 @@ def _writable(M: Any) -> Any:
 def incompatibility(outcome: QpOutcome | None) -> str | None:
     """Why a FoV-constrained solve counts as incompatible (16), or ``None`` if it is accepted:
     no solution, a primal violation above :data:`FEASIBILITY_TOL`, or a dual residual / duality
-    gap of the returned ``qpsolvers.Solution`` above :data:`KKT_TOL`."""
+    gap of the returned ``qpsolvers.Solution`` above :data:`KKT_TOL` or NaN (an infinite one is
+    qpsolvers' "not defined", a back-end that returned no multipliers: the primal check stands)."""
     if outcome is None:
         return "no outcome"
     if not outcome.ok:
@@ -307,7 +321,7 @@ def incompatibility(outcome: QpOutcome | None) -> str | None:
             val = float(getattr(sol, name)())
         except (ValueError, TypeError, AttributeError):  # no multipliers: the primal check stands
             continue
-        if math.isfinite(val) and val > KKT_TOL:
+        if math.isnan(val) or (math.isfinite(val) and val > KKT_TOL):  # inf: not defined (qpsolvers)
             return f"KKT {name.replace('_', ' ')} {val:.1e} > {KKT_TOL:.0e}"
     return None
 
@@ -387,4 +401,5 @@ def _max_violation(qp: PerchingQp, c_hat: Array, G: Array, lo: Array, hi: Array)
     residual over ``max(1, |bound|)``; an infinite bound is never violated), by the Rust kernel:
     NaN when a residual is NaN (then not SOLVED)."""
     A, b = qp.stacked_equalities()
-    return float(_avp_rust.max_violation(np.ascontiguousarray(c_hat, dtype=np.float64), A, b, G, lo, hi))
+    f64 = functools.partial(np.ascontiguousarray, dtype=np.float64)  # no copy of the planner's own rows
+    return float(_avp_rust.max_violation(f64(c_hat), f64(A), f64(b), f64(G), f64(lo), f64(hi)))

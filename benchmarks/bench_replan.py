@@ -13,9 +13,10 @@ Runs ``avp.sim.run.simulate`` in ``Mode.AVP`` for every seed, distance and incli
 scheduler's slices; the wall figures are printed too) and counts the garbage collections that ran
 inside it. ``--gc-between-steps`` turns the cyclic collector off inside each step and on again
 after it: a collection that falls due then runs at the loop's next allocation, between steps, as
-a real-time loop schedules it (the README, "Replanning in a loop"). Every step is reported, the initial plan apart: the ``HELD`` and
-``FROZEN_NEAR_CONTACT`` steps that need no solve are real cycles of the 30 Hz loop. Then the
-steps that solve, with their solves per step, by action.
+a real-time loop schedules it (the README's paragraph on ``ReplanConfig(deadline=...)``).
+Every step is reported, the initial plan apart: the ``HELD`` and ``FROZEN_NEAR_CONTACT`` steps
+that need no solve are real cycles of the 30 Hz loop. Then the steps that solve, with their
+solves per step, by action.
 
 Baseline in the same run: after each simulation, every planning call the steps made
 (``plan_detailed`` at the same start state, goal, durations and previous plan) is repeated bare,
@@ -95,11 +96,13 @@ class TimedReplanner(Replanner):
         between = TimedReplanner.collect_between_steps and gc.isenabled()
         if between:
             gc.disable()
-        w0, c0 = time.perf_counter(), time.thread_time()
-        s = super().step(t, odometry, target_estimate)
-        c1, w1 = time.thread_time(), time.perf_counter()
-        if between:  # a collection that fell due runs at the next allocation, outside the step
-            gc.enable()
+        try:
+            w0, c0 = time.perf_counter(), time.thread_time()
+            s = super().step(t, odometry, target_estimate)
+            c1, w1 = time.thread_time(), time.perf_counter()
+        finally:
+            if between:  # a collection that fell due runs at the next allocation, outside the step
+                gc.enable()
         _STAGE_ON[0] = None
         traj = self.trajectory
         TimedReplanner.records.append(dict(

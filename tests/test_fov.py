@@ -525,3 +525,32 @@ def test_fov_blocks_read_column_major_inputs_as_their_values() -> None:
     for b_c, b_f in zip(c_order.blocks, f_order.blocks, strict=True):
         np.testing.assert_array_equal(b_f.matrix, b_c.matrix)
         np.testing.assert_array_equal(b_f.upper, b_c.upper)
+
+
+def test_fov_rows_of_integer_knots_and_times_are_those_of_their_values() -> None:
+    """``fov_rows`` keys its cached point basis on the float64 bytes of the knots and times: a
+    caller's integer knots (``FovRowInputs`` is public) give the rows of the same values as
+    floats, and a second call with other times or rotor drag is not served the first one's
+    basis."""
+    from dataclasses import replace
+
+    from avp.qp.fov import fov_rows
+
+    layout = avp.qp.layout.layout_for(3, 7)
+    for seed in range(50):  # the first case with points placed in two segments at least
+        rng = np.random.default_rng(seed)
+        x, psi, a, s = _random_fov_case(rng, 8)
+        x[0] += 0.5
+        rows = fov_blocks(layout, np.array([0.0, 1.0, 2.0, 3.0]), np.sort(rng.uniform(0.0, 3.0, 8)), x, psi, a, s,
+                          FovConfig()).rows
+        if rows is not None and np.unique(np.floor(rows.times)).size > 1:
+            break
+    assert rows is not None and np.unique(np.floor(rows.times)).size > 1
+    floats = fov_rows(rows)
+    integers = fov_rows(replace(rows, knots_rel=np.array([0, 1, 2, 3])))
+    for b_f, b_i in zip(floats, integers, strict=True):
+        np.testing.assert_array_equal(b_i.matrix, b_f.matrix)
+    shifted = fov_rows(replace(rows, times=rows.times * 0.5))  # other times: another basis
+    assert not np.array_equal(shifted[0].matrix, floats[0].matrix)
+    with_drag = fov_rows(replace(rows, rotor_drag=0.3))  # the acceleration columns carry b2 + d b1
+    assert not np.array_equal(with_drag[0].matrix, floats[0].matrix)

@@ -200,13 +200,27 @@ def test_incremental_reduction_equals_a_fresh_one() -> None:
     # the new rows', the same as a fresh QP's to rounding, with the parent's factor
     assert "_least_distance" in base.__dict__
     la, lb = child.least_distance(), fresh.least_distance()
-    assert la is not None and lb is not None and la.R_inv is base.least_distance().R_inv
+    assert la is not None and lb is not None and la.R is base.least_distance().R
     np.testing.assert_allclose(la.M, lb.M, rtol=1e-12, atol=1e-12 * float(np.abs(lb.M).max()))
     np.testing.assert_allclose(la.v, lb.v, rtol=1e-12, atol=1e-12 * float(np.abs(lb.v).max()))
     parent = base.least_distance()
     assert la.M[:parent.M.shape[0]].tobytes() == parent.M.tobytes() and la.v is parent.v
     same = base.with_inequalities()  # no new rows: the parent's rows
     assert same.least_distance().M is base.least_distance().M
+    # the planner's order: a second child stacked before it is reduced takes its new rows as
+    # views of its stacked rows; the same reduction, bit for bit
+    second = base.with_inequalities(*lin.blocks)
+    second.stacked_inequalities()
+    c = second.reduce()
+    assert "_stacked_inequalities" in second.__dict__
+    for name in ("G", "lower", "upper"):
+        assert getattr(c, name).tobytes() == getattr(a, name).tobytes(), name
+    # a child whose factor is another object (not the parent's) does not take the parent's rows
+    third = base.with_inequalities(*lin.blocks)
+    third.__dict__["_cholesky"] = base.least_distance().R.copy()
+    lt = third.least_distance()
+    assert lt is not None and lt.M is not parent.M and not np.shares_memory(lt.M, parent.M)
+    np.testing.assert_allclose(lt.M, la.M, rtol=1e-12, atol=1e-12 * float(np.abs(la.M).max()))
 
 
 @settings(max_examples=200, deadline=None)
@@ -387,23 +401,29 @@ def test_proxqp_meets_the_reduced_optimum_in_the_full_form_where_daqp_did_not():
 
 
 @settings(max_examples=100, deadline=None)
-@given(n=st.integers(1, 12), seed=st.integers(0, 2**32 - 1), shift=st.floats(1e-3, 10.0))
-def test_inverse_cholesky_whitens_the_hessian(n, seed, shift) -> None:
-    """``inverse_cholesky(H)`` is ``R^-1`` with ``H = R^T R``: upper triangular, and
-    ``R^-T H R^-1 = I`` to rounding (scaled by ``H``'s condition number); computed once per
-    read-only Hessian that owns its data, and ``None`` for a matrix with no Cholesky factor."""
+@given(n=st.integers(1, 12), seed=st.integers(0, 2**32 - 1), shift=st.floats(1e-3, 10.0), m=st.integers(0, 8))
+def test_the_least_distance_form_is_the_reduced_qp_whitened(n, seed, shift, m) -> None:
+    """``cholesky_factor(H)`` is the upper triangular ``R`` with ``R^T R = H`` (read-only;
+    ``None`` for a matrix with no factor), and the least-distance form's rows and linear term are
+    ``G R^-1`` and ``R^-T g`` (checked against NumPy's general solver), with ``reduced(R z) =
+    z``: the same QP in ``u = R z``."""
     import numpy as np
 
-    from avp.qp.assemble import inverse_cholesky
+    from avp.qp.assemble import LeastDistanceQp, _rows_over, _solve_upper, cholesky_factor
 
     rng = np.random.default_rng(seed)
     B = rng.standard_normal((n, n))
     H = B @ B.T + shift * np.eye(n)
-    H.setflags(write=False)
-    R_inv = inverse_cholesky(H)
-    assert R_inv is not None and not R_inv.flags.writeable
-    assert np.array_equal(R_inv, np.triu(R_inv))
-    np.testing.assert_allclose(R_inv.T @ H @ R_inv, np.eye(n), atol=1e-12 * np.linalg.cond(H))
-    assert inverse_cholesky(H) is R_inv  # cached
-    assert inverse_cholesky(-H) is None  # negative definite: no factor
-    assert inverse_cholesky(np.zeros((0, 0))) is None
+    R = cholesky_factor(H)
+    assert R is not None and not R.flags.writeable
+    assert np.array_equal(R, np.triu(R))
+    np.testing.assert_allclose(R.T @ R, H, rtol=1e-12, atol=1e-12 * np.abs(H).max())
+    G, g, z = rng.standard_normal((m, n)), rng.standard_normal(n), rng.standard_normal(n)
+    ldp = LeastDistanceQp(R, _rows_over(R, G), _solve_upper(R, g, transposed=True))
+    assert ldp.M.shape == (m, n) and ldp.M.flags.c_contiguous and ldp.M.flags.writeable  # DAQP's buffers
+    scale = np.linalg.cond(R)
+    np.testing.assert_allclose(ldp.M, np.linalg.solve(R.T, G.T).T, atol=1e-12 * scale * max(1.0, float(np.abs(G).max(initial=0.0))))
+    np.testing.assert_allclose(ldp.v, np.linalg.solve(R.T, g), atol=1e-12 * scale * max(1.0, np.abs(g).max()))
+    np.testing.assert_allclose(ldp.reduced(R @ z), z, atol=1e-12 * scale * max(1.0, np.abs(z).max()))
+    assert cholesky_factor(-H) is None  # negative definite: no factor
+    assert cholesky_factor(np.zeros((0, 0))) is None

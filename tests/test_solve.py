@@ -90,8 +90,11 @@ def test_direct_two_sided_daqp_matches_the_qpsolvers_path(incline) -> None:
     # and multipliers, to the rounding of the transformation
     ldp = qp.with_inequalities(*lin.blocks).least_distance()
     assert ldp is not None
+    M, v = ldp.M.copy(), ldp.v.copy()
     via_ldp = solve._solve_two_sided(red.H, red.g, red.G, red.lower, red.upper, {}, ldp)
     assert via_ldp.found
+    # DAQP takes writable buffers only; it leaves the cached rows as they were
+    assert np.array_equal(ldp.M, M) and np.array_equal(ldp.v, v)
     np.testing.assert_allclose(via_ldp.x, reference.x, rtol=1e-9, atol=1e-9)
     np.testing.assert_allclose(via_ldp.lam, solve._solve_two_sided(red.H, red.g, red.G, red.lower, red.upper, {}).lam,
                                rtol=1e-7, atol=1e-9)
@@ -188,22 +191,124 @@ def test_kkt_residuals_kernel_against_exact_arithmetic(data, n, m) -> None:
     assert abs(gap - float(exact_gap)) <= 16 * (n + m + 2) * 2.0**-52 * mag_gap
 
 
-@pytest.mark.parametrize("call", [
-    lambda r, np: r.max_violation(np.zeros(2), np.zeros((1, 3)), np.zeros(1), np.zeros((0, 2)), np.zeros(0), np.zeros(0)),
-    lambda r, np: r.max_violation(np.zeros(2), np.zeros((0, 2)), np.zeros(0), np.zeros((1, 2)), np.zeros(1), np.zeros(2)),
-    lambda r, np: r.kkt_residuals(np.eye(2), np.zeros(2), np.zeros((1, 2)), np.zeros(2), np.zeros(2), np.zeros(1),
-                                  np.zeros(1)),
-    lambda r, np: r.max_violation(np.zeros(2), np.zeros((2, 2), order="F"), np.zeros(2), np.zeros((0, 2)),
-                                  np.zeros(0), np.zeros(0)),
-], ids=["a columns", "upper length", "g rows", "column-major a"])
-def test_qp_check_kernels_name_a_bad_argument(call) -> None:
+@pytest.mark.parametrize("call, arg", [
+    (lambda r, np: r.max_violation(np.zeros(2), np.zeros((1, 3)), np.zeros(1), np.zeros((0, 2)), np.zeros(0),
+                                   np.zeros(0)), "a"),
+    (lambda r, np: r.max_violation(np.zeros(2), np.zeros((0, 2)), np.zeros(0), np.zeros((1, 2)), np.zeros(1),
+                                   np.zeros(2)), "upper"),
+    (lambda r, np: r.max_violation(np.zeros(2), np.zeros((0, 2)), np.zeros(0), np.zeros((3, 2)), np.zeros(2),
+                                   np.zeros(2)), "lower"),
+    (lambda r, np: r.max_violation(np.zeros(0), np.zeros((3, 0)), np.zeros(1), np.zeros((0, 0)), np.zeros(0),
+                                   np.zeros(0)), "b"),
+    (lambda r, np: r.kkt_residuals(np.eye(2), np.zeros(2), np.zeros((1, 2)), np.zeros(2), np.zeros(2), np.zeros(1),
+                                   np.zeros(1)), "lam"),
+    (lambda r, np: r.kkt_residuals(np.zeros((0, 0)), np.zeros(0), np.zeros((3, 0)), np.zeros(0), np.zeros(1),
+                                   np.zeros(1), np.zeros(1)), "lam"),
+    (lambda r, np: r.kkt_residuals(np.eye(3)[:2], np.zeros(3), np.zeros((0, 3)), np.zeros(3), np.zeros(0), np.zeros(0),
+                                   np.zeros(0)), "h"),
+    (lambda r, np: r.max_violation(np.zeros(2), np.zeros((2, 2), order="F"), np.zeros(2), np.zeros((0, 2)),
+                                   np.zeros(0), np.zeros(0)), "a"),
+], ids=["a columns", "upper length", "lower length", "b length without columns", "g rows", "g rows without columns",
+        "h rows", "column-major a"])
+def test_qp_check_kernels_name_a_bad_argument(call, arg) -> None:
     import numpy as np
 
     from avp import _avp_rust
 
     with pytest.raises(_avp_rust.KernelError) as exc:
         call(_avp_rust, np)
-    assert exc.value.arg in {"a", "upper", "g"}
+    assert exc.value.arg == arg
+
+
+def test_a_nan_multiplier_is_incompatible_not_a_pass() -> None:
+    """A NaN multiplier makes the dual residual and duality gap NaN, and the fallback check (16)
+    calls the solve incompatible; a back-end that returns no multipliers (qpsolvers' ``inf``,
+    "not defined") is judged by its primal check alone."""
+    import math
+
+    import numpy as np
+    import qpsolvers
+
+    from avp import _avp_rust
+
+    dual, gap = _avp_rust.kkt_residuals(np.eye(2), np.zeros(2), np.eye(2), np.zeros(2), np.array([math.nan, 0.0]),
+                                        np.zeros(2), np.ones(2))
+    assert math.isnan(dual) and math.isnan(gap)
+    sol = solve.TwoSidedSolution(qpsolvers.Problem(P=np.eye(2), q=np.zeros(2)), G=np.eye(2), lower=np.zeros(2),
+                                 upper=np.ones(2))
+    sol.found, sol.x, sol.lam = True, np.zeros(2), np.array([math.nan, 0.0])
+    outcome = solve.QpOutcome(status=solve.QpStatus.SOLVED, c_hat=np.zeros(2), solver="daqp", build_time=0.0,
+                              solve_time=0.0, max_violation=0.0, solution=sol)
+    assert "dual residual nan" in (solve.incompatibility(outcome) or "")
+    no_duals = qpsolvers.Solution(qpsolvers.Problem(P=np.eye(2), q=np.zeros(2), G=np.eye(2), h=np.ones(2)))
+    no_duals.found, no_duals.x = True, np.zeros(2)  # no z: qpsolvers says inf
+    assert no_duals.dual_residual() == math.inf
+    assert solve.incompatibility(dataclasses.replace(outcome, solution=no_duals)) is None
+
+
+def test_the_kkt_figures_follow_every_array_they_read() -> None:
+    """The residuals are recomputed when any array they read is replaced (not only ``x``)."""
+    import numpy as np
+    import qpsolvers
+
+    sol = solve.TwoSidedSolution(qpsolvers.Problem(P=np.eye(2), q=np.zeros(2)), G=np.eye(2), lower=np.zeros(2),
+                                 upper=np.ones(2))
+    sol.found, sol.x, sol.lam = True, np.ones(2), np.ones(2)
+    assert sol.dual_residual() == 2.0  # x + lam
+    sol.G = 2.0 * np.eye(2)
+    assert sol.dual_residual() == 3.0
+    sol.upper = 2.0 * np.ones(2)
+    assert sol.duality_gap() == 2.0 + 4.0  # x.x + upper.lam
+    sol.lower = None  # the gap needs both bounds; the dual residual does not
+    assert sol.duality_gap() == float("inf") and sol.dual_residual() == 3.0
+
+
+def test_rows_of_any_order_and_dtype_are_judged_not_refused() -> None:
+    """A QP with a column-major or integer inequality block (``ConstraintBlock`` is public) is
+    solved and judged as before: the acceptance check takes any real array."""
+    import numpy as np
+
+    from avp.qp.assemble import ConstraintBlock
+
+    sc = standard(60, 3.5)
+    cfg = PlannerConfig()
+    from avp.timing import initial_durations
+
+    qp = avp.qp.build_perching_qp(sc.state, sc.target, cfg, initial_durations(sc.state, sc.target, cfg))
+    n = qp.layout.n_variables
+    row = np.zeros((1, n), dtype=np.int64)
+    row[0, 0] = 1
+    for block in (ConstraintBlock("column-major", np.asfortranarray(np.eye(2, n)), np.full(2, -1e3), np.full(2, 1e3)),
+                  ConstraintBlock("integer", row, np.array([-1000]), np.array([1000]))):
+        out = solve.solve_perching_qp(qp.with_inequalities(block), cfg)
+        assert out.ok and out.max_violation < solve.FEASIBILITY_TOL
+
+
+def test_a_primal_start_is_read_in_the_variables_it_was_given_in(monkeypatch) -> None:
+    """With a DAQP setting that depends on the variables (``primal_start``, ``eps_prox``), DAQP
+    gets the reduced QP itself, not its least-distance form, and the solution is the same."""
+    import daqp
+    import numpy as np
+
+    from avp.timing import initial_durations
+
+    sc = standard(60, 3.5)
+    cfg = PlannerConfig()
+    qp = avp.qp.build_perching_qp(sc.state, sc.target, cfg, initial_durations(sc.state, sc.target, cfg))
+    red, ldp = qp.reduce(), qp.least_distance()
+    assert ldp is not None
+    hessians = []
+    real = daqp.solve
+
+    def spy(H, *args, **kwargs):
+        hessians.append(np.array(H))
+        return real(H, *args, **kwargs)
+
+    monkeypatch.setattr(daqp, "solve", spy)
+    plain = solve._solve_two_sided(red.H, red.g, red.G, red.lower, red.upper, {}, ldp)
+    started = solve._solve_two_sided(red.H, red.g, red.G, red.lower, red.upper, {"primal_start": plain.x}, ldp)
+    assert np.array_equal(hessians[0], np.eye(red.H.shape[0])) and np.array_equal(hessians[1], red.H)
+    np.testing.assert_allclose(started.x, plain.x, rtol=1e-8, atol=1e-9)
 
 
 def test_a_nan_residual_is_a_violation_not_a_pass() -> None:
@@ -218,3 +323,16 @@ def test_a_nan_residual_is_a_violation_not_a_pass() -> None:
     v = _avp_rust.max_violation(np.array([1e308, 1e308]), np.zeros((0, 2)), np.zeros(0), np.ones((1, 2)),
                                 np.array([-math.inf]), np.array([math.inf]))
     assert math.isnan(v) and not v <= solve.FEASIBILITY_TOL
+    # through the planner's judge of a solve: a row that overflows at the solution, not SOLVED
+    from avp.timing import initial_durations
+
+    sc = standard(60, 3.5)
+    cfg = PlannerConfig()
+    qp = avp.qp.build_perching_qp(sc.state, sc.target, cfg, initial_durations(sc.state, sc.target, cfg))
+    out = solve.solve_perching_qp(qp, cfg)
+    assert out.ok
+    G, lo, hi = qp.stacked_inequalities()
+    big = np.full((1, G.shape[1]), 1e308)
+    judged = solve._outcome(qp, cfg, qp.reduce(), out.solution, np.vstack([G, big]), np.append(lo, -math.inf),
+                            np.append(hi, math.inf), 0.0, 0.0)
+    assert judged.status is solve.QpStatus.INACCURATE and math.isnan(judged.max_violation)

@@ -38,6 +38,7 @@ from functools import cached_property
 import numpy as np
 import numpy.typing as npt
 import scipy.linalg
+import scipy.linalg.blas
 import scipy.linalg.lapack
 
 from .._typing import Array
@@ -76,6 +77,11 @@ class _Factor:
     H: Array  # scaled, symmetrised Z^T P Z
     scale: float
     G: Array  # Z^T P Z, not scaled (a further elimination inside Z starts from it)
+
+    @cached_property
+    def cholesky(self) -> Array | None:
+        """:func:`cholesky_factor` of :attr:`H`, computed once per cached factorisation."""
+        return cholesky_factor(self.H)
 
 
 _FACTORS: OrderedDict[tuple[object, ...], list[_Factor]] = OrderedDict()
@@ -240,6 +246,11 @@ class _Within:
         H.setflags(write=False)
         return scale, H
 
+    @cached_property
+    def cholesky(self) -> Array | None:
+        """:func:`cholesky_factor` of the scaled Hessian of :attr:`scaled`, computed once per entry."""
+        return cholesky_factor(self.scaled[1])
+
 
 _WITHIN: OrderedDict[tuple[object, ...], _Within] = OrderedDict()
 """Second-stage factorisations by ``(id(Z0), id(G0), A_t's shape and bytes)``, least recently
@@ -326,6 +337,13 @@ def eliminate_within(Z0: Array, c0: Array, G0: Array, P: Array, A_t: Array, b_t:
     Raises :class:`InfeasibleError` (``inconsistent``, formatted with the residual) when the rows
     ``A_t`` cannot be met inside the null space.
     """
+    return _eliminate_within(Z0, c0, G0, P, A_t, b_t, M, inconsistent, cache)[:4]
+
+
+def _eliminate_within(Z0: Array, c0: Array, G0: Array, P: Array, A_t: Array, b_t: Array, M: Array | None,
+                      inconsistent: str, cache: bool) -> tuple[Array, Array, Array, Array, _Within | None]:
+    """:func:`eliminate_within`, and the entry whose cached Hessian it returned (``None`` with a
+    slip cost ``M``: the Hessian is then computed here)."""
     w = _within(Z0, G0, A_t, cache)
     rhs = b_t - A_t @ c0
     w_p = w.Q1 @ _solve_transposed_upper(w.R1, rhs[w.piv])
@@ -337,60 +355,61 @@ def eliminate_within(Z0: Array, c0: Array, G0: Array, P: Array, A_t: Array, b_t:
     Pc = P @ c_p
     if M is None:  # the cost's Hessian in the null space, scaled, is the cached entry's
         scale, H = w.scaled
-        return Z, c_p, H, scale * (Z.T @ Pc)
+        return Z, c_p, H, scale * (Z.T @ Pc), w
     MZ = M @ Z
     H = w.G + MZ.T @ MZ
     Pc = Pc + M.T @ (M @ c_p)
     scale = _unit_diagonal_scale(H)
-    return Z, c_p, (0.5 * scale) * (H + H.T), scale * (Z.T @ Pc)
+    return Z, c_p, (0.5 * scale) * (H + H.T), scale * (Z.T @ Pc), None
 
 
-_INVERSE_CHOLESKY: OrderedDict[int, tuple[Array, Array | None]] = OrderedDict()
-"""``R^-1`` of cached reduced Hessians by identity (:func:`inverse_cholesky`); each entry keeps
-its Hessian alive, so an id is not reused while it is here."""
-
-
-def inverse_cholesky(H: Array) -> Array | None:
-    """``R^-1`` (upper triangular, read-only) with ``H = R^T R`` the Cholesky factorisation, by
-    LAPACK potrf and trtri; ``None`` when ``H`` is empty or not numerically positive definite.
+def cholesky_factor(H: Array) -> Array | None:
+    """``R`` (upper triangular, Fortran-ordered, read-only) with ``H = R^T R``, by LAPACK potrf on
+    the upper triangle of the symmetric ``H``; ``None`` when ``H`` is empty or potrf finds it not
+    positive definite.
 
     With ``u = R z`` the reduced QP ``min 1/2 z^T H z + g^T z`` s.t. ``lower <= G z <= upper``
     is the least-distance problem ``min 1/2 |u|^2 + (R^-T g)^T u`` s.t. ``lower <= G R^-1 u <=
-    upper``: DAQP's own form (Arnström, Bemporad and Axehill, "A dual active-set solver for
-    embedded quadratic programming using recursive LDL^T updates"), which it otherwise builds
-    from ``H`` at every call. Computed once per read-only Hessian that owns its data (the
-    elimination's cached ones: every QP of a time search, of an SQP and of a replan at the same
-    durations shares it)."""
+    upper`` (:class:`LeastDistanceQp`): DAQP's own form (Arnström, Bemporad and Axehill, "A
+    dual active-set solver for embedded quadratic programming using recursive LDL^T updates"),
+    which it otherwise builds from ``H`` at every call."""
     if H.size == 0:
         return None
-    owned = _owned(H)
-    if owned:
-        with _FACTORS_LOCK:
-            hit = _INVERSE_CHOLESKY.get(id(H))
-            if hit is not None and hit[0] is H:
-                _INVERSE_CHOLESKY.move_to_end(id(H))
-                return hit[1]
     R, info = scipy.linalg.lapack.dpotrf(H, lower=0, clean=1)
-    Rinv: Array | None = None
-    if info == 0:
-        Rinv, info = scipy.linalg.lapack.dtrtri(R, lower=0)
-        Rinv = _read_only(np.ascontiguousarray(Rinv)) if info == 0 and np.isfinite(Rinv).all() else None
-    if owned:
-        with _FACTORS_LOCK:
-            _INVERSE_CHOLESKY[id(H)] = (H, Rinv)
-            while len(_INVERSE_CHOLESKY) > ELIMINATION_CACHE_SIZE:
-                _INVERSE_CHOLESKY.popitem(last=False)
-    return Rinv
+    if info != 0 or not np.isfinite(R).all():
+        return None
+    return _read_only(R)
+
+
+def _solve_upper(R: Array, b: Array, transposed: bool = False) -> Array:
+    """``x`` with ``R x = b`` (``R^T x = b`` when ``transposed``) for the upper triangular,
+    nonsingular ``R`` of :func:`cholesky_factor` (BLAS trsv)."""
+    return np.asarray(scipy.linalg.blas.dtrsv(R, b, lower=0, trans=int(transposed)))
 
 
 @dataclass(frozen=True)
 class LeastDistanceQp:
-    """The reduced QP in ``u = R z`` (:func:`inverse_cholesky`): ``min 1/2 |u|^2 + v^T u`` s.t.
-    ``lower <= M u <= upper`` (the reduced QP's bounds), with ``z = R_inv u``."""
+    """The reduced QP in ``u = R z`` (:func:`cholesky_factor`): ``min 1/2 |u|^2 + v^T u`` s.t.
+    ``lower <= M u <= upper`` (the reduced QP's bounds). ``M`` and ``v`` are computed by
+    triangular solves (``M R = G``, ``R^T v = g``), not through ``R^-1``, and ``M`` is shared with
+    the copies of its QP: a row-major, writable buffer (DAQP takes no other) that nothing may
+    write."""
 
-    R_inv: Array
+    R: Array
     M: Array  # G R^-1
     v: Array  # R^-T g
+
+    def reduced(self, u: Array) -> Array:
+        """``z = R^-1 u`` (the reduced QP's variable)."""
+        return _solve_upper(self.R, u)
+
+
+def _rows_over(R: Array, G: Array) -> Array:
+    """``G R^-1``, row-major and writable, by a triangular solve (BLAS trsm: ``R^T X = G^T``
+    on the column-major view ``G^T``, and ``X^T`` is row-major)."""
+    if G.shape[0] == 0:
+        return np.zeros((0, R.shape[0]))
+    return np.asarray(scipy.linalg.blas.dtrsm(1.0, R, G.T, side=0, lower=0, trans_a=1).T)
 
 
 def _unit_diagonal_scale(H: Array) -> float:
@@ -513,7 +532,8 @@ class PerchingQp:
 
     def _same_equalities(self, other: PerchingQp) -> PerchingQp:
         """``other`` has this QP's cost and equalities: hand over the elimination if computed."""
-        for name in ("elimination", "_stacked_equalities", "knots_rel", "_increasing", "_physical_scale"):
+        for name in ("elimination", "_hessian_owner", "_cholesky", "_stacked_equalities", "knots_rel", "_increasing",
+                     "_physical_scale"):
             if name in self.__dict__:
                 other.__dict__[name] = self.__dict__[name]
         return other
@@ -544,12 +564,14 @@ class PerchingQp:
             f = _factor(A1, self.P)
             c0 = _particular(f, np.concatenate([blk.lower for blk in fixed]))
             rest = tuple(blk for blk in blocks if not _owned(blk.matrix))
-            Z, c_p, H, g = eliminate_within(f.Z, c0, f.G, self.P, np.concatenate([blk.matrix for blk in rest]),
-                                            np.concatenate([blk.lower for blk in rest]), inconsistent=_INCONSISTENT)
+            Z, c_p, H, g, owner = _eliminate_within(f.Z, c0, f.G, self.P, np.concatenate([blk.matrix for blk in rest]),
+                                                    np.concatenate([blk.lower for blk in rest]), None, _INCONSISTENT, True)
+            self.__dict__["_hessian_owner"] = owner
         else:
             f = _factor(A, self.P)
             c_p = _particular(f, b)
             Z, H, g = f.Z, f.H, f.scale * (f.PZ.T @ c_p)
+            self.__dict__["_hessian_owner"] = f
         residual = float(np.abs(A @ c_p - b).max()) if m else 0.0
         if residual > 1e-8 * max(1.0, float(np.abs(b).max()) if m else 0.0):
             raise InfeasibleError(_INCONSISTENT.format(residual))
@@ -564,23 +586,33 @@ class PerchingQp:
     def least_distance(self) -> LeastDistanceQp | None:
         """The reduced QP as a least-distance problem (:class:`LeastDistanceQp`), or ``None``
         when its Hessian has no Cholesky factor. Computed once per QP; a copy made by
-        :meth:`with_inequalities` transforms only its new rows when this QP's exists."""
+        :meth:`with_inequalities` transforms only its new rows when this QP's exists, and
+        copies with this QP's equalities share its factor."""
         return self._least_distance
 
     @cached_property
+    def _cholesky(self) -> Array | None:
+        """:func:`cholesky_factor` of the reduced Hessian: the cached factorisation's own when
+        the Hessian is one (``_hessian_owner``, set by :attr:`elimination`), computed here
+        otherwise; handed to copies with the same equalities (:meth:`_same_equalities`)."""
+        H = self.elimination[2]
+        owner = self.__dict__.get("_hessian_owner")
+        return owner.cholesky if owner is not None else cholesky_factor(H)
+
+    @cached_property
     def _least_distance(self) -> LeastDistanceQp | None:
-        red = self._reduced
-        R_inv = inverse_cholesky(red.H)
-        if R_inv is None:
+        R = self._cholesky
+        if R is None:
             return None
+        red = self._reduced
         parent = self.__dict__.get("_parent")
         if parent is not None and parent.__dict__.get("_least_distance") is not None:
             p = parent._least_distance
             k = p.M.shape[0]
-            if p.R_inv is R_inv and parent._reduced.g is red.g and k <= red.G.shape[0]:
-                M = p.M if k == red.G.shape[0] else np.concatenate([p.M, red.G[k:] @ R_inv], axis=0)
-                return LeastDistanceQp(R_inv, M, p.v)
-        return LeastDistanceQp(R_inv, red.G @ R_inv, R_inv.T @ red.g)
+            if p.R is R and parent._reduced.g is red.g and k <= red.G.shape[0]:
+                M = p.M if k == red.G.shape[0] else np.concatenate([p.M, _rows_over(R, red.G[k:])], axis=0)
+                return LeastDistanceQp(R, M, p.v)
+        return LeastDistanceQp(R, _rows_over(R, red.G), _solve_upper(R, red.g, transposed=True))
 
     @cached_property
     def _reduced(self) -> ReducedQp:

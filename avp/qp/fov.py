@@ -16,6 +16,7 @@ are linear rows on the QP. All blocks are named ``"fov ..."`` so ``qp.without("f
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field
 from functools import cached_property, lru_cache
@@ -166,7 +167,9 @@ def fov_rows(inp: FovRowInputs) -> tuple[ConstraintBlock, ...]:
     if k == 0:
         return ()
     fov, layout = inp.fov, inp.layout
-    seg, p0, p2 = _point_basis(layout, inp.knots_rel.tobytes(), inp.times.tobytes(), float(inp.rotor_drag))
+    as_key = functools.partial(np.ascontiguousarray, dtype=np.float64)  # the cache's keys are float64 bytes
+    seg, p0, p2 = _point_basis(layout, as_key(inp.knots_rel).tobytes(), as_key(inp.times).tobytes(),
+                               float(inp.rotor_drag))
     row8, Rx, Ra, Ryaw = _avp_rust.fov_row_matrices(
         layout.n_segments, seg, p0, p2,
         np.ascontiguousarray(inp.gx), np.ascontiguousarray(inp.ga), np.ascontiguousarray(inp.gp),

@@ -2,8 +2,8 @@
 //!
 //! Pure functions on plain slices: spline evaluation ([`spline`]), polynomial algebra ([`poly`]),
 //! Sturm sequences and bound certificates (`sturm`, `certify`, `exact`), workspace
-//! certificates (`regions`), the anticipation step (6) of the replanner (`anticipation`) and
-//! the time search's scaling law (`time_scaling`) and the acceptance checks of a QP solution
+//! certificates (`regions`), the anticipation step (6) of the replanner (`anticipation`), the
+//! time search's scaling law (`time_scaling`) and the acceptance checks of a QP solution
 //! (`qp_check`). The PyO3 wrappers live in `python` behind
 //! the `python` feature, so `cargo test` runs without linking libpython.
 //!

@@ -89,7 +89,8 @@ pub fn max_violation(
 /// multipliers `lam` (`> 0`: upper bound active, `< 0`: lower): the dual residual `max_i |(H x +
 /// q + G^T lam)_i|` (0 for an empty `x`) and the duality gap `|x^T H x + q^T x + sum_{lam_j > 0}
 /// upper_j lam_j + sum_{lam_j < 0} lower_j lam_j|`. They equal those of the one-sided problem
-/// `[G; -G] x <= [upper; -lower]` with multipliers `[lam^+; lam^-]`. NaN propagates.
+/// `[G; -G] x <= [upper; -lower]` with multipliers `[lam^+; lam^-]`. NaN propagates, except from
+/// a row of `G` whose multiplier is zero (it adds nothing, so its entries are not read).
 pub fn kkt_residuals(
     h: &[f64],
     q: &[f64],

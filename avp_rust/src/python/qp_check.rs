@@ -19,6 +19,24 @@ fn columns(arg: &'static str, m: &PyReadonlyArray2<'_, f64>, n: usize) -> PyResu
     }
 }
 
+/// `vector` (named `arg`) has one entry per row of `m` (named `matrix`).
+fn one_per_row(
+    arg: &'static str,
+    len: usize,
+    matrix: &str,
+    m: &PyReadonlyArray2<'_, f64>,
+) -> PyResult<()> {
+    let rows = m.shape()[0];
+    if len == rows {
+        Ok(())
+    } else {
+        Err(kernel_err(
+            arg,
+            format!("wrong shape: expected {rows} entries, one per row of {matrix}, got {len}"),
+        ))
+    }
+}
+
 /// Largest relative violation at `c` of `a c = b` and `lower <= g c <= upper` (0 at least;
 /// NaN when a residual is NaN).
 #[pyfunction(name = "max_violation")]
@@ -33,6 +51,9 @@ fn max_violation_py(
     let cs = contiguous("c", &c)?;
     columns("a", &a, cs.len())?;
     columns("g", &g, cs.len())?;
+    one_per_row("b", b.len(), "a", &a)?;
+    one_per_row("lower", lower.len(), "g", &g)?;
+    one_per_row("upper", upper.len(), "g", &g)?;
     let (a_s, bs, gs) = (
         contiguous("a", &a)?,
         contiguous("b", &b)?,
@@ -57,7 +78,11 @@ fn kkt_residuals_py(
 ) -> PyResult<(f64, f64)> {
     let xs = contiguous("x", &x)?;
     columns("h", &h, xs.len())?;
+    one_per_row("h", xs.len(), "h", &h)?;
     columns("g", &g, xs.len())?;
+    one_per_row("lam", lam.len(), "g", &g)?;
+    one_per_row("lower", lower.len(), "g", &g)?;
+    one_per_row("upper", upper.len(), "g", &g)?;
     let (hs, qs, gs) = (
         contiguous("h", &h)?,
         contiguous("q", &q)?,
