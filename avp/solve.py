@@ -307,8 +307,9 @@ def _writable(M: Any) -> Any:
 def incompatibility(outcome: QpOutcome | None) -> str | None:
     """Why a FoV-constrained solve counts as incompatible (16), or ``None`` if it is accepted:
     no solution, a primal violation above :data:`FEASIBILITY_TOL`, or a dual residual / duality
-    gap of the returned ``qpsolvers.Solution`` above :data:`KKT_TOL` or NaN (an infinite one is
-    qpsolvers' "not defined", a back-end that returned no multipliers: the primal check stands)."""
+    gap of the returned ``qpsolvers.Solution`` above :data:`KKT_TOL`, NaN or infinite. From a
+    qpsolvers back-end an infinite one is qpsolvers' "not defined" (no multipliers returned): the
+    primal check stands; a :class:`TwoSidedSolution` always has its multipliers."""
     if outcome is None:
         return "no outcome"
     if not outcome.ok:
@@ -316,12 +317,13 @@ def incompatibility(outcome: QpOutcome | None) -> str | None:
     sol = outcome.solution
     if sol is None:
         return None
+    undefined = math.inf if not isinstance(sol, TwoSidedSolution) else math.nan  # TwoSidedSolution: always defined
     for name in ("dual_residual", "duality_gap"):
         try:
             val = float(getattr(sol, name)())
         except (ValueError, TypeError, AttributeError):  # no multipliers: the primal check stands
             continue
-        if math.isnan(val) or (math.isfinite(val) and val > KKT_TOL):  # inf: not defined (qpsolvers)
+        if val != undefined and not val <= KKT_TOL:  # NaN and overflows count
             return f"KKT {name.replace('_', ' ')} {val:.1e} > {KKT_TOL:.0e}"
     return None
 

@@ -215,12 +215,20 @@ def test_incremental_reduction_equals_a_fresh_one() -> None:
     assert "_stacked_inequalities" in second.__dict__
     for name in ("G", "lower", "upper"):
         assert getattr(c, name).tobytes() == getattr(a, name).tobytes(), name
-    # a child whose factor is another object (not the parent's) does not take the parent's rows
+    # a child whose factor is another one than its parent's does not take the parent's rows: with
+    # 2 R, every row and the linear term are halved
     third = base.with_inequalities(*lin.blocks)
-    third.__dict__["_cholesky"] = base.least_distance().R.copy()
+    third.__dict__["_cholesky"] = 2.0 * base.least_distance().R
     lt = third.least_distance()
-    assert lt is not None and lt.M is not parent.M and not np.shares_memory(lt.M, parent.M)
-    np.testing.assert_allclose(lt.M, la.M, rtol=1e-12, atol=1e-12 * float(np.abs(la.M).max()))
+    assert lt is not None
+    np.testing.assert_allclose(lt.M, la.M / 2, rtol=1e-12, atol=1e-12 * float(np.abs(la.M).max()))
+    np.testing.assert_allclose(lt.v, la.v / 2, rtol=1e-12, atol=1e-12 * float(np.abs(la.v).max()))
+    # nor one whose linear term is another object (another right-hand side): its own v
+    fourth = base.with_inequalities(*lin.blocks)
+    fourth.__dict__["_reduced"] = dataclasses.replace(child.reduce(), g=2.0 * child.reduce().g)
+    lf = fourth.least_distance()
+    assert lf is not None and lf.v is not parent.v
+    np.testing.assert_allclose(lf.v, 2 * la.v, rtol=1e-12, atol=1e-12 * float(np.abs(la.v).max()))
 
 
 @settings(max_examples=200, deadline=None)

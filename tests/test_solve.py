@@ -261,6 +261,27 @@ def test_the_kkt_figures_follow_every_array_they_read() -> None:
     assert sol.duality_gap() == 2.0 + 4.0  # x.x + upper.lam
     sol.lower = None  # the gap needs both bounds; the dual residual does not
     assert sol.duality_gap() == float("inf") and sol.dual_residual() == 3.0
+    sol.problem = qpsolvers.Problem(P=2.0 * np.eye(2), q=np.zeros(2))  # a new cost: 2 x + 2 lam
+    assert sol.dual_residual() == 4.0
+    sol.problem = qpsolvers.Problem(P=2.0 * np.eye(2), q=np.ones(2))
+    assert sol.dual_residual() == 5.0
+
+
+def test_an_overflowed_kkt_residual_of_the_direct_path_is_incompatible() -> None:
+    """An infinite residual of the direct DAQP path is an overflow, not qpsolvers' "not
+    defined" (its multipliers are always there): the FoV solve is incompatible (16)."""
+    import math
+
+    import numpy as np
+    import qpsolvers
+
+    sol = solve.TwoSidedSolution(qpsolvers.Problem(P=np.eye(2), q=np.zeros(2)), G=np.ones((2, 2)), lower=np.zeros(2),
+                                 upper=np.ones(2))
+    sol.found, sol.x, sol.lam = True, np.zeros(2), np.array([math.inf, 0.0])
+    outcome = solve.QpOutcome(status=solve.QpStatus.SOLVED, c_hat=np.zeros(2), solver="daqp", build_time=0.0,
+                              solve_time=0.0, max_violation=0.0, solution=sol)
+    assert sol.dual_residual() == math.inf
+    assert "dual residual inf" in (solve.incompatibility(outcome) or "")
 
 
 def test_rows_of_any_order_and_dtype_are_judged_not_refused() -> None:
@@ -278,9 +299,13 @@ def test_rows_of_any_order_and_dtype_are_judged_not_refused() -> None:
     n = qp.layout.n_variables
     row = np.zeros((1, n), dtype=np.int64)
     row[0, 0] = 1
+    bare = qp.without("")  # no other inequality block: stacking would hand the kernel float64 rows
     for block in (ConstraintBlock("column-major", np.asfortranarray(np.eye(2, n)), np.full(2, -1e3), np.full(2, 1e3)),
                   ConstraintBlock("integer", row, np.array([-1000]), np.array([1000]))):
-        out = solve.solve_perching_qp(qp.with_inequalities(block), cfg)
+        one = bare.with_inequalities(block)
+        G = one.stacked_inequalities()[0]
+        assert not (G.flags.c_contiguous and G.dtype == np.float64)  # the block's own layout reaches the check
+        out = solve.solve_perching_qp(one, cfg)
         assert out.ok and out.max_violation < solve.FEASIBILITY_TOL
 
 
@@ -307,8 +332,12 @@ def test_a_primal_start_is_read_in_the_variables_it_was_given_in(monkeypatch) ->
     monkeypatch.setattr(daqp, "solve", spy)
     plain = solve._solve_two_sided(red.H, red.g, red.G, red.lower, red.upper, {}, ldp)
     started = solve._solve_two_sided(red.H, red.g, red.G, red.lower, red.upper, {"primal_start": plain.x}, ldp)
-    assert np.array_equal(hessians[0], np.eye(red.H.shape[0])) and np.array_equal(hessians[1], red.H)
+    proximal = solve._solve_two_sided(red.H, red.g, red.G, red.lower, red.upper, {"eps_prox": 1e-6}, ldp)
+    assert np.array_equal(hessians[0], np.eye(red.H.shape[0]))
+    assert np.array_equal(hessians[1], red.H) and np.array_equal(hessians[2], red.H)
     np.testing.assert_allclose(started.x, plain.x, rtol=1e-8, atol=1e-9)
+    assert proximal.found
+    np.testing.assert_allclose(proximal.x, plain.x, rtol=1e-5, atol=1e-5)
 
 
 def test_a_nan_residual_is_a_violation_not_a_pass() -> None:

@@ -585,7 +585,8 @@ class PerchingQp:
 
     def least_distance(self) -> LeastDistanceQp | None:
         """The reduced QP as a least-distance problem (:class:`LeastDistanceQp`), or ``None``
-        when its Hessian has no Cholesky factor. Computed once per QP; a copy made by
+        when its Hessian has no Cholesky factor or the transformed rows overflow. Computed once
+        per QP; a copy made by
         :meth:`with_inequalities` transforms only its new rows when this QP's exists, and
         copies with this QP's equalities share its factor."""
         return self._least_distance
@@ -610,9 +611,14 @@ class PerchingQp:
             p = parent._least_distance
             k = p.M.shape[0]
             if p.R is R and parent._reduced.g is red.g and k <= red.G.shape[0]:
-                M = p.M if k == red.G.shape[0] else np.concatenate([p.M, _rows_over(R, red.G[k:])], axis=0)
-                return LeastDistanceQp(R, M, p.v)
-        return LeastDistanceQp(R, _rows_over(R, red.G), _solve_upper(R, red.g, transposed=True))
+                if k == red.G.shape[0]:
+                    return LeastDistanceQp(R, p.M, p.v)
+                new = _rows_over(R, red.G[k:])
+                return LeastDistanceQp(R, np.concatenate([p.M, new], axis=0), p.v) if np.isfinite(new).all() else None
+        M, v = _rows_over(R, red.G), _solve_upper(R, red.g, transposed=True)
+        if not (np.isfinite(M).all() and np.isfinite(v).all()):  # a nearly singular factor: DAQP gets the QP in z
+            return None
+        return LeastDistanceQp(R, M, v)
 
     @cached_property
     def _reduced(self) -> ReducedQp:

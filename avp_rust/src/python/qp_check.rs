@@ -77,8 +77,16 @@ fn kkt_residuals_py(
     upper: PyReadonlyArray1<'_, f64>,
 ) -> PyResult<(f64, f64)> {
     let xs = contiguous("x", &x)?;
-    columns("h", &h, xs.len())?;
-    one_per_row("h", xs.len(), "h", &h)?;
+    if h.shape() != [xs.len(), xs.len()] {
+        return Err(kernel_err(
+            "h",
+            format!(
+                "wrong shape: expected ({n}, {n}) for len(x) = {n}, got {:?}",
+                h.shape(),
+                n = xs.len()
+            ),
+        ));
+    }
     columns("g", &g, xs.len())?;
     one_per_row("lam", lam.len(), "g", &g)?;
     one_per_row("lower", lower.len(), "g", &g)?;
