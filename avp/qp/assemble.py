@@ -586,9 +586,8 @@ class PerchingQp:
     def least_distance(self) -> LeastDistanceQp | None:
         """The reduced QP as a least-distance problem (:class:`LeastDistanceQp`), or ``None``
         when its Hessian has no Cholesky factor or the transformed rows overflow. Computed once
-        per QP; a copy made by
-        :meth:`with_inequalities` transforms only its new rows when this QP's exists, and
-        copies with this QP's equalities share its factor."""
+        per QP; a copy made by :meth:`with_inequalities` transforms only its new rows when this
+        QP's exists, and copies with this QP's equalities share its factor."""
         return self._least_distance
 
     @cached_property
