@@ -175,6 +175,10 @@ def known_solvers() -> tuple[str, ...]:
 _INF = 1e30
 """DAQP's infinity for a missing bound."""
 
+_f64 = functools.partial(np.ascontiguousarray, dtype=np.float64)
+"""A row-major float64 view of an array (no copy when it is one already): what the Rust kernels
+take."""
+
 _VARIABLE_OPTIONS = frozenset({"primal_start", "eps_prox"})
 """DAQP settings whose meaning depends on the variables (a primal guess, a proximal term): with
 one of them in ``config.solver_options`` DAQP is given the reduced QP in ``z`` as asked, not its
@@ -214,9 +218,8 @@ class TwoSidedSolution(qpsolvers.Solution):
             m = lam.shape[0]
             lower = self.lower if self.lower is not None else np.full(m, -np.inf)
             upper = self.upper if self.upper is not None else np.full(m, np.inf)
-            f64 = functools.partial(np.ascontiguousarray, dtype=np.float64)
-            residuals = _avp_rust.kkt_residuals(f64(self.problem.P), f64(self.problem.q), f64(G), f64(x), f64(lam),
-                                                 f64(lower), f64(upper))
+            residuals = _avp_rust.kkt_residuals(_f64(self.problem.P), _f64(self.problem.q), _f64(G), _f64(x),
+                                                 _f64(lam), _f64(lower), _f64(upper))
             cached = (inputs, residuals)
             self.__dict__["_kkt_cache"] = cached
         return cached[1]
@@ -405,5 +408,4 @@ def _max_violation(qp: PerchingQp, c_hat: Array, G: Array, lo: Array, hi: Array)
     residual over ``max(1, |bound|)``; an infinite bound is never violated), by the Rust kernel:
     NaN when a residual is NaN (then not SOLVED)."""
     A, b = qp.stacked_equalities()
-    f64 = functools.partial(np.ascontiguousarray, dtype=np.float64)  # no copy of the planner's own rows
-    return float(_avp_rust.max_violation(f64(c_hat), f64(A), f64(b), f64(G), f64(lo), f64(hi)))
+    return float(_avp_rust.max_violation(_f64(c_hat), _f64(A), _f64(b), _f64(G), _f64(lo), _f64(hi)))

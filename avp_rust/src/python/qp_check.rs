@@ -37,6 +37,24 @@ fn one_per_row(
     }
 }
 
+/// The row-major slices of two-sided rows `lower <= g z <= upper` on `n` variables: `g` with
+/// `n` columns, one bound of each side per row (the rows both kernels check).
+fn two_sided_rows<'a>(
+    g: &'a PyReadonlyArray2<'_, f64>,
+    lower: &'a PyReadonlyArray1<'_, f64>,
+    upper: &'a PyReadonlyArray1<'_, f64>,
+    n: usize,
+) -> PyResult<(&'a [f64], &'a [f64], &'a [f64])> {
+    columns("g", g, n)?;
+    one_per_row("lower", lower.len(), "g", g)?;
+    one_per_row("upper", upper.len(), "g", g)?;
+    Ok((
+        contiguous("g", g)?,
+        contiguous("lower", lower)?,
+        contiguous("upper", upper)?,
+    ))
+}
+
 /// Largest relative violation at `c` of `a c = b` and `lower <= g c <= upper` (0 at least;
 /// NaN when a residual is NaN).
 #[pyfunction(name = "max_violation")]
@@ -50,16 +68,9 @@ fn max_violation_py(
 ) -> PyResult<f64> {
     let cs = contiguous("c", &c)?;
     columns("a", &a, cs.len())?;
-    columns("g", &g, cs.len())?;
     one_per_row("b", b.len(), "a", &a)?;
-    one_per_row("lower", lower.len(), "g", &g)?;
-    one_per_row("upper", upper.len(), "g", &g)?;
-    let (a_s, bs, gs) = (
-        contiguous("a", &a)?,
-        contiguous("b", &b)?,
-        contiguous("g", &g)?,
-    );
-    let (lo, hi) = (contiguous("lower", &lower)?, contiguous("upper", &upper)?);
+    let (gs, lo, hi) = two_sided_rows(&g, &lower, &upper, cs.len())?;
+    let (a_s, bs) = (contiguous("a", &a)?, contiguous("b", &b)?);
     guarded(|| qp_check::max_violation(cs, a_s, bs, gs, lo, hi)).map_err(to_py_err)
 }
 
@@ -87,19 +98,12 @@ fn kkt_residuals_py(
             ),
         ));
     }
-    columns("g", &g, xs.len())?;
     one_per_row("lam", lam.len(), "g", &g)?;
-    one_per_row("lower", lower.len(), "g", &g)?;
-    one_per_row("upper", upper.len(), "g", &g)?;
-    let (hs, qs, gs) = (
+    let (gs, lo, hi) = two_sided_rows(&g, &lower, &upper, xs.len())?;
+    let (hs, qs, ls) = (
         contiguous("h", &h)?,
         contiguous("q", &q)?,
-        contiguous("g", &g)?,
-    );
-    let (ls, lo, hi) = (
         contiguous("lam", &lam)?,
-        contiguous("lower", &lower)?,
-        contiguous("upper", &upper)?,
     );
     guarded(|| qp_check::kkt_residuals(hs, qs, gs, xs, ls, lo, hi)).map_err(to_py_err)
 }
