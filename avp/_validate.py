@@ -192,6 +192,14 @@ def positive_float(field: str, value: Any, *, allow_inf: bool = False) -> float:
     return out
 
 
+def boolean(field: str, value: Any) -> bool:
+    """``value`` as ``True`` or ``False`` (a NumPy boolean too); anything else, whose truth
+    value would silently switch the option, is refused."""
+    if not isinstance(value, (bool, np.bool_)):
+        raise ConfigError(field, f"expected True or False, got {value!r}")
+    return bool(value)
+
+
 def flags(prefix: str, obj: Any) -> None:
     """Every field of the dataclass ``obj`` annotated ``bool`` holds ``True`` or ``False`` (a
     NumPy boolean is stored as Python's): a string such as ``"no"``, a number or ``None`` is

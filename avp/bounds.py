@@ -234,8 +234,7 @@ def certify_spline(
     if math.isfinite(limits[Bound.THRUST_MIN]) and limits[Bound.THRUST_MIN] > limits[Bound.THRUST_MAX]:
         raise ConfigError("thrust_min", f"{thrust_min} exceeds thrust_max {thrust_max}")
     g = _validate.positive_float("g", g)  # gravity along -e3: the thrust construction needs it > 0
-    if not isinstance(exact, (bool, np.bool_)):
-        raise ConfigError("exact", f"expected True or False, got {exact!r}")
+    exact = _validate.boolean("exact", exact)
     try:
         budget = float(budget)
     except (TypeError, ValueError):

@@ -577,8 +577,7 @@ def plan_line(
     opts = options if options is not None else LineOptions()
     if not isinstance(opts, LineOptions):
         raise ConfigError("options", f"expected avp.LineOptions, got {type(opts).__name__}")
-    if not isinstance(perch_search, (bool, np.bool_)):
-        raise ConfigError("perch_search", f"expected True or False, got {perch_search!r}")
+    perch_search = v.boolean("perch_search", perch_search)
     r = line.gripper_offset
     d0 = line.distance(state.position)
     if d0 < r - ON_LINE_TOL:

@@ -597,8 +597,7 @@ def plan(
         Only a relaxed plan exists and ``allow_relaxed`` is false (``exc.result.trajectory``
         holds it).
     """
-    if not isinstance(allow_relaxed, (bool, np.bool_)):
-        raise ConfigError("allow_relaxed", f"expected True or False, got {allow_relaxed!r}")
+    allow_relaxed = v.boolean("allow_relaxed", allow_relaxed)
     result = plan_detailed(state, target, config, durations=durations)
     if result.ok and result.trajectory is not None:
         if result.status is PlanStatus.SOLVED_RELAXED and not allow_relaxed:

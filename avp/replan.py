@@ -270,6 +270,32 @@ def _step_time(t: Any) -> float:
     return t
 
 
+def check_step_input(t: Any, last_t: float | None, odometry: Any, target_estimate: Any, target_type: type) -> float:
+    """The checks of :meth:`Replanner.step`'s input (``ConfigError`` naming the argument): ``t``
+    finite, within the time limit and not before ``last_t``; ``odometry`` a :class:`State`;
+    ``target_estimate`` ``None`` or a ``target_type``. Returns ``t`` as a float."""
+    t = _step_time(t)
+    if last_t is not None and t < last_t:
+        raise ConfigError("t", f"went back from {last_t:.6g} s to {t:.6g} s: steps must come in time "
+                          "order on one clock (after a clock reset, build a new Replanner)")
+    if not isinstance(odometry, State):
+        raise ConfigError("odometry", f"expected avp.State, got {type(odometry).__name__}")
+    if target_estimate is not None and not isinstance(target_estimate, target_type):
+        raise ConfigError("target_estimate",
+                          f"expected avp.{target_type.__name__}, got {type(target_estimate).__name__}")
+    return t
+
+
+def flown_plan(committed: Trajectory | None, previous: Trajectory | None, t: float) -> Trajectory:
+    """The plan flown at ``t``: ``previous`` before the ``committed`` plan's start, ``committed``
+    from then on (:meth:`Replanner.plan_at`)."""
+    if committed is None:
+        raise ConfigError("t", "no plan committed yet; call step() first")
+    if t < committed.t0 and previous is not None:
+        return previous
+    return committed
+
+
 def _target_change(a: PerchTarget, b: PerchTarget) -> tuple[float, float]:
     """Distance (m) between the pad centres and angle (rad) between the normals. A turn of the
     pad about its normal is not a change: the committed contact yaw stays (on a level pad built
@@ -371,12 +397,7 @@ class Replanner:
         return self._flown(v.finite_float("t", t))
 
     def _flown(self, t: float) -> Trajectory:
-        traj = self.trajectory
-        if traj is None:
-            raise ConfigError("t", "no plan committed yet; call step() first")
-        if t < traj.t0 and self._previous is not None:
-            traj = self._previous
-        return traj
+        return flown_plan(self.trajectory, self._previous, t)
 
     def reference(self, t: float) -> FlatOutput:
         """Flat output to track at ``t`` (s, one time), of :meth:`plan_at`; held at the plans'
@@ -395,16 +416,8 @@ class Replanner:
         Raises only for bad input (:class:`~avp.errors.ConfigError`); planning failures of any
         kind are reported in the returned :class:`ReplanStep`.
         """
-        t = _step_time(t)
-        if self._last_t is not None and t < self._last_t:
-            raise ConfigError("t", f"went back from {self._last_t:.6g} s to {t:.6g} s: steps must come in time "
-                              "order on one clock (after a clock reset, build a new Replanner)")
-        if not isinstance(odometry, State):
-            raise ConfigError("odometry", f"expected avp.State, got {type(odometry).__name__}")
+        t = check_step_input(t, self._last_t, odometry, target_estimate, self._target_type)
         if target_estimate is not None:
-            if not isinstance(target_estimate, self._target_type):
-                raise ConfigError("target_estimate",
-                                  f"expected avp.{self._target_type.__name__}, got {type(target_estimate).__name__}")
             self.target = target_estimate
         step = self._initial(t, odometry) if self.trajectory is None else self._replan(t, odometry)
         self._last_t = t
