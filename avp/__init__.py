@@ -23,6 +23,7 @@ from .errors import (
     PlanningError,
     RelaxedPlanError,
     SolverError,
+    WorkerError,
     WorkspaceNotCertifiedError,
 )
 
@@ -36,10 +37,12 @@ __all__ = [
     "PlanningError",
     "RelaxedPlanError",
     "SolverError",
+    "WorkerError",
     "WorkspaceNotCertifiedError",
     "__version__",
 ]
 
+from .background import BackgroundReplanner, BackgroundStep, PlanningWorker
 from .bounds import Bound, BoundReport, Certificate
 from .camera import Camera
 from .config import (
@@ -79,6 +82,8 @@ from .trajectory import Derivative, FlatOutput, Provenance, Trajectory
 from .types import PerchTarget, State
 
 __all__ += [
+    "BackgroundReplanner",
+    "BackgroundStep",
     "Bound",
     "BoundReport",
     "BoundsPolicy",
@@ -101,6 +106,7 @@ __all__ += [
     "PlanStatus",
     "PlanTimings",
     "PlannerConfig",
+    "PlanningWorker",
     "PreImpactMode",
     "Provenance",
     "QpForm",

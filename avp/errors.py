@@ -20,6 +20,7 @@ __all__ = [
     "PlanningError",
     "RelaxedPlanError",
     "SolverError",
+    "WorkerError",
     "WorkspaceNotCertifiedError",
 ]
 
@@ -80,3 +81,8 @@ class WorkspaceNotCertifiedError(PlanningError):
 class RelaxedPlanError(PlanningError):
     """A certified trajectory exists only with soft constraints relaxed (``result.relaxations``);
     :func:`avp.plan` returns it only with ``allow_relaxed=True``."""
+
+
+class WorkerError(AvpError):
+    """The planning worker of :class:`avp.BackgroundReplanner` died, closed or did not answer in
+    time; the message says which. Start a new :class:`avp.PlanningWorker`."""

@@ -44,3 +44,16 @@ def test_moving_perch_example(tmp_path: Path) -> None:
     assert proc.returncode == 0, proc.stderr
     assert proc.stdout.startswith("status: SOLVED")
     assert "bounds certified: True" in proc.stdout and "clearance: certified" in proc.stdout
+
+
+def test_background_loop_example(tmp_path: Path) -> None:
+    """The loop of a replanner in a worker process perches on the true pad, adopting the worker's
+    steps (whether in time depends on this machine's load: not asserted)."""
+    proc = subprocess.run([sys.executable, str(EXAMPLES / "background_loop.py")], capture_output=True,
+                          text=True, timeout=120, cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    out = proc.stdout
+    assert "adopted the step of t=0.000 s: INITIAL_PLAN" in out and ": REPLANNED" in out
+    last = out.strip().splitlines()[-1]
+    assert last.startswith("contact at t=")
+    assert float(last.split(",")[1].split("cm")[0]) < 1.0  # converged on the true pad

@@ -51,6 +51,7 @@ from typing import Any
 import numpy as np
 
 from .. import _validate as v
+from ..background import BackgroundReplanner, BackgroundStep, PlanningWorker
 from ..camera import Camera
 from ..config import GROUND_CLEARANCE, ContactVelocity, PlannerConfig, VehicleLimits
 from ..errors import AvpError, ConfigError
@@ -612,6 +613,12 @@ def _estimate_target(est: TargetEstimator, sc: SimScenario) -> PerchTarget | Non
     return PerchTarget(point=e.p_W - sc.aim_normal * target.s3 - down * target.s1, R_WS=e.R_WS)
 
 
+def _replan_step(out: ReplanStep | BackgroundStep) -> ReplanStep | None:
+    """The replanning step a loop's call produced: itself, or the worker's step a background
+    call adopted (``None`` when none finished)."""
+    return out.adopted if isinstance(out, BackgroundStep) else out
+
+
 def _shared(sc: SimScenario, config: PlannerConfig | None) -> tuple[SimScenario, PlannerConfig]:
     """Scenario and planner configuration sharing one vehicle and one camera object."""
     if config is None:
@@ -717,6 +724,7 @@ def simulate(
     max_time: float = 20.0,
     moving: MovingConfig | None = None,
     plan_drag: bool | None = None,
+    background: bool | PlanningWorker = False,
 ) -> SimResult:
     """Fly one perch of ``scenario`` in ``mode`` (module docstring) and record it.
 
@@ -755,7 +763,37 @@ def simulate(
         runner and ``avp simulate`` give it unless the configuration sets ``rotor_drag``. A planner that knows
         no drag, on a vehicle whose controller feeds it forward, plans a contact it cannot fly
         (on rotorpy's wall ``b3`` arrives 9 deg off ``s3``): pass ``False`` to fly one anyway.
+    background:
+        ``Mode.AVP`` only: run the replanner in a worker process (:class:`~avp.background.BackgroundReplanner`
+        in lock-step: each step's request is adopted at the next step), on a new worker (``True``,
+        closed at the end) or on the :class:`~avp.background.PlanningWorker` given (left open, for
+        the next run). Not with ``scenario.compute_slowdown`` (which models a step that plans in
+        the loop). Set ``replan.latency`` to at least the step period ``1 / replan_rate_hz``:
+        a plan adopted after its ``t_ex`` counts in ``late_commits``.
     """
+    if not (background is False or background is True or isinstance(background, PlanningWorker)):
+        raise ConfigError("background", f"expected True, False or an avp.PlanningWorker, got {background!r}")
+    if background is not False:
+        sc0 = scenario if scenario is not None else SimScenario()
+        if Mode.parse(mode) is not Mode.AVP:
+            raise ConfigError("background", "runs the replanner of Mode.AVP; a one-shot flight has none")
+        if sc0.compute_slowdown:
+            raise ConfigError("background", "plans in a worker process; scenario.compute_slowdown models a step "
+                              "that plans in the loop: use one or the other")
+    worker = PlanningWorker() if background is True else background if background is not False else None
+    try:
+        return _simulate(scenario, mode, seed, config, replan, dt, max_time, moving, plan_drag, worker)
+    finally:
+        if background is True and worker is not None:
+            worker.close()
+
+
+def _simulate(
+    scenario: SimScenario | None, mode: Mode | str, seed: int, config: PlannerConfig | None,
+    replan: ReplanConfig | None, dt: float, max_time: float, moving: MovingConfig | None,
+    plan_drag: bool | None, worker: PlanningWorker | None,
+) -> SimResult:
+    """:func:`simulate`, its replanner in ``worker`` when one is given."""
     dt = check_dt(dt)
     seed = v.integer("seed", seed, 0, hint="(a random generator seed)")
     max_time = v.positive_float("max_time", max_time, allow_inf=True)  # inf: the plan's end and the timeout
@@ -876,10 +914,12 @@ def simulate(
     zero_ref = FlatReference(np.zeros(3), np.zeros(3), np.zeros(3), np.zeros(3), np.zeros(3))
     start = _odometry_state(believed(t_plan, state), t_plan, zero_ref)
     solve_times: list[float] = []
-    replanner: Replanner | None = None
+    replanner: Replanner | BackgroundReplanner | None = None
     if mode is Mode.AVP:
-        replanner = Replanner(initial, cfg, rcfg) if platform is None else MovingReplanner(initial, cfg, rcfg, mcfg)  # type: ignore[arg-type]
-        first = replanner.step(t_plan, start, initial)
+        inner = Replanner(initial, cfg, rcfg) if platform is None else MovingReplanner(initial, cfg, rcfg, mcfg)  # type: ignore[arg-type]
+        replanner = inner if worker is None else BackgroundReplanner(inner, worker=worker, wait=True)
+        first = _replan_step(replanner.step(t_plan, start, initial))
+        assert first is not None  # a first plan is waited for
         solve_times.append(first.solve_time)
         if replanner.trajectory is None:
             return finish(f"no plan: {first.reason}", steps=tuple(replanner.history),
@@ -968,8 +1008,13 @@ def simulate(
         before = committed()
         odometry, estimate = _odometry_state(believed(t, state), t, reference(t)), estimate_target()
         c0 = _step_clock()
-        s = replanner.step(t, odometry, estimate)
+        out = replanner.step(t, odometry, estimate)
         elapsed = _step_clock() - c0
+        if isinstance(out, BackgroundStep):  # the step adopted at this tick (if any): requested at the one before
+            late += out.late > 0.0
+        s = _replan_step(out)
+        if s is None:
+            return
         if slowdown:
             delay = slowdown * elapsed
             step_delays.append(delay)

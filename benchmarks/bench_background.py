@@ -1,0 +1,188 @@
+"""The loop's cost of replanning in a worker process (``avp.BackgroundReplanner``) against the
+synchronous ``Replanner.step``, in the same simulated 30 Hz closed loops, interleaved run by run.
+
+    python benchmarks/bench_background.py [--seeds 6] [--distances 1.5 4.5 7.5] [--inclines 90 45]
+                                          [--latency-ms 40] [--gc-freeze] [--gc-between-steps]
+                                          [--realistic] [--backend avp|rotorpy]
+
+For every seed, distance and incline, ``avp.sim.run.simulate`` flies the perch twice with the
+same ``ReplanConfig(latency=...)``: with the replanner in the loop (``Replanner.step``, what
+``benchmarks/bench_replan.py`` measures) and with ``background=`` a shared ``PlanningWorker``
+(lock-step: a step's request is adopted at the next step). Each loop call is timed with
+``time.thread_time`` (the CPU of the loop's thread: a background call's wait for the worker,
+which real time spends flying, is not counted; its wall time is printed too); the first call
+(the initial plan, waited for in both) is not counted. For the background runs the worker's own
+CPU per adopted step is printed too (the planning that moved off the loop, not removed), and
+the outcomes of both runs, the adopted plans that came after their switch time (``late``) and
+the runs whose adopted steps are the loop's own. With ``--latency-ms`` above the 33.3 ms period
+a plan is adopted before its switch time, so the vehicle flies the same references in both runs
+and the worker's steps should be the loop's, plans bit for bit (the background run's last
+request is not adopted: the flight ended); below it, every replan is adopted late and the runs
+part. Nothing is asserted by the tests; these numbers are for this machine
+and its load.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import gc
+import math
+import time
+import warnings
+from collections import Counter
+from typing import Any
+
+import numpy as np
+
+import avp.sim.run as sim_run
+from avp.background import BackgroundReplanner, BackgroundStep, PlanningWorker
+from avp.replan import ReplanConfig, Replanner, ReplanStep
+from avp.sim.evaluate import SimConfig
+from avp.sim.run import Mode, SimScenario, simulate
+
+HEAD = f"{'steps':>6} {'median':>7} {'p95':>7} {'p99':>7} {'max':>7} {'>1.5 ms':>8} {'>5 ms':>6}"
+_BETWEEN = [False]  # --gc-between-steps
+
+
+def stats(ms: np.ndarray) -> str:
+    if ms.size == 0:
+        return f"{0:6d} {'-':>7} {'-':>7} {'-':>7} {'-':>7} {'-':>8} {'-':>6}"
+    p95, p99 = np.percentile(ms, [95, 99])
+    return (f"{ms.size:6d} {np.median(ms):7.3f} {p95:7.3f} {p99:7.3f} {ms.max():7.2f} "
+            f"{int((ms > 1.5).sum()):8d} {int((ms > 5.0).sum()):6d}")
+
+
+def _timed(call: Any, records: list[dict[str, Any]], *args: Any) -> Any:
+    between = _BETWEEN[0] and gc.isenabled()
+    if between:
+        gc.disable()
+    try:
+        w0, c0 = time.perf_counter(), time.thread_time()
+        out = call(*args)
+        c1, w1 = time.thread_time(), time.perf_counter()
+    finally:
+        if between:
+            gc.enable()
+    records.append(dict(cpu=c1 - c0, wall=w1 - w0, out=out))
+    return out
+
+
+class TimedReplanner(Replanner):
+    """The synchronous replanner, each step timed (in this process only: never pickled)."""
+
+    records: list[dict[str, Any]] = []  # noqa: RUF012 - one list per run, swapped by main()
+
+    def step(self, t: float, odometry: Any, target_estimate: Any = None) -> ReplanStep:
+        return _timed(super().step, TimedReplanner.records, t, odometry, target_estimate)  # type: ignore[no-any-return]
+
+
+class TimedBackground(BackgroundReplanner):
+    """The background replanner's loop-side call, timed."""
+
+    records: list[dict[str, Any]] = []  # noqa: RUF012
+
+    def step(self, t: float, odometry: Any, target_estimate: Any = None, *,
+             wait: bool | None = None) -> BackgroundStep:
+        return _timed(lambda *a: super(TimedBackground, self).step(*a, wait=wait),  # type: ignore[no-any-return]
+                      TimedBackground.records, t, odometry, target_estimate)
+
+
+def _decisions(steps: tuple[ReplanStep, ...]) -> list[tuple[Any, ...]]:
+    """Each step's action, fraction, solves and committed plan (its coefficients' bytes)."""
+    return [(s.action.name, s.fraction, s.n_solves,
+             s.trajectory.coefficients.tobytes() if s.committed and s.trajectory is not None else b"")
+            for s in steps]
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--seeds", type=int, default=6)
+    ap.add_argument("--distances", type=float, nargs="+", default=[1.5, 4.5, 7.5])
+    ap.add_argument("--inclines", type=float, nargs="+", default=[90.0, 45.0])
+    ap.add_argument("--latency-ms", type=float, default=40.0,
+                    help="ReplanConfig.latency (ms) of both runs (above the 33.3 ms period: a background plan "
+                         "is adopted at the next step)")
+    ap.add_argument("--gc-freeze", action="store_true",
+                    help="after a set-up run, gc.collect() and gc.freeze(): the objects built so far leave the "
+                         "collector's generations")
+    ap.add_argument("--gc-between-steps", action="store_true",
+                    help="the cyclic collector off inside each loop call and on again after it")
+    ap.add_argument("--realistic", action="store_true",
+                    help="the realistic simulator of the success sweeps (SimConfig().scenario)")
+    ap.add_argument("--backend", choices=["avp", "rotorpy"], default="avp")
+    args = ap.parse_args()
+    warnings.simplefilter("ignore")
+    _BETWEEN[0] = args.gc_between_steps
+    sim_run.BackgroundReplanner = TimedBackground  # type: ignore[misc]  # the loop builds this class
+
+    def in_loop(timed: bool) -> None:
+        """The loop's synchronous replanner timed, or the library's (the worker's copy is
+        pickled: it must be a class the worker imports)."""
+        sim_run.Replanner = TimedReplanner if timed else Replanner  # type: ignore[misc]
+    rcfg = ReplanConfig(latency=args.latency_ms * 1e-3)
+
+    def scenario(inc: float, d: float) -> SimScenario:
+        sc = SimConfig().scenario(inc, d) if args.realistic else SimScenario(distance=d, incline=math.radians(inc))
+        return dataclasses.replace(sc, backend=args.backend)
+
+    worker = PlanningWorker()
+    try:
+        if args.gc_freeze:  # not counted: a set-up run of each
+            first = scenario(args.inclines[0], args.distances[0])
+            in_loop(True)
+            simulate(first, Mode.AVP, seed=10**6, replan=rcfg)
+            in_loop(False)
+            simulate(first, Mode.AVP, seed=10**6, replan=rcfg, background=worker)
+            gc.collect()
+            gc.freeze()
+        sync_rows: list[dict[str, Any]] = []
+        bg_rows: list[dict[str, Any]] = []
+        outcomes: dict[str, Counter[str]] = {"in the loop": Counter(), "background": Counter()}
+        late = same = runs = 0
+        for inc in args.inclines:
+            for d in args.distances:
+                for seed in range(args.seeds):
+                    sc = scenario(inc, d)
+                    TimedReplanner.records = []
+                    in_loop(True)
+                    a = simulate(sc, Mode.AVP, seed=seed, replan=rcfg)
+                    sync_rows += TimedReplanner.records[1:]
+                    TimedBackground.records = []
+                    in_loop(False)
+                    b = simulate(sc, Mode.AVP, seed=seed, replan=rcfg, background=worker)
+                    bg_rows += TimedBackground.records[1:]
+                    outcomes["in the loop"][a.outcome.split(":")[0]] += 1
+                    outcomes["background"][b.outcome.split(":")[0]] += 1
+                    late += b.late_commits
+                    # the background run's last request is never adopted (the flight ended)
+                    same += _decisions(a.steps)[:len(b.steps)] == _decisions(b.steps)
+                    runs += 1
+    finally:
+        worker.close()
+
+    def ms(rows: list[dict[str, Any]], key: str, keep: Any = None) -> np.ndarray:
+        return np.array([r[key] for r in rows if keep is None or keep(r)]) * 1e3
+
+    solving = lambda r: r["out"].solved
+    adopted = lambda r: r["out"].adopted is not None
+    adopted_solving = lambda r: r["out"].adopted is not None and r["out"].adopted.solved
+    print(f"{runs} closed-loop runs of each (inclines {args.inclines} deg, distances {args.distances} m, "
+          f"{args.seeds} seeds, latency {args.latency_ms:g} ms{', realistic' if args.realistic else ''}, "
+          f"{args.backend}); ms per loop call:")
+    print(f"{'':<52} {HEAD}")
+    print(f"{'Replanner.step in the loop, CPU':<52} {stats(ms(sync_rows, 'cpu'))}")
+    print(f"{'  steps with a solve, CPU':<52} {stats(ms(sync_rows, 'cpu', solving))}")
+    print(f"{'BackgroundReplanner.step, CPU':<52} {stats(ms(bg_rows, 'cpu'))}")
+    print(f"{'  calls that adopted a step, CPU':<52} {stats(ms(bg_rows, 'cpu', adopted))}")
+    print(f"{'  calls that adopted a solving step, CPU':<52} {stats(ms(bg_rows, 'cpu', adopted_solving))}")
+    print(f"{'  wall (waits for the worker included)':<52} {stats(ms(bg_rows, 'wall'))}")
+    plan = np.array([r["out"].plan_cpu for r in bg_rows if adopted_solving(r)]) * 1e3
+    print(f"{'  the worker on those solving steps, CPU':<52} {stats(plan)}")
+    print(f"\noutcomes: {dict(outcomes['in the loop'])} in the loop, {dict(outcomes['background'])} in the "
+          f"background; adopted after their switch time: {late}; runs whose adopted steps are the loop's "
+          f"(actions, fractions, solves, plans bit for bit): {same} of {runs}")
+
+
+if __name__ == "__main__":
+    main()
