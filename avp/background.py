@@ -18,45 +18,55 @@ their certificates and the policy are the wrapped replanner's, unchanged. An ado
 ``result.qp.solution`` (the back-end's own record, with the QP's matrices) is ``None``: it stays in
 the worker.
 
-A request and its plan's adoption are at least one call apart. So that the plan still starts in
-the future when it is adopted, set ``ReplanConfig.latency`` to at least the loop's period (with a
-margin for the worker's planning time): a plan adopted after its ``t_ex`` is flown from its
-adoption on, and :attr:`BackgroundStep.late` says by how much its start had passed (the plan
-starts from the anticipated state at ``t_ex``, not from where the vehicle is at adoption).
+A plan is flown once it is adopted, and it starts at ``t_ex``. :meth:`BackgroundReplanner.poll`
+adopts a finished step without sending anything: a control loop faster than the replanning
+calls (the controller's, at hundreds of Hz) calls it before :meth:`~BackgroundReplanner.reference`,
+so a plan is adopted within a control period of the worker's finishing. Set
+``ReplanConfig.latency`` above the time from a request to its adoption: the worker's planning
+time (a few milliseconds, more on a slower computer) plus the polling interval, or the
+replanning period when only :meth:`~BackgroundReplanner.step` adopts. A plan adopted after its
+``t_ex`` is flown from its adoption on, and :attr:`BackgroundStep.late` says by how much its start
+had passed (the plan starts from the anticipated state at ``t_ex``, not from where the vehicle is
+at adoption).
 
 Waiting: the first plan (nothing to fly yet) is waited for. ``wait=True`` (a constructor default,
-or per call) waits for the step in flight before sending the next: each request is adopted at
-the next call whatever the worker's speed, as in real time when a plan takes less than a period;
-the simulator runs this way (reproducible). Without it a call never waits once a plan is
-committed.
+or per call of :meth:`~BackgroundReplanner.step` and :meth:`~BackgroundReplanner.poll`) waits for
+the step in flight: with it the adoptions do not depend on the worker's speed (the simulator polls
+with it at its next control step: ``avp.sim.run.simulate(background=...)``). Without it a call
+never waits once a plan is committed.
 
 The wrapped replanner is sent to the worker (pickled): the object passed in is not updated. The
 worker is a fresh interpreter on POSIX (:class:`PlanningWorker`); start one and pass it to several
-replanners in turn to pay its start (about a second) once. A worker that dies raises
-:class:`~avp.errors.WorkerError` at the next call.
+replanners in turn to pay its start (about a second) once. A worker that dies, has a step in
+flight for longer than its ``timeout`` (hung) or now hosts another replanner raises
+:class:`~avp.errors.WorkerError` at the next call (the first two close it); what the hosted
+replanner's step raised is raised at the call that adopts it, and that step's estimate goes with
+the next request. The worker ignores SIGINT: a loop that catches Ctrl-C keeps its worker.
 """
 
 from __future__ import annotations
 
 import contextlib
 import dataclasses
+import json
 import math
 import multiprocessing
 import os
 import pickle
+import signal
 import socket
 import subprocess
 import sys
 import time
+import traceback
 import weakref
 from multiprocessing.connection import Connection
-from pathlib import Path
 from typing import Any
 
 from . import _validate as v
 from ._blas import warm as _warm_blas
 from .errors import AvpError, ConfigError, WorkerError
-from .replan import ReplanAction, Replanner, ReplanStep, check_step_input, flown_plan
+from .replan import ReplanAction, Replanner, ReplanStep, check_step_time, flown_plan
 from .trajectory import FlatOutput, Trajectory
 from .types import PerchTarget, State
 
@@ -66,10 +76,31 @@ _STOP, _HOST, _STEP, _READY, _DONE, _FAILED = "stop", "host", "step", "ready", "
 """The messages between a :class:`PlanningWorker` and its process."""
 
 
+def _reply_failed(conn: Connection, exc: BaseException) -> None:
+    """Send ``exc`` back as ``_FAILED``: an ``AvpError`` that survives a pickle round trip as it
+    is (the caller re-raises it), anything else as a :class:`~avp.errors.WorkerError` with its
+    traceback."""
+    data = b""
+    if isinstance(exc, AvpError):
+        try:
+            data = pickle.dumps((_FAILED, exc))
+            pickle.loads(data)
+        except Exception:
+            data = b""
+    if not data:
+        text = "".join(traceback.format_exception(exc)).rstrip()
+        data = pickle.dumps((_FAILED, WorkerError(f"the hosted replanner raised {type(exc).__name__}: {exc}\n{text}")))
+    conn.send_bytes(data)
+
+
 def _serve(conn: Connection) -> None:
     """The worker process: host a replanner (``_HOST``), run its steps (``_STEP``) until
-    ``_STOP`` or the pipe closes. A step's exception goes back as ``_FAILED`` (the replanner
-    raises only for bad input, which :meth:`BackgroundReplanner.step` checks before sending)."""
+    ``_STOP`` or the pipe closes. A step's exception goes back as ``_FAILED`` (the parent checks
+    the input first, :meth:`Replanner._check_input <avp.replan.Replanner._check_input>`, so it is
+    a fault of the replanner's). SIGINT is ignored: the loop's Ctrl-C is the loop's to handle, and
+    the worker ends with the pipe."""
+    with contextlib.suppress(ValueError, OSError, AttributeError):  # not the main thread, no signals
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
     replanner: Replanner | None = None
     _warm_blas()
     while True:
@@ -79,8 +110,8 @@ def _serve(conn: Connection) -> None:
             return
         try:
             msg = pickle.loads(data)
-        except Exception as exc:
-            conn.send((_FAILED, WorkerError(f"the worker could not read a message: {type(exc).__name__}: {exc}")))
+        except Exception as exc:  # a class this process cannot import, say
+            _reply_failed(conn, WorkerError(f"the worker could not read the message: {type(exc).__name__}: {exc}"))
             continue
         kind = msg[0]
         if kind == _STOP:
@@ -94,13 +125,11 @@ def _serve(conn: Connection) -> None:
             if replanner is None:  # pragma: no cover - PlanningWorker hosts before it submits
                 raise WorkerError("no replanner hosted")
             step = replanner.step(*msg[1:])
+            answer = pickle.dumps((_DONE, _portable(step), time.thread_time() - c0, time.perf_counter() - w0))
         except Exception as exc:
-            try:
-                conn.send((_FAILED, exc))
-            except Exception:
-                conn.send((_FAILED, WorkerError(f"{type(exc).__name__}: {exc}")))
+            _reply_failed(conn, exc)
             continue
-        conn.send((_DONE, _portable(step), time.thread_time() - c0, time.perf_counter() - w0))
+        conn.send_bytes(answer)
 
 
 def _portable(step: ReplanStep) -> ReplanStep:
@@ -119,18 +148,37 @@ def _serve_fd(fd: int) -> None:
     _serve(Connection(fd))
 
 
+def _serve_process(conn: Connection, parent_end: Connection) -> None:
+    """The worker's entry point under ``multiprocessing``: close the parent's end of the pipe
+    (inherited by ``fork``; with it open, the worker would never see the parent's end) and
+    serve."""
+    parent_end.close()
+    _serve(conn)
+
+
+_BOOT = ("import json, os, sys; sys.path[:] = json.loads(os.environ.pop('AVP_WORKER_SYS_PATH')); "
+         "from avp.background import _serve_fd; _serve_fd({fd})")
+"""What the fresh interpreter runs: the parent's ``sys.path`` (so it imports the same ``avp``
+and the modules beside the caller's script), then the worker's loop on the inherited socket."""
+
+
 class _Subprocess:
     """A worker in a fresh interpreter (``subprocess``), with the calls :func:`_shutdown` makes."""
 
     def __init__(self) -> None:
         parent, child = socket.socketpair()
-        package_root = str(Path(__file__).resolve().parent.parent)  # this avp, not another on the path
         env = dict(os.environ)
-        env["PYTHONPATH"] = os.pathsep.join(p for p in (package_root, env.get("PYTHONPATH", "")) if p)
-        self.popen = subprocess.Popen(
-            [sys.executable, "-c", f"from avp.background import _serve_fd; _serve_fd({child.fileno()})"],
-            pass_fds=(child.fileno(),), stdin=subprocess.DEVNULL, env=env, close_fds=True)
-        child.close()
+        env["AVP_WORKER_SYS_PATH"] = json.dumps([os.path.abspath(p) if p else os.getcwd() for p in sys.path])
+        flags: list[str] = getattr(subprocess, "_args_from_interpreter_flags", list)()  # -W, -X, -O... as here
+        try:
+            self.popen = subprocess.Popen(
+                [sys.executable, *flags, "-c", _BOOT.format(fd=child.fileno())],
+                pass_fds=(child.fileno(),), stdin=subprocess.DEVNULL, env=env, close_fds=True)
+        except OSError as exc:
+            parent.close()
+            raise WorkerError(f"could not start a worker interpreter ({sys.executable!r}): {exc}") from exc
+        finally:
+            child.close()
         self.conn = Connection(parent.detach())
 
     def is_alive(self) -> bool:
@@ -154,13 +202,14 @@ class _Multiprocess:
     def __init__(self, method: str) -> None:
         ctx: Any = multiprocessing.get_context(method)
         parent, child = ctx.Pipe()
-        self.process = ctx.Process(target=_serve, args=(child,), daemon=True, name="avp-planning-worker")
+        self.process = ctx.Process(target=_serve_process, args=(child, parent), daemon=True,
+                                   name="avp-planning-worker")
         self.process.start()
         child.close()
         self.conn = parent
 
     def is_alive(self) -> bool:
-        return self.process.is_alive()
+        return bool(self.process.is_alive())
 
     def join(self, timeout: float) -> None:
         self.process.join(timeout)
@@ -170,17 +219,19 @@ class _Multiprocess:
 
     @property
     def exitcode(self) -> int | None:
-        return self.process.exitcode
+        return self.process.exitcode  # type: ignore[no-any-return]
 
 
-def _shutdown(process: _Subprocess | _Multiprocess) -> None:
-    """Stop a worker process: ask, then wait a little, then terminate."""
-    with contextlib.suppress(OSError, ValueError):
-        process.conn.send((_STOP,))
-    process.join(2.0)
+def _shutdown(process: _Subprocess | _Multiprocess, state: dict[str, Any]) -> None:
+    """Stop a worker process. An idle one is asked to stop (it does at once); one with a step in
+    flight, or one that does not stop, is terminated: a step is not waited for."""
+    if not state["busy"]:
+        with contextlib.suppress(OSError, ValueError):
+            process.conn.send((_STOP,))
+        process.join(1.0)
     if process.is_alive():
         process.terminate()
-        process.join(2.0)
+        process.join(1.0)
     process.conn.close()
 
 
@@ -193,40 +244,52 @@ def start_methods() -> tuple[str, ...]:
 
 class PlanningWorker:
     """A process that runs one :class:`~avp.replan.Replanner` at a time for
-    :class:`BackgroundReplanner` (module docstring).
+    :class:`BackgroundReplanner` (module docstring). Several replanners may use one worker in
+    turn: hosting a new one ends the previous one's use of it (its next call raises
+    :class:`~avp.errors.WorkerError`).
 
     Parameters
     ----------
     start_method:
-        ``"subprocess"`` (the default on POSIX): a fresh interpreter that imports this ``avp``
-        (about a second); it never runs the caller's main module, so a script needs no
+        ``"subprocess"`` (the default on POSIX): a fresh interpreter with this process's
+        ``sys.path`` and interpreter flags, so it imports this ``avp`` and the modules beside the
+        caller's script (a replanner subclass must be importable from one; the main script's own
+        classes are not); it never runs the main script, which needs no
         ``if __name__ == "__main__":`` guard. Or one of ``multiprocessing``'s methods (the default
         elsewhere: ``spawn``, which runs the main module again and needs that guard; ``fork``
         copies the caller's threads' state, BLAS pools included: not advised).
     timeout:
-        Seconds a call waits for the worker before raising :class:`~avp.errors.WorkerError`
-        (its start, the first plan, a step in flight with ``wait``; a plan takes milliseconds).
+        Seconds a step may be in flight (s): a call that waits for it longer, or finds it older
+        (a hung worker), closes the worker and raises :class:`~avp.errors.WorkerError`, since
+        its answer can no longer be matched to its request. A plan takes milliseconds.
+    start_timeout:
+        Seconds hosting a replanner may take (the first one waits for the interpreter's start,
+        about a second).
     """
 
-    def __init__(self, start_method: str | None = None, timeout: float = 60.0) -> None:
+    def __init__(self, start_method: str | None = None, timeout: float = 60.0, start_timeout: float = 120.0) -> None:
         methods = start_methods()
         method = methods[0] if start_method is None else start_method
         if method not in methods:
             raise ConfigError("start_method", f"{method!r} is not one of this platform's start methods {methods}")
         self.timeout = v.positive_float("timeout", timeout)
+        self.start_timeout = v.positive_float("start_timeout", start_timeout)
         self.start_method = method
         self._process = _Subprocess() if method == "subprocess" else _Multiprocess(method)
         self._conn = self._process.conn
-        self._busy = False
-        self._finalizer = weakref.finalize(self, _shutdown, self._process)
+        self._state: dict[str, Any] = {"busy": False}  # shared with the finalizer
+        self._sent_at = 0.0  # perf_counter of the step in flight's request
+        self._host_token: object | None = None  # who is hosted (BackgroundReplanner._token)
+        self._finalizer = weakref.finalize(self, _shutdown, self._process, self._state)
 
     @property
     def alive(self) -> bool:
-        """The worker process is running."""
+        """The worker process is running (and not closed)."""
         return self._finalizer.alive and self._process.is_alive()
 
     def close(self) -> None:
-        """Stop the worker process (idempotent; also at garbage collection and exit)."""
+        """Stop the worker process (idempotent; also at garbage collection and exit). A step in
+        flight is dropped: the process is terminated, not waited for."""
         self._finalizer()
 
     def __enter__(self) -> PlanningWorker:
@@ -235,67 +298,99 @@ class PlanningWorker:
     def __exit__(self, *exc: object) -> None:
         self.close()
 
+    # -- the protocol (BackgroundReplanner's) ---------------------------------------------------
+    def _fail(self, message: str, cause: BaseException | None = None) -> WorkerError:
+        """Close the worker (its answers can no longer be matched to requests) and return the
+        error to raise."""
+        self._state["busy"] = False
+        self.close()
+        err = WorkerError(message + "; the worker is closed: start a new PlanningWorker")
+        err.__cause__ = cause
+        return err
+
     def _send(self, msg: tuple[Any, ...]) -> None:
         if not self._finalizer.alive:
             raise WorkerError("the planning worker is closed: start a new PlanningWorker")
         try:
             self._conn.send(msg)
         except (OSError, ValueError) as exc:
-            raise WorkerError(f"the planning worker is gone ({type(exc).__name__}: {exc}); start a new one") from exc
+            raise self._fail(f"the planning worker is gone ({type(exc).__name__}: {exc})", exc) from exc
 
-    def _receive(self) -> tuple[Any, ...]:
+    def _reply(self, timeout: float) -> tuple[Any, ...]:
+        """The next answer (waits up to ``timeout``); a timeout, the worker's end or an answer
+        that does not read close the worker."""
         if not self._finalizer.alive:
             raise WorkerError("the planning worker is closed: start a new PlanningWorker")
-        if not self._conn.poll(self.timeout):
-            raise WorkerError(f"the planning worker did not answer within {self.timeout:g} s (timeout)")
         try:
-            return self._conn.recv()  # type: ignore[no-any-return]
+            ready = self._conn.poll(timeout)
+        except (OSError, ValueError) as exc:
+            raise self._fail(f"the planning worker is gone ({type(exc).__name__}: {exc})", exc) from exc
+        if not ready:
+            raise self._fail(f"the planning worker did not answer within {timeout:g} s (timeout)")
+        try:
+            data = self._conn.recv_bytes()
         except (EOFError, OSError) as exc:
-            self._busy = False
             self._process.join(1.0)
-            raise WorkerError(f"the planning worker exited (exit code {self._process.exitcode}); start a new "
-                              "PlanningWorker") from exc
+            raise self._fail(f"the planning worker exited (exit code {self._process.exitcode})", exc) from exc
+        try:
+            return pickle.loads(data)  # type: ignore[no-any-return]
+        except Exception as exc:
+            raise self._fail(f"the planning worker's answer does not read here ({type(exc).__name__}: {exc})",
+                             exc) from exc
 
-    def host(self, replanner: Replanner) -> None:
-        """Send ``replanner`` to the worker (it replaces the one hosted before); waits until
-        it is there. A step still in flight is received and dropped first."""
-        if self._busy:
-            self._busy = False
-            self._receive()
+    def _host(self, replanner: Replanner, token: object) -> None:
+        """Send ``replanner`` to the worker (it replaces the one hosted before, whose next call
+        then raises); waits until it is there. A step still in flight is received and dropped
+        first."""
+        if self._state["busy"]:
+            self._state["busy"] = False
+            self._reply(self.timeout)
+        self._host_token = None
         self._send((_HOST, replanner))
-        reply = self._receive()
+        reply = self._reply(self.start_timeout)
         if reply[0] == _FAILED:
             raise ConfigError("replanner", f"{reply[1]} (a subclass must be importable in the worker: defined in "
-                              "a module, not in the main script or a function)")
+                              "a module on this process's sys.path, not in the main script or a function)")
         if reply[0] != _READY:  # pragma: no cover - the protocol's own check
-            raise WorkerError(f"unexpected reply {reply[0]!r} to hosting a replanner")
+            raise self._fail(f"unexpected reply {reply[0]!r} to hosting a replanner")
+        self._host_token = token
 
-    def submit(self, t: float, odometry: State, target_estimate: PerchTarget | None) -> None:
-        """Start the hosted replanner's step (the worker must be idle)."""
-        if self._busy:  # pragma: no cover - BackgroundReplanner sends only when idle
-            raise WorkerError("the planning worker is busy: receive its step first")
+    def _check_host(self, token: object) -> None:
+        if self._host_token is not token:
+            raise WorkerError("this PlanningWorker now hosts another replanner (or none): a BackgroundReplanner "
+                              "uses its worker until another is built on it")
+
+    def _submit(self, t: float, odometry: State, target_estimate: PerchTarget | None) -> None:
+        """Start the hosted replanner's step (the worker is idle)."""
         self._send((_STEP, t, odometry, target_estimate))
-        self._busy = True
+        self._state["busy"] = True
+        self._sent_at = time.perf_counter()
 
     @property
-    def busy(self) -> bool:
-        """A step is in flight."""
-        return self._busy
+    def _busy(self) -> bool:
+        return bool(self._state["busy"])
 
-    def finished(self) -> bool:
-        """The step in flight has finished (its answer, or the worker's end, is waiting)."""
-        return self._busy and self._conn.poll()
+    def _finished(self) -> bool:
+        """The step in flight has finished (its answer, or the worker's end, is waiting); one in
+        flight for longer than ``timeout`` closes the worker and raises."""
+        if not self._busy:
+            return False
+        try:
+            if self._conn.poll():
+                return True
+        except (OSError, ValueError) as exc:
+            raise self._fail(f"the planning worker is gone ({type(exc).__name__}: {exc})", exc) from exc
+        if time.perf_counter() - self._sent_at > self.timeout:
+            raise self._fail(f"the planning worker has not answered for {self.timeout:g} s (timeout: hung?)")
+        return False
 
-    def receive(self) -> tuple[ReplanStep, float, float]:
-        """The step in flight (waits for it, up to ``timeout``): the step, and the worker's CPU and
-        wall seconds on it. Re-raises what the step raised."""
-        if not self._busy:  # pragma: no cover - BackgroundReplanner receives only when busy
-            raise WorkerError("no step in flight")
-        reply = self._receive()
-        self._busy = False
+    def _receive(self) -> tuple[ReplanStep, float, float]:
+        """The step in flight (waits for it, up to ``timeout`` from its request): the step, and the
+        worker's CPU and wall seconds on it. Re-raises what the step raised."""
+        reply = self._reply(max(self.timeout - (time.perf_counter() - self._sent_at), 0.0))
+        self._state["busy"] = False
         if reply[0] == _FAILED:
-            exc = reply[1]
-            raise exc if isinstance(exc, AvpError) else WorkerError(f"{type(exc).__name__}: {exc}")
+            raise reply[1]
         return reply[1], reply[2], reply[3]
 
 
@@ -328,15 +423,18 @@ class BackgroundReplanner:
     Parameters
     ----------
     replanner:
-        The replanner to run (a :class:`~avp.replan.Replanner` or a subclass); a pickled copy runs
-        in the worker, so this object is not updated (read :attr:`history` and
-        :attr:`trajectory` here).
+        The replanner to run (a :class:`~avp.replan.Replanner` or a subclass, importable in the
+        worker); a pickled copy runs in the worker, so this object is not updated: read
+        :attr:`history` and :attr:`trajectory` here. State a subclass keeps beyond those (a
+        :class:`~avp.line_replan.LineReplanner`'s ``recovery``) is in the adopted steps' results.
+        One that has stepped already carries on (its time, plans and history are kept).
     worker:
         A :class:`PlanningWorker` to host it (default: a new one, closed by :meth:`close`; one
-        passed in stays open and may host another replanner afterwards).
+        passed in stays open and may host another replanner afterwards, which ends this one's
+        use of it).
     wait:
-        Every call waits for the step in flight before sending the next (lock-step; module
-        docstring); a call's own ``wait`` overrides it.
+        Every call waits for the step in flight (lock-step; module docstring); a call's own
+        ``wait`` overrides it.
     """
 
     def __init__(self, replanner: Replanner, *, worker: PlanningWorker | None = None, wait: bool = False) -> None:
@@ -352,41 +450,52 @@ class BackgroundReplanner:
                               "a subclass must be defined at module level and hold picklable state") from exc
         self._owns = worker is None
         self.worker = worker if worker is not None else PlanningWorker()
-        self.worker.host(replanner)
+        self._token = object()  # this replanner's claim on the worker (PlanningWorker._host)
+        try:
+            self.worker._host(replanner, self._token)
+        except BaseException:
+            if self._owns:
+                self.worker.close()
+            raise
+        self._kind = type(replanner)  # its input checks (Replanner._check_input)
         self.config = replanner.config
         self.replan = replanner.replan
         self.target = replanner.target
         """The latest estimate handed to :meth:`step` (sent or waiting to be)."""
         self.trajectory: Trajectory | None = replanner.trajectory
         """The committed plan adopted last (``None`` before the first)."""
-        self._previous: Trajectory | None = None
-        self.history: list[ReplanStep] = []
-        """The worker's steps, in the order adopted."""
-        self._target_type = replanner._target_type
-        self._last_t: float | None = None
+        self._previous: Trajectory | None = replanner._previous
+        self.history: list[ReplanStep] = list(replanner.history)
+        """The replanner's steps, then the worker's, in the order adopted."""
+        self._last_t: float | None = replanner._last_t
         self._requested: float | None = None  # the time of the request in flight
+        self._in_flight: PerchTarget | None = None  # the estimate it carries
         self._unsent: PerchTarget | None = None  # an estimate that came while the worker was busy
 
-    # -- the loop's call ---------------------------------------------------------------------
+    # -- the loop's calls ----------------------------------------------------------------------
     def step(self, t: float, odometry: State, target_estimate: PerchTarget | None = None, *,
              wait: bool | None = None) -> BackgroundStep:
         """One cycle of the loop at ``t`` (module docstring): adopt the worker's finished step,
-        then send this call's input when the worker is idle. Input is checked here as
-        :meth:`Replanner.step <avp.replan.Replanner.step>` checks it (``ConfigError``); a worker
-        that died or does not answer raises :class:`~avp.errors.WorkerError`."""
-        t = check_step_input(t, self._last_t, odometry, target_estimate, self._target_type)
+        then send this call's input when the worker is idle. Input is checked here as the
+        replanner's own ``step`` checks it (``ConfigError``), before anything is sent; a worker
+        that died, hung past its ``timeout`` or was given to another replanner raises
+        :class:`~avp.errors.WorkerError`, and what the hosted replanner's step raised is
+        re-raised (an ``AvpError`` as it is)."""
+        self.worker._check_host(self._token)
+        t = self._kind._check_input(t, odometry, target_estimate, self._last_t,
+                                    self.target if self.trajectory is None else None)
         wait = self.wait if wait is None else v.boolean("wait", wait)
         if target_estimate is not None:
             self.target = target_estimate
             self._unsent = target_estimate
         out: dict[str, Any] = {}
         waited = 0.0
-        if self.worker.busy and (wait or self.trajectory is None or self.worker.finished()):
+        if self.worker._busy and (wait or self.trajectory is None or self.worker._finished()):
             waited += self._adopt(t, out)
         sent = False
-        if not self.worker.busy:
-            self.worker.submit(t, odometry, self._unsent)
-            self._requested, self._unsent, sent = t, None, True
+        if not self.worker._busy:
+            self.worker._submit(t, odometry, self._unsent)
+            self._requested, self._in_flight, self._unsent, sent = t, self._unsent, None, True
             if self.trajectory is None:  # the first plan: nothing to fly without it
                 waited += self._adopt(t, out)
         self._last_t = t
@@ -394,25 +503,45 @@ class BackgroundReplanner:
 
     def _adopt(self, t: float, out: dict[str, Any]) -> float:
         """Receive the step in flight and put it in force; its fields go into ``out``. Returns the
-        wall seconds spent waiting for it."""
+        wall seconds spent waiting for it. When the step raised, its estimate goes with the next
+        request (unless a newer one came) and the exception is raised."""
         w0 = time.perf_counter()
-        step, cpu, wall = self.worker.receive()
+        requested, estimate = self._requested, self._in_flight
+        self._requested = self._in_flight = None
+        try:
+            step, cpu, wall = self.worker._receive()
+        except BaseException:
+            if self._unsent is None:
+                self._unsent = estimate
+            raise
         waited = time.perf_counter() - w0
+        replan = step.committed and step.action is not ReplanAction.INITIAL_PLAN
         if step.committed and step.trajectory is not None:
-            if step.action is not ReplanAction.INITIAL_PLAN:
-                self._previous = self.trajectory
-            self.trajectory = step.trajectory
+            self._previous, self.trajectory = self.trajectory, step.trajectory
         self.history.append(step)
-        out.update(adopted=step, requested=self._requested, plan_cpu=cpu, plan_wall=wall,
-                   late=max(t - step.t_ex, 0.0) if step.committed and step.action is not ReplanAction.INITIAL_PLAN else 0.0)
-        self._requested = None
+        out.update(adopted=step, requested=requested, plan_cpu=cpu, plan_wall=wall,
+                   late=max(t - step.t_ex, 0.0) if replan else 0.0)
         return waited
+
+    def poll(self, t: float, *, wait: bool = False) -> BackgroundStep | None:
+        """Adopt the worker's step if it has finished (with ``wait``, wait for the one in flight),
+        sending nothing: for a control loop faster than the replanning calls, so that a plan is
+        flown as soon as it is ready rather than at the next :meth:`step` (module docstring).
+        ``t`` (s) is the loop's clock now, not before the last step's; ``None`` when nothing
+        was adopted. Raises as :meth:`step` does."""
+        self.worker._check_host(self._token)
+        t = check_step_time(t, self._last_t)
+        if not self.worker._busy or not (v.boolean("wait", wait) or self.worker._finished()):
+            return None
+        out: dict[str, Any] = {}
+        waited = self._adopt(t, out)
+        return BackgroundStep(t=t, waited=waited, **out)
 
     # -- what the loop flies -------------------------------------------------------------------
     @property
     def pending(self) -> bool:
-        """A request is in flight."""
-        return self.worker.busy
+        """A request of this replanner's is in flight."""
+        return self.worker._busy and self.worker._host_token is self._token
 
     @property
     def cannot_reach(self) -> bool:

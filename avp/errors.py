@@ -84,5 +84,8 @@ class RelaxedPlanError(PlanningError):
 
 
 class WorkerError(AvpError):
-    """The planning worker of :class:`avp.BackgroundReplanner` died, closed or did not answer in
-    time; the message says which. Start a new :class:`avp.PlanningWorker`."""
+    """The planning worker of :class:`avp.BackgroundReplanner` died, was closed, did not answer
+    in time or hosts another replanner now; or the hosted replanner raised an exception that is
+    not an ``AvpError`` and does not cross the process boundary (the message has its traceback).
+    The message says which, and whether the worker was closed (then start a new
+    :class:`avp.PlanningWorker`)."""

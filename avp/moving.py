@@ -52,7 +52,7 @@ from .moving_clearance import ClearanceReport, certify_moving_clearance
 from .planner import STILL_SPEED, PlanStatus, planning_error
 from .platform import MovingTarget
 from .qp.moving import MovingQpBuilder, TerminalYaw, contact_point, objective
-from .replan import ReplanConfig, Replanner, ReplanStep, _step_time, _target_change
+from .replan import ReplanConfig, Replanner, _target_change
 from .safety import (
     RESIDUAL_TOL,
     TOUCH_TOL,
@@ -625,15 +625,19 @@ class MovingReplanner(Replanner):
         # planner has no duration schedule or relaxations for ``search_on_replan`` to turn off
         self._replan_config = self.config
 
-    def step(self, t: float, odometry: State, target_estimate: PerchTarget | None = None) -> ReplanStep:
-        t = _step_time(t)
+    _target_type = MovingTarget
+
+    @classmethod
+    def _check_input(cls, t: Any, odometry: Any, target_estimate: Any, last_t: float | None,
+                     first_target: PerchTarget | None) -> float:
+        """:meth:`Replanner._check_input <avp.replan.Replanner._check_input>` and the estimate's
+        time: the pad predicted now from it stays within the time limit."""
+        t = super()._check_input(t, odometry, target_estimate, last_t, first_target)
         if target_estimate is not None:
-            if not isinstance(target_estimate, MovingTarget):
-                raise ConfigError("target_estimate", f"expected avp.platform.MovingTarget, got {type(target_estimate).__name__}")
             _predicted_now(target_estimate, t, "target_estimate.time")
-        elif self.trajectory is None and isinstance(self.target, MovingTarget):  # the constructor's
-            _predicted_now(self.target, t, "target.time")  # estimate plans the first step
-        return super().step(t, odometry, target_estimate)
+        elif isinstance(first_target, MovingTarget):  # the constructor's estimate plans the first step
+            _predicted_now(first_target, t, "target.time")
+        return t
 
     def _change(self, a: Any, b: Any) -> tuple[float, float]:
         """Distance (m) and angle (rad) between the pads that ``a`` and ``b`` predict at the

@@ -270,14 +270,21 @@ def _step_time(t: Any) -> float:
     return t
 
 
-def check_step_input(t: Any, last_t: float | None, odometry: Any, target_estimate: Any, target_type: type) -> float:
-    """The checks of :meth:`Replanner.step`'s input (``ConfigError`` naming the argument): ``t``
-    finite, within the time limit and not before ``last_t``; ``odometry`` a :class:`State`;
-    ``target_estimate`` ``None`` or a ``target_type``. Returns ``t`` as a float."""
+def check_step_time(t: Any, last_t: float | None) -> float:
+    """A step's ``t`` as a float: finite, within the time limit and not before ``last_t`` (the
+    previous step's; ``ConfigError`` on ``t``)."""
     t = _step_time(t)
     if last_t is not None and t < last_t:
         raise ConfigError("t", f"went back from {last_t:.6g} s to {t:.6g} s: steps must come in time "
                           "order on one clock (after a clock reset, build a new Replanner)")
+    return t
+
+
+def check_step_input(t: Any, last_t: float | None, odometry: Any, target_estimate: Any, target_type: type) -> float:
+    """The checks of :meth:`Replanner.step`'s input (``ConfigError`` naming the argument): ``t``
+    finite, within the time limit and not before ``last_t``; ``odometry`` a :class:`State`;
+    ``target_estimate`` ``None`` or a ``target_type``. Returns ``t`` as a float."""
+    t = check_step_time(t, last_t)
     if not isinstance(odometry, State):
         raise ConfigError("odometry", f"expected avp.State, got {type(odometry).__name__}")
     if target_estimate is not None and not isinstance(target_estimate, target_type):
@@ -416,7 +423,7 @@ class Replanner:
         Raises only for bad input (:class:`~avp.errors.ConfigError`); planning failures of any
         kind are reported in the returned :class:`ReplanStep`.
         """
-        t = check_step_input(t, self._last_t, odometry, target_estimate, self._target_type)
+        t = self._check_input(t, odometry, target_estimate, self._last_t, self.target if self.trajectory is None else None)
         if target_estimate is not None:
             self.target = target_estimate
         step = self._initial(t, odometry) if self.trajectory is None else self._replan(t, odometry)
@@ -785,6 +792,16 @@ class Replanner:
 
     _target_type: type = PerchTarget
     """The target class :meth:`step` accepts (a subclass for another target model sets its own)."""
+
+    @classmethod
+    def _check_input(cls, t: Any, odometry: Any, target_estimate: Any, last_t: float | None,
+                     first_target: PerchTarget | None) -> float:
+        """:meth:`step`'s input checks (``ConfigError`` naming the argument), ``t`` as a float;
+        ``last_t`` is the previous step's time and ``first_target`` the estimate a first plan
+        would use when ``target_estimate`` is ``None`` (``None`` once a plan is committed). A
+        subclass adds its own (a moving pad: the estimate's time). A class method, so that
+        :class:`avp.BackgroundReplanner` checks a call before sending it to its worker."""
+        return check_step_input(t, last_t, odometry, target_estimate, cls._target_type)
 
     def _change(self, a: Any, b: Any) -> tuple[float, float]:
         """Distance (m) and angle (rad) between two target estimates (the hold and reach tests).

@@ -1,7 +1,7 @@
 """Replanning in a worker process (avp.background): the worker's steps are the synchronous
-replanner's on the same input, adopted one call later; the loop's call never loses an estimate;
-bad input, a dead worker and an unpicklable replanner are clear errors; the simulator's
-background mode flies, and counts the plans adopted after their switch time."""
+replanner's on the same input, adopted one call later or by a poll between calls; the loop's
+call never loses an estimate; bad input, a dead worker and an unpicklable replanner are clear
+errors; the simulator's background mode flies the loop replanner's flight."""
 
 from __future__ import annotations
 
@@ -9,12 +9,14 @@ import dataclasses
 import math
 import os
 import signal
+import subprocess
 import sys
 import time
 import types
 
 import numpy as np
 import pytest
+from background_helpers import FailingReplanner, GatedReplanner
 
 import avp
 from avp.background import (
@@ -22,7 +24,6 @@ from avp.background import (
     BackgroundStep,
     PlanningWorker,
     _portable,
-    start_methods,
 )
 from avp.errors import ConfigError, WorkerError
 from avp.replan import ReplanAction, ReplanConfig, Replanner, ReplanStep
@@ -99,6 +100,9 @@ def test_lock_step_adopts_the_synchronous_steps_one_call_later(worker, seed):
     assert len(bg.history) == len(sync.history) - 1  # the last request is still in flight
     for a, b in zip(bg.history, sync.history, strict=False):
         _same_step(a, b)
+        if a.result is not None and a.result.qp is not None:  # the back-end's record stays in the worker
+            assert a.result.qp.solution is None and b.result.qp.solution is not None
+            assert np.array_equal(a.result.qp.c_hat, b.result.qp.c_hat)
     actions = {s.action for s in sync.history}
     assert ReplanAction.REPLANNED in actions and len(actions) >= 3, actions  # the calls exercise the policy
 
@@ -129,47 +133,149 @@ def test_portable_step_drops_only_the_back_end_record():
     assert dataclasses.replace(light.result.qp, solution=step.result.qp.solution) == step.result.qp
 
 
-# -- a slow replanner, to see the loop's call while the worker is busy ---------------------------------------
-class SlowReplanner(Replanner):
-    """Sleeps before each step, and says in the reason which estimate it was given."""
-
-    delay = 0.3
-
-    def step(self, t, odometry, target_estimate=None):
-        time.sleep(self.delay)
-        out = super().step(t, odometry, target_estimate)
-        got = "none" if target_estimate is None else f"{target_estimate.point[1]:.3f}"
-        return dataclasses.replace(out, reason=f"{out.reason} | estimate y {got}")
-
-
-@pytest.mark.skipif("fork" not in start_methods(), reason="the test's replanner class reaches the worker by fork")
-def test_busy_worker_keeps_the_estimate_for_the_next_request():
+def test_busy_worker_keeps_the_estimate_for_the_next_request(worker, tmp_path):
     """Without ``wait``, a call while the worker plans sends nothing and does not wait; the
     estimate it brought goes with the next request, not lost."""
-    with PlanningWorker(start_method="fork") as w:
-        bg = BackgroundReplanner(SlowReplanner(WALL, replan=RCFG), worker=w)
-        first = bg.step(0.0, START, WALL)  # waited for
-        assert first.adopted is not None and first.adopted.action is ReplanAction.INITIAL_PLAN
-        traj = bg.trajectory
-        assert traj is not None
-        odo = START
-        moved = avp.PerchTarget(point=WALL.point + [0.0, 0.05, 0.0], R_WS=WALL.R_WS)
-        out1 = bg.step(PERIOD, odo, None)  # the worker starts (slowly)
-        assert out1.sent and out1.adopted is None and bg.pending
-        w0 = time.perf_counter()
-        out2 = bg.step(2 * PERIOD, odo, moved)  # busy: nothing sent, the estimate kept
-        assert time.perf_counter() - w0 < 0.5 * SlowReplanner.delay  # did not wait
-        assert not out2.sent and out2.adopted is None
-        assert bg.target is moved
-        time.sleep(1.5 * SlowReplanner.delay)
-        out3 = bg.step(3 * PERIOD, odo, None)  # adopts call 1's step, sends with the kept estimate
-        assert out3.adopted is not None and out3.requested == PERIOD and out3.sent
-        assert out3.adopted.reason.endswith("estimate y none")
-        out4 = bg.step(4 * PERIOD, odo, None, wait=True)
-        assert out4.adopted is not None and out4.requested == 3 * PERIOD
-        assert out4.adopted.reason.endswith("estimate y 0.050")
-        bg.close()  # a worker passed in stays open
-        assert w.alive
+    gate = tmp_path / "go"
+    bg = BackgroundReplanner(GatedReplanner(WALL, replan=RCFG, gate=str(gate)), worker=worker)
+    first = bg.step(0.0, START, WALL)  # waited for (the first plan is not gated)
+    assert first.adopted is not None and first.adopted.action is ReplanAction.INITIAL_PLAN
+    moved = avp.PerchTarget(point=WALL.point + [0.0, 0.05, 0.0], R_WS=WALL.R_WS)
+    out1 = bg.step(PERIOD, START, None)  # the worker starts, and waits at the gate
+    assert out1.sent and out1.adopted is None and bg.pending
+    out2 = bg.step(2 * PERIOD, START, moved)  # busy: nothing sent, the estimate kept
+    assert not out2.sent and out2.adopted is None and out2.waited == 0.0
+    assert bg.poll(2 * PERIOD) is None and bg.target is moved
+    gate.touch()
+    out3 = bg.step(3 * PERIOD, START, None, wait=True)  # adopts call 1's step, sends with the kept estimate
+    assert out3.adopted is not None and out3.requested == PERIOD and out3.sent
+    assert out3.adopted.reason.endswith("estimate y none")
+    out4 = bg.step(4 * PERIOD, START, None, wait=True)
+    assert out4.adopted is not None and out4.requested == 3 * PERIOD
+    assert out4.adopted.reason.endswith("estimate y 0.050")
+    bg.close()  # a worker passed in stays open
+    assert worker.alive
+
+
+@pytest.mark.parametrize("kind", ["config", "runtime", "unreadable"])
+def test_a_failing_replanner_step_is_raised_and_its_estimate_kept(kind):
+    """What the hosted replanner raises comes back at the adopting call: an AvpError as it is,
+    another exception as a WorkerError with its traceback (one that does not unpickle here
+    too); the worker is fine afterwards and the failed request's estimate goes with the next."""
+    with PlanningWorker() as w:
+        bg = BackgroundReplanner(FailingReplanner(WALL, replan=RCFG, kind=kind), worker=w, wait=True)
+        bg.step(0.0, START, WALL)
+        moved = avp.PerchTarget(point=WALL.point + [0.0, 0.02, 0.0], R_WS=WALL.R_WS)
+        bg.step(PERIOD, START, moved)  # sent; it fails in the worker
+        expected = {"config": (ConfigError, "^replanner.kind: a planned failure"),
+                    "runtime": (WorkerError, "RuntimeError: a planned failure(.|\n)*Traceback"),
+                    "unreadable": (WorkerError, "Unreadable")}[kind]
+        with pytest.raises(expected[0], match=expected[1]):
+            bg.step(2 * PERIOD, START, None)  # adopts the failure; nothing sent
+        assert w.alive and not bg.pending
+        out = bg.step(3 * PERIOD, START, None)
+        assert out.sent and bg.pending and out.adopted is None  # lock-step: adopted at the next call
+        out = bg.step(4 * PERIOD, START, None)
+        assert out.adopted is not None and out.adopted.reason.endswith("seen [0.02, 0.02]")
+
+
+def test_a_worker_serves_one_replanner_at_a_time(worker):
+    """Hosting a second replanner on a worker ends the first one's use of it: its next call is
+    a WorkerError, not a step of the other replanner's."""
+    other = avp.PerchTarget.from_incline([2.0, 1.0, 1.0], math.radians(90.0))
+    first = BackgroundReplanner(Replanner(WALL, replan=RCFG), worker=worker)
+    first.step(0.0, START, WALL)
+    second = BackgroundReplanner(Replanner(other, replan=RCFG), worker=worker)
+    with pytest.raises(WorkerError, match="hosts another replanner"):
+        first.step(PERIOD, START, None)
+    with pytest.raises(WorkerError, match="hosts another replanner"):
+        first.poll(PERIOD)
+    assert not first.pending
+    out = second.step(0.0, START, other)
+    assert np.allclose(second.trajectory(second.trajectory.tf), other.point, atol=1e-9)
+    assert out.adopted.action is ReplanAction.INITIAL_PLAN
+
+
+def test_a_hung_worker_times_out_and_is_closed(tmp_path):
+    """A step in flight for longer than ``timeout`` closes the worker and raises, waiting or not
+    (its late answer could no longer be matched to its request)."""
+    for wait in (True, False):
+        w = PlanningWorker(timeout=0.3)
+        bg = BackgroundReplanner(GatedReplanner(WALL, replan=RCFG, gate=str(tmp_path / "never")), worker=w)
+        bg.step(0.0, START, WALL)
+        bg.step(PERIOD, START, None)  # held at the gate for good
+        if not wait:
+            assert bg.poll(PERIOD) is None  # not yet overdue
+            time.sleep(0.4)
+        with pytest.raises(WorkerError, match="timeout"):
+            bg.step(2 * PERIOD, START, None, wait=wait)
+        assert not w.alive
+        with pytest.raises(WorkerError, match="closed"):
+            bg.step(3 * PERIOD, START, None)
+
+
+def test_the_worker_ignores_ctrl_c(worker):
+    """SIGINT (the terminal's Ctrl-C reaches the whole process group) does not end the worker."""
+    if worker.start_method != "subprocess":
+        pytest.skip("signals a subprocess worker")
+    bg = BackgroundReplanner(Replanner(WALL, replan=RCFG), worker=worker, wait=True)
+    bg.step(0.0, START, WALL)
+    os.kill(worker._process.popen.pid, signal.SIGINT)
+    time.sleep(0.2)
+    assert worker.alive
+    bg.step(PERIOD, START, None)
+    assert bg.step(2 * PERIOD, START, None).adopted is not None
+
+
+def test_the_worker_imports_the_callers_avp_and_modules(tmp_path):
+    """The worker gets the caller's sys.path: a decoy ``avp`` in the working directory (which a
+    plain ``python -c`` would put first) is not imported, and a replanner subclass in a module
+    beside the caller's script is found."""
+    cwd, scripts = tmp_path / "cwd", tmp_path / "scripts"
+    (cwd / "avp").mkdir(parents=True)
+    (cwd / "avp" / "__init__.py").write_text("raise ImportError('the decoy avp was imported')\n")
+    scripts.mkdir()
+    (scripts / "mine.py").write_text("import avp\n\nclass MyReplanner(avp.Replanner):\n    pass\n")
+    (scripts / "run.py").write_text(
+        "import math\nimport avp\nfrom mine import MyReplanner\n"
+        "wall = avp.PerchTarget.from_incline([4.5, 0.0, 1.5], math.radians(90.0))\n"
+        "with avp.BackgroundReplanner(MyReplanner(wall)) as bg:\n"
+        "    print(bg.step(0.0, avp.State.hover([0.0, 0.0, 1.5]), wall).adopted.action.name)\n")
+    proc = subprocess.run([sys.executable, str(scripts / "run.py")], capture_output=True, text=True, timeout=120,
+                          cwd=cwd)
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.strip() == "INITIAL_PLAN"
+
+
+def test_a_replanner_that_has_stepped_carries_on(worker):
+    """A replanner wrapped after steps of its own keeps its time, plans and history: an earlier
+    ``t`` is refused at the call, and the flown plan is its own."""
+    sync = Replanner(WALL, replan=RCFG)
+    calls = _inputs(4, 6)
+    for t, odo, est in calls[:4]:
+        sync.step(t, odo, est)
+    bg = BackgroundReplanner(sync, worker=worker, wait=True)
+    assert bg.history == sync.history and bg.trajectory is sync.trajectory
+    for tt in (calls[3][0], sync.trajectory.t0 - 1e-3, sync.trajectory.t0 + 0.1):
+        assert bg.plan_at(tt) is sync.plan_at(tt)
+    with pytest.raises(ConfigError, match="^t: went back"):
+        bg.step(calls[2][0], calls[2][1], None)
+    assert not bg.pending
+
+
+def test_a_moving_estimates_time_is_checked_at_the_call(worker):
+    """A subclass's own input checks (a moving pad's estimate time) run at the call, before
+    anything is sent."""
+    from avp.moving import MovingConfig, MovingReplanner
+    from avp.platform import MovingTarget
+
+    pad = MovingTarget.on_platform([0.0, 0.0, 1.0], incline=0.5, speed=2.0)
+    bg = BackgroundReplanner(MovingReplanner(pad, moving=MovingConfig()), worker=worker)
+    start = avp.State(position=[-3.0, 0.0, 1.0], velocity=[2.0, 0.0, 0.0])
+    stale = MovingTarget.on_platform([0.0, 0.0, 1.0], incline=0.5, speed=2.0, time=1.7e9)
+    with pytest.raises(ConfigError) as exc:
+        bg.step(0.0, start, stale)
+    assert exc.value.field == "target_estimate.time" and not bg.pending
 
 
 def test_bad_input_is_refused_before_anything_is_sent(worker):
@@ -230,13 +336,16 @@ def test_a_dead_worker_is_a_worker_error():
     bg.step(0.0, START, WALL)
     pid = w._process.popen.pid if w.start_method == "subprocess" else w._process.process.pid
     os.kill(pid, signal.SIGKILL)
+    w._process.join(5.0)
+    assert not w.alive  # seen dead before anything is sent
     with pytest.raises(WorkerError, match="exited|gone"):
         bg.step(PERIOD, START, None, wait=True)
         bg.step(2 * PERIOD, START, None, wait=True)
-    w.close()
-    assert not w.alive
     with pytest.raises(WorkerError, match="closed"):
-        w.host(Replanner(WALL))
+        bg.step(3 * PERIOD, START, None)
+    w.close()
+    with pytest.raises(WorkerError, match="closed"):
+        BackgroundReplanner(Replanner(WALL), worker=w)
 
 
 def test_first_plan_failure_keeps_waiting_for_a_plan(worker):
@@ -250,16 +359,39 @@ def test_first_plan_failure_keeps_waiting_for_a_plan(worker):
     assert bg.trajectory is not None and bg.plan_at(PERIOD) is bg.trajectory
 
 
-def test_simulate_in_the_background(worker):
-    """The simulator's background mode perches as the loop's replanner does; with a latency
-    below the step period every adopted replan comes after its switch time, above it none."""
+def test_poll_adopts_between_steps(worker):
+    """``poll`` adopts the finished step without sending: polled right after each call (as a
+    controller would at its next step), the background replanner flies what the synchronous
+    one flies at every call, with the default latency, and nothing is adopted late."""
+    calls = _inputs(2, 30)
+    sync = Replanner(WALL)
+    bg = BackgroundReplanner(Replanner(WALL), worker=worker)
+    assert bg.poll(0.0) is None  # nothing in flight
+    for t, odo, est in calls:
+        out = bg.step(t, odo, est)
+        sync.step(t, odo, est)
+        assert out.sent
+        got = bg.poll(t + 0.002, wait=True) if out.adopted is None else out
+        assert got is not None and got.adopted is not None and got.requested == t
+        assert got.late == 0.0 and not bg.pending
+        _same_step(got.adopted, sync.history[-1])
+        assert np.array_equal(bg.plan_at(t + 0.005).coefficients, sync.plan_at(t + 0.005).coefficients)
+    assert bg.poll(calls[-1][0] + 0.01, wait=True) is None
+    with pytest.raises(ConfigError, match="^t: went back"):
+        bg.poll(calls[-1][0] - 0.01)
+
+
+def test_simulate_in_the_background_flies_the_loop_replanners_flight(worker):
+    """The simulator's background mode adopts each request at its own time, so the flight is
+    the loop replanner's: the same steps, plans bit for bit, the same contact."""
     sc = SimScenario(distance=4.5)
-    in_time = simulate(sc, Mode.AVP, seed=0, replan=RCFG, background=worker)
-    assert in_time.outcome == "success" and in_time.late_commits == 0
-    assert sum(s.action is ReplanAction.REPLANNED for s in in_time.steps) >= 3
-    late = simulate(sc, Mode.AVP, seed=0, replan=ReplanConfig(latency=0.02), background=worker)
-    committed = sum(s.committed for s in late.steps[1:])
-    assert committed >= 3 and late.late_commits == committed
+    loop = simulate(sc, Mode.AVP, seed=1)
+    bg = simulate(sc, Mode.AVP, seed=1, background=worker)
+    assert len(bg.steps) == len(loop.steps) and sum(s.action is ReplanAction.REPLANNED for s in bg.steps) >= 3
+    for a, b in zip(loop.steps, bg.steps, strict=True):
+        _same_step(a, b)
+    assert (bg.outcome, bg.late_commits) == (loop.outcome, 0)
+    assert np.array_equal(bg.path_p, loop.path_p)
     with pytest.raises(ConfigError, match="^background:"):
         simulate(sc, Mode.ONE_SHOT, background=worker)
     with pytest.raises(ConfigError, match="^background:"):

@@ -613,12 +613,6 @@ def _estimate_target(est: TargetEstimator, sc: SimScenario) -> PerchTarget | Non
     return PerchTarget(point=e.p_W - sc.aim_normal * target.s3 - down * target.s1, R_WS=e.R_WS)
 
 
-def _replan_step(out: ReplanStep | BackgroundStep) -> ReplanStep | None:
-    """The replanning step a loop's call produced: itself, or the worker's step a background
-    call adopted (``None`` when none finished)."""
-    return out.adopted if isinstance(out, BackgroundStep) else out
-
-
 def _shared(sc: SimScenario, config: PlannerConfig | None) -> tuple[SimScenario, PlannerConfig]:
     """Scenario and planner configuration sharing one vehicle and one camera object."""
     if config is None:
@@ -764,12 +758,14 @@ def simulate(
         no drag, on a vehicle whose controller feeds it forward, plans a contact it cannot fly
         (on rotorpy's wall ``b3`` arrives 9 deg off ``s3``): pass ``False`` to fly one anyway.
     background:
-        ``Mode.AVP`` only: run the replanner in a worker process (:class:`~avp.background.BackgroundReplanner`
-        in lock-step: each step's request is adopted at the next step), on a new worker (``True``,
-        closed at the end) or on the :class:`~avp.background.PlanningWorker` given (left open, for
-        the next run). Not with ``scenario.compute_slowdown`` (which models a step that plans in
-        the loop). Set ``replan.latency`` to at least the step period ``1 / replan_rate_hz``:
-        a plan adopted after its ``t_ex`` counts in ``late_commits``.
+        ``Mode.AVP`` only: run the replanner in a worker process
+        (:class:`~avp.background.BackgroundReplanner`), on a new worker (``True``, closed at the
+        end) or on the :class:`~avp.background.PlanningWorker` given (left open, for the next
+        run). Each step's request is adopted at the next control step, at the same simulated
+        time (:meth:`~avp.background.BackgroundReplanner.poll` with ``wait``): time stands still
+        while a plan is made, as for the replanner in the loop, so the flight is the same, plans
+        bit for bit; what differs is the loop's own cost (``benchmarks/bench_background.py``).
+        Not with ``scenario.compute_slowdown`` (which models a step that plans in the loop).
     """
     if not (background is False or background is True or isinstance(background, PlanningWorker)):
         raise ConfigError("background", f"expected True, False or an avp.PlanningWorker, got {background!r}")
@@ -918,7 +914,8 @@ def _simulate(
     if mode is Mode.AVP:
         inner = Replanner(initial, cfg, rcfg) if platform is None else MovingReplanner(initial, cfg, rcfg, mcfg)  # type: ignore[arg-type]
         replanner = inner if worker is None else BackgroundReplanner(inner, worker=worker, wait=True)
-        first = _replan_step(replanner.step(t_plan, start, initial))
+        out = replanner.step(t_plan, start, initial)
+        first = out.adopted if isinstance(out, BackgroundStep) else out
         assert first is not None  # a first plan is waited for
         solve_times.append(first.solve_time)
         if replanner.trajectory is None:
@@ -955,6 +952,10 @@ def _simulate(
         if held is not None and tt < held[0]:  # the new plan has not arrived: fly the one before it
             traj = held[1]  # started: a step commits only once the committed plan has (Replanner)
             return _hold(traj, tt, idle) if tt > traj.tf else traj.flat_output(max(tt, traj.t0))
+        if isinstance(replanner, BackgroundReplanner) and replanner.pending:
+            # the request of the tick just made, adopted at its first control step (the same time:
+            # simulated time stands still while it is planned, as for the replanner in the loop)
+            adopt(replanner.poll(tt, wait=True))
         traj = committed()
         if tt > traj.tf:
             return _hold(traj, tt, idle)
@@ -1007,14 +1008,12 @@ def _simulate(
             return
         before = committed()
         odometry, estimate = _odometry_state(believed(t, state), t, reference(t)), estimate_target()
-        c0 = _step_clock()
-        out = replanner.step(t, odometry, estimate)
-        elapsed = _step_clock() - c0
-        if isinstance(out, BackgroundStep):  # the step adopted at this tick (if any): requested at the one before
-            late += out.late > 0.0
-        s = _replan_step(out)
-        if s is None:
+        if isinstance(replanner, BackgroundReplanner):  # sends; the next control step adopts (reference)
+            adopt(replanner.step(t, odometry, estimate))
             return
+        c0 = _step_clock()
+        s = replanner.step(t, odometry, estimate)
+        elapsed = _step_clock() - c0
         if slowdown:
             delay = slowdown * elapsed
             step_delays.append(delay)
@@ -1022,10 +1021,22 @@ def _simulate(
             if committed() is not before and t + delay > s.t_ex:  # arrives after its switch time
                 held = (t + delay, before)
                 late += 1
+        record(s)
+
+    def record(s: ReplanStep) -> None:
+        """A step's solve time and, for a committed replan, its anticipated start (checked
+        against the flight at ``t_ex`` by ``hook``)."""
         if s.solved:
             solve_times.append(s.solve_time)
         if s.action in (ReplanAction.REPLANNED, ReplanAction.PARTIAL) and s.anticipated is not None:
             pending.append((s.t_ex, s.anticipated.position.copy()))
+
+    def adopt(out: BackgroundStep | None) -> None:
+        """The bookkeeping of a step a background call adopted (if any)."""
+        nonlocal late
+        if out is not None and out.adopted is not None:
+            late += out.late > 0.0
+            record(out.adopted)
 
     state, contact = closed_loop(
         state, reference, t_plan, lambda: flown().tf + sc.timeout, max_time, 1.0 / sc.replan_rate_hz, dt,
