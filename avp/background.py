@@ -73,23 +73,28 @@ from .types import PerchTarget, State
 __all__ = ["BackgroundReplanner", "BackgroundStep", "PlanningWorker"]
 
 _STOP, _HOST, _STEP, _READY, _DONE, _FAILED = "stop", "host", "step", "ready", "done", "failed"
-"""The messages between a :class:`PlanningWorker` and its process."""
+"""The messages between a :class:`PlanningWorker` and its process. A ``_FAILED`` answer carries
+the exception and what failed: ``"step"`` (the hosted replanner's step raised; the worker goes
+on), ``"input"`` (the worker could not read the message: a class it cannot import) or
+``"answer"`` (the step ran but its answer does not pickle: the worker's replanner has moved on
+without the parent, so the parent closes it)."""
 
 
-def _reply_failed(conn: Connection, exc: BaseException) -> None:
+def _reply_failed(conn: Connection, exc: BaseException, what: str) -> None:
     """Send ``exc`` back as ``_FAILED``: an ``AvpError`` that survives a pickle round trip as it
     is (the caller re-raises it), anything else as a :class:`~avp.errors.WorkerError` with its
     traceback."""
     data = b""
     if isinstance(exc, AvpError):
         try:
-            data = pickle.dumps((_FAILED, exc))
+            data = pickle.dumps((_FAILED, exc, what))
             pickle.loads(data)
         except Exception:
             data = b""
     if not data:
         text = "".join(traceback.format_exception(exc)).rstrip()
-        data = pickle.dumps((_FAILED, WorkerError(f"the hosted replanner raised {type(exc).__name__}: {exc}\n{text}")))
+        data = pickle.dumps((_FAILED, WorkerError(f"the hosted replanner raised {type(exc).__name__}: {exc}\n{text}"),
+                             what))
     conn.send_bytes(data)
 
 
@@ -111,7 +116,7 @@ def _serve(conn: Connection) -> None:
         try:
             msg = pickle.loads(data)
         except Exception as exc:  # a class this process cannot import, say
-            _reply_failed(conn, WorkerError(f"the worker could not read the message: {type(exc).__name__}: {exc}"))
+            _reply_failed(conn, WorkerError(f"the worker could not read it: {type(exc).__name__}: {exc}"), "input")
             continue
         kind = msg[0]
         if kind == _STOP:
@@ -125,9 +130,13 @@ def _serve(conn: Connection) -> None:
             if replanner is None:  # pragma: no cover - PlanningWorker hosts before it submits
                 raise WorkerError("no replanner hosted")
             step = replanner.step(*msg[1:])
+        except Exception as exc:
+            _reply_failed(conn, exc, "step")
+            continue
+        try:
             answer = pickle.dumps((_DONE, _portable(step), time.thread_time() - c0, time.perf_counter() - w0))
         except Exception as exc:
-            _reply_failed(conn, exc)
+            _reply_failed(conn, exc, "answer")
             continue
         conn.send_bytes(answer)
 
@@ -158,25 +167,36 @@ def _serve_process(conn: Connection, parent_end: Connection) -> None:
 
 _BOOT = ("import json, os, sys; sys.path[:] = json.loads(os.environ.pop('AVP_WORKER_SYS_PATH')); "
          "from avp.background import _serve_fd; _serve_fd({fd})")
-"""What the fresh interpreter runs: the parent's ``sys.path`` (so it imports the same ``avp``
-and the modules beside the caller's script), then the worker's loop on the inherited socket."""
+"""What the fresh interpreter runs (with ``-P``: nothing from the working directory is imported
+before): the parent's ``sys.path`` (so it imports the same ``avp`` and the modules beside the
+caller's script), then the worker's loop on the inherited socket."""
+
+
+def _parent_path() -> str:
+    """This process's ``sys.path`` as JSON, its entries absolute (``''``: the working
+    directory); entries that are not strings are left out."""
+    cwd = os.getcwd()
+    return json.dumps([os.path.join(cwd, p) if p else cwd for p in sys.path if isinstance(p, str)])
 
 
 class _Subprocess:
-    """A worker in a fresh interpreter (``subprocess``), with the calls :func:`_shutdown` makes."""
+    """A worker in a fresh interpreter (``subprocess``), with the calls :func:`_shutdown` makes.
+    It runs in its own session: the terminal's Ctrl-C never reaches it, not even while it starts."""
 
     def __init__(self) -> None:
         parent, child = socket.socketpair()
-        env = dict(os.environ)
-        env["AVP_WORKER_SYS_PATH"] = json.dumps([os.path.abspath(p) if p else os.getcwd() for p in sys.path])
-        flags: list[str] = getattr(subprocess, "_args_from_interpreter_flags", list)()  # -W, -X, -O... as here
         try:
+            env = dict(os.environ)
+            env["AVP_WORKER_SYS_PATH"] = _parent_path()
+            flags: list[str] = getattr(subprocess, "_args_from_interpreter_flags", list)()  # -W, -X, -O... as here
             self.popen = subprocess.Popen(
-                [sys.executable, *flags, "-c", _BOOT.format(fd=child.fileno())],
-                pass_fds=(child.fileno(),), stdin=subprocess.DEVNULL, env=env, close_fds=True)
-        except OSError as exc:
+                [sys.executable, *flags, "-P", "-c", _BOOT.format(fd=child.fileno())],
+                pass_fds=(child.fileno(),), stdin=subprocess.DEVNULL, env=env, close_fds=True,
+                start_new_session=True)
+        except (OSError, ValueError, TypeError) as exc:
             parent.close()
-            raise WorkerError(f"could not start a worker interpreter ({sys.executable!r}): {exc}") from exc
+            raise WorkerError(f"could not start a worker interpreter ({sys.executable!r}): "
+                              f"{type(exc).__name__}: {exc}") from exc
         finally:
             child.close()
         self.conn = Connection(parent.detach())
@@ -202,10 +222,15 @@ class _Multiprocess:
     def __init__(self, method: str) -> None:
         ctx: Any = multiprocessing.get_context(method)
         parent, child = ctx.Pipe()
-        self.process = ctx.Process(target=_serve_process, args=(child, parent), daemon=True,
-                                   name="avp-planning-worker")
-        self.process.start()
-        child.close()
+        try:
+            self.process = ctx.Process(target=_serve_process, args=(child, parent), daemon=True,
+                                       name="avp-planning-worker")
+            self.process.start()
+        except Exception as exc:
+            parent.close()
+            raise WorkerError(f"could not start a worker process ({method}): {type(exc).__name__}: {exc}") from exc
+        finally:
+            child.close()
         self.conn = parent
 
     def is_alive(self) -> bool:
@@ -235,6 +260,18 @@ def _shutdown(process: _Subprocess | _Multiprocess, state: dict[str, Any]) -> No
     process.conn.close()
 
 
+_LONGEST_WAIT = 1e6
+"""The longest timeout (s) a :class:`PlanningWorker` takes (about 11 days: a wait the system
+calls can express)."""
+
+
+def _seconds(field: str, value: Any) -> float:
+    out = v.positive_float(field, value)
+    if out > _LONGEST_WAIT:
+        raise ConfigError(field, f"must be at most {_LONGEST_WAIT:g} s, got {out:g}")
+    return out
+
+
 def start_methods() -> tuple[str, ...]:
     """The :class:`PlanningWorker` start methods of this platform: ``subprocess`` (POSIX: a fresh
     interpreter, the default) and ``multiprocessing``'s."""
@@ -257,7 +294,9 @@ class PlanningWorker:
         classes are not); it never runs the main script, which needs no
         ``if __name__ == "__main__":`` guard. Or one of ``multiprocessing``'s methods (the default
         elsewhere: ``spawn``, which runs the main module again and needs that guard; ``fork``
-        copies the caller's threads' state, BLAS pools included: not advised).
+        copies the caller's threads' state, BLAS pools included: not advised). A
+        ``multiprocessing`` worker shares the terminal's process group: a Ctrl-C while it starts
+        (before it ignores SIGINT) ends it.
     timeout:
         Seconds a step may be in flight (s): a call that waits for it longer, or finds it older
         (a hung worker), closes the worker and raises :class:`~avp.errors.WorkerError`, since
@@ -272,8 +311,8 @@ class PlanningWorker:
         method = methods[0] if start_method is None else start_method
         if method not in methods:
             raise ConfigError("start_method", f"{method!r} is not one of this platform's start methods {methods}")
-        self.timeout = v.positive_float("timeout", timeout)
-        self.start_timeout = v.positive_float("start_timeout", start_timeout)
+        self.timeout = _seconds("timeout", timeout)
+        self.start_timeout = _seconds("start_timeout", start_timeout)
         self.start_method = method
         self._process = _Subprocess() if method == "subprocess" else _Multiprocess(method)
         self._conn = self._process.conn
@@ -300,17 +339,20 @@ class PlanningWorker:
 
     # -- the protocol (BackgroundReplanner's) ---------------------------------------------------
     def _fail(self, message: str, cause: BaseException | None = None) -> WorkerError:
-        """Close the worker (its answers can no longer be matched to requests) and return the
-        error to raise."""
-        self._state["busy"] = False
+        """Close the worker (terminated at once: its answers can no longer be matched to
+        requests) and return the error to raise."""
         self.close()
+        self._state["busy"] = False
         err = WorkerError(message + "; the worker is closed: start a new PlanningWorker")
         err.__cause__ = cause
         return err
 
+    def _closed(self) -> WorkerError:
+        return WorkerError("the planning worker is closed: start a new PlanningWorker")
+
     def _send(self, msg: tuple[Any, ...]) -> None:
         if not self._finalizer.alive:
-            raise WorkerError("the planning worker is closed: start a new PlanningWorker")
+            raise self._closed()
         try:
             self._conn.send(msg)
         except (OSError, ValueError) as exc:
@@ -320,13 +362,13 @@ class PlanningWorker:
         """The next answer (waits up to ``timeout``); a timeout, the worker's end or an answer
         that does not read close the worker."""
         if not self._finalizer.alive:
-            raise WorkerError("the planning worker is closed: start a new PlanningWorker")
+            raise self._closed()
         try:
             ready = self._conn.poll(timeout)
         except (OSError, ValueError) as exc:
             raise self._fail(f"the planning worker is gone ({type(exc).__name__}: {exc})", exc) from exc
         if not ready:
-            raise self._fail(f"the planning worker did not answer within {timeout:g} s (timeout)")
+            raise self._fail(f"the planning worker did not answer in time (timeout {self.timeout:g} s)")
         try:
             data = self._conn.recv_bytes()
         except (EOFError, OSError) as exc:
@@ -338,13 +380,17 @@ class PlanningWorker:
             raise self._fail(f"the planning worker's answer does not read here ({type(exc).__name__}: {exc})",
                              exc) from exc
 
+    def _left(self) -> float:
+        """Seconds the step in flight may still take."""
+        return max(self.timeout - (time.perf_counter() - self._sent_at), 0.0)
+
     def _host(self, replanner: Replanner, token: object) -> None:
         """Send ``replanner`` to the worker (it replaces the one hosted before, whose next call
         then raises); waits until it is there. A step still in flight is received and dropped
         first."""
-        if self._state["busy"]:
+        if self._busy:
+            self._reply(self._left())
             self._state["busy"] = False
-            self._reply(self.timeout)
         self._host_token = None
         self._send((_HOST, replanner))
         reply = self._reply(self.start_timeout)
@@ -356,6 +402,9 @@ class PlanningWorker:
         self._host_token = token
 
     def _check_host(self, token: object) -> None:
+        """The worker is open and hosts the replanner of ``token``."""
+        if not self._finalizer.alive:
+            raise self._closed()
         if self._host_token is not token:
             raise WorkerError("this PlanningWorker now hosts another replanner (or none): a BackgroundReplanner "
                               "uses its worker until another is built on it")
@@ -368,7 +417,7 @@ class PlanningWorker:
 
     @property
     def _busy(self) -> bool:
-        return bool(self._state["busy"])
+        return bool(self._state["busy"]) and self._finalizer.alive
 
     def _finished(self) -> bool:
         """The step in flight has finished (its answer, or the worker's end, is waiting); one in
@@ -380,18 +429,21 @@ class PlanningWorker:
                 return True
         except (OSError, ValueError) as exc:
             raise self._fail(f"the planning worker is gone ({type(exc).__name__}: {exc})", exc) from exc
-        if time.perf_counter() - self._sent_at > self.timeout:
+        if self._left() <= 0.0:
             raise self._fail(f"the planning worker has not answered for {self.timeout:g} s (timeout: hung?)")
         return False
 
-    def _receive(self) -> tuple[ReplanStep, float, float]:
-        """The step in flight (waits for it, up to ``timeout`` from its request): the step, and the
-        worker's CPU and wall seconds on it. Re-raises what the step raised."""
-        reply = self._reply(max(self.timeout - (time.perf_counter() - self._sent_at), 0.0))
+    def _receive(self) -> tuple[Any, ...]:
+        """The answer to the step in flight (waits for it, up to ``timeout`` from its request):
+        ``(_DONE, step, cpu, wall)`` or ``(_FAILED, exception, what)``. An answer the parent
+        can no longer follow (``"answer"``: the worker's replanner moved on without it) closes
+        the worker and raises."""
+        reply = self._reply(self._left())
         self._state["busy"] = False
-        if reply[0] == _FAILED:
-            raise reply[1]
-        return reply[1], reply[2], reply[3]
+        if reply[0] == _FAILED and reply[2] == "answer":
+            raise self._fail(f"the hosted replanner's step ran but its answer does not pickle ({reply[1]}); the "
+                             "worker's replanner has moved on without this process")
+        return reply
 
 
 @dataclasses.dataclass(frozen=True, kw_only=True)
@@ -490,10 +542,10 @@ class BackgroundReplanner:
             self._unsent = target_estimate
         out: dict[str, Any] = {}
         waited = 0.0
-        if self.worker._busy and (wait or self.trajectory is None or self.worker._finished()):
+        if self.pending and (wait or self.trajectory is None or self.worker._finished()):
             waited += self._adopt(t, out)
         sent = False
-        if not self.worker._busy:
+        if not self.pending:
             self.worker._submit(t, odometry, self._unsent)
             self._requested, self._in_flight, self._unsent, sent = t, self._unsent, None, True
             if self.trajectory is None:  # the first plan: nothing to fly without it
@@ -503,18 +555,23 @@ class BackgroundReplanner:
 
     def _adopt(self, t: float, out: dict[str, Any]) -> float:
         """Receive the step in flight and put it in force; its fields go into ``out``. Returns the
-        wall seconds spent waiting for it. When the step raised, its estimate goes with the next
-        request (unless a newer one came) and the exception is raised."""
+        wall seconds spent waiting for it. When the step raised, the exception is raised, and
+        the step's estimate goes with the next request unless a newer one came or the input was
+        refused (a ``ConfigError``: the synchronous replanner would have refused it too)."""
         w0 = time.perf_counter()
+        reply = self.worker._receive()
+        waited = time.perf_counter() - w0
         requested, estimate = self._requested, self._in_flight
         self._requested = self._in_flight = None
-        try:
-            step, cpu, wall = self.worker._receive()
-        except BaseException:
-            if self._unsent is None:
+        if reply[0] == _FAILED:
+            exc, what = reply[1], reply[2]
+            if what == "input":
+                raise ConfigError("odometry, target_estimate", f"{exc} (a subclass of State or PerchTarget must be "
+                                  "importable in the worker: defined in a module, not in the main script)")
+            if self._unsent is None and not isinstance(exc, ConfigError):
                 self._unsent = estimate
-            raise
-        waited = time.perf_counter() - w0
+            raise exc
+        step, cpu, wall = reply[1], reply[2], reply[3]
         replan = step.committed and step.action is not ReplanAction.INITIAL_PLAN
         if step.committed and step.trajectory is not None:
             self._previous, self.trajectory = self.trajectory, step.trajectory
@@ -531,7 +588,8 @@ class BackgroundReplanner:
         was adopted. Raises as :meth:`step` does."""
         self.worker._check_host(self._token)
         t = check_step_time(t, self._last_t)
-        if not self.worker._busy or not (v.boolean("wait", wait) or self.worker._finished()):
+        wait = v.boolean("wait", wait)
+        if not self.pending or not (wait or self.worker._finished()):
             return None
         out: dict[str, Any] = {}
         waited = self._adopt(t, out)

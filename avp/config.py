@@ -886,7 +886,9 @@ class ReplanConfig:
     ----------
     latency:
         Time (s) between the odometry sample ``t_rp`` and the switch to the new plan ``t_ex``.
-        20 ms: the median replan step measured 8-15 ms on 2 shared cores.
+        20 ms: the median replan step measured 8-15 ms on 2 shared cores. With
+        :class:`avp.BackgroundReplanner`, keep it above the worker's planning time plus the
+        interval at which the loop polls for the plan (a plan adopted after ``t_ex`` is late).
     adapt_latency:
         If true, use ``max(latency, latency_margin * recent median solve time)``.
     latency_margin:

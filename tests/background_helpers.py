@@ -4,10 +4,11 @@
 from __future__ import annotations
 
 import dataclasses
+import sys
 import time
 from pathlib import Path
 
-from avp.errors import ConfigError
+from avp.errors import AvpError, ConfigError
 from avp.replan import Replanner
 
 
@@ -33,9 +34,17 @@ class Unreadable(Exception):  # noqa: N818 - pickles, but does not unpickle (two
         super().__init__(f"{code}: {detail}")
 
 
+class UnreadableAvpError(AvpError):
+    """An AvpError that pickles but does not unpickle (two arguments)."""
+
+    def __init__(self, code: int, detail: str) -> None:
+        super().__init__(f"{code}: {detail}")
+
+
 class FailingReplanner(Replanner):
-    """Its replans raise: ``kind`` "config" a ConfigError, "runtime" a RuntimeError, "unreadable"
-    an exception that does not unpickle in the parent."""
+    """Its first replan fails: ``kind`` "config" raises a ConfigError, "runtime" a RuntimeError,
+    "unreadable" an exception that does not unpickle in the parent, "unreadable_avp" such an
+    AvpError, "answer" returns a step that does not pickle (after committing its plan here)."""
 
     def __init__(self, *args, kind: str, **kw) -> None:
         super().__init__(*args, **kw)
@@ -51,6 +60,19 @@ class FailingReplanner(Replanner):
                 raise ConfigError("replanner.kind", "a planned failure")
             if self.kind == "runtime":
                 raise RuntimeError("a planned failure")
+            if self.kind == "unreadable_avp":
+                raise UnreadableAvpError(7, "a planned failure")
+            if self.kind == "answer":
+                out = super().step(t, odometry, target_estimate)
+                return dataclasses.replace(out, reason=lambda: "does not pickle")
             raise Unreadable(7, "a planned failure")
         out = super().step(t, odometry, target_estimate)
         return dataclasses.replace(out, reason=f"{out.reason} | seen {self.seen}")
+
+
+class FlagsReplanner(Replanner):
+    """Says in its steps' reasons the worker's ``sys.flags.optimize``."""
+
+    def step(self, t, odometry, target_estimate=None):
+        out = super().step(t, odometry, target_estimate)
+        return dataclasses.replace(out, reason=f"optimize={sys.flags.optimize}")

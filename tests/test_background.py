@@ -13,6 +13,7 @@ import subprocess
 import sys
 import time
 import types
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -24,11 +25,13 @@ from avp.background import (
     BackgroundStep,
     PlanningWorker,
     _portable,
+    start_methods,
 )
 from avp.errors import ConfigError, WorkerError
 from avp.replan import ReplanAction, ReplanConfig, Replanner, ReplanStep
 from avp.sim.run import Mode, SimScenario, simulate
 
+HELPERS = Path(__file__).resolve().parent  # tests/: background_helpers.py
 WALL = avp.PerchTarget.from_incline([4.5, 0.0, 1.5], math.radians(90.0))
 START = avp.State.hover([0.0, 0.0, 1.5])
 PERIOD = 1.0 / 30.0
@@ -157,11 +160,12 @@ def test_busy_worker_keeps_the_estimate_for_the_next_request(worker, tmp_path):
     assert worker.alive
 
 
-@pytest.mark.parametrize("kind", ["config", "runtime", "unreadable"])
+@pytest.mark.parametrize("kind", ["config", "runtime", "unreadable", "unreadable_avp"])
 def test_a_failing_replanner_step_is_raised_and_its_estimate_kept(kind):
     """What the hosted replanner raises comes back at the adopting call: an AvpError as it is,
-    another exception as a WorkerError with its traceback (one that does not unpickle here
-    too); the worker is fine afterwards and the failed request's estimate goes with the next."""
+    another exception (or one that does not unpickle here) as a WorkerError with its traceback;
+    the worker is fine afterwards and the failed request's estimate goes with the next, unless
+    it was refused (a ConfigError: the synchronous replanner would have kept its old target)."""
     with PlanningWorker() as w:
         bg = BackgroundReplanner(FailingReplanner(WALL, replan=RCFG, kind=kind), worker=w, wait=True)
         bg.step(0.0, START, WALL)
@@ -169,14 +173,28 @@ def test_a_failing_replanner_step_is_raised_and_its_estimate_kept(kind):
         bg.step(PERIOD, START, moved)  # sent; it fails in the worker
         expected = {"config": (ConfigError, "^replanner.kind: a planned failure"),
                     "runtime": (WorkerError, "RuntimeError: a planned failure(.|\n)*Traceback"),
-                    "unreadable": (WorkerError, "Unreadable")}[kind]
+                    "unreadable": (WorkerError, "Unreadable"),
+                    "unreadable_avp": (WorkerError, "UnreadableAvpError(.|\n)*Traceback")}[kind]
         with pytest.raises(expected[0], match=expected[1]):
             bg.step(2 * PERIOD, START, None)  # adopts the failure; nothing sent
         assert w.alive and not bg.pending
         out = bg.step(3 * PERIOD, START, None)
         assert out.sent and bg.pending and out.adopted is None  # lock-step: adopted at the next call
         out = bg.step(4 * PERIOD, START, None)
-        assert out.adopted is not None and out.adopted.reason.endswith("seen [0.02, 0.02]")
+        assert out.adopted is not None
+        assert out.adopted.reason.endswith("seen [0.02, None]" if kind == "config" else "seen [0.02, 0.02]")
+
+
+def test_an_answer_that_does_not_pickle_closes_the_worker():
+    """A step that ran (its plan committed in the worker) but whose answer does not pickle
+    leaves the worker's replanner ahead of this process: the worker is closed."""
+    w = PlanningWorker()
+    bg = BackgroundReplanner(FailingReplanner(WALL, replan=RCFG, kind="answer"), worker=w, wait=True)
+    bg.step(0.0, START, WALL)
+    bg.step(PERIOD, START, None)
+    with pytest.raises(WorkerError, match="does not pickle(.|\n)*closed"):
+        bg.step(2 * PERIOD, START, None)
+    assert not w.alive
 
 
 def test_a_worker_serves_one_replanner_at_a_time(worker):
@@ -198,18 +216,22 @@ def test_a_worker_serves_one_replanner_at_a_time(worker):
 
 def test_a_hung_worker_times_out_and_is_closed(tmp_path):
     """A step in flight for longer than ``timeout`` closes the worker and raises, waiting or not
-    (its late answer could no longer be matched to its request)."""
+    (its late answer could no longer be matched to its request). The step's age is set back
+    rather than waited for."""
     for wait in (True, False):
-        w = PlanningWorker(timeout=0.3)
+        w = PlanningWorker()
         bg = BackgroundReplanner(GatedReplanner(WALL, replan=RCFG, gate=str(tmp_path / "never")), worker=w)
         bg.step(0.0, START, WALL)
         bg.step(PERIOD, START, None)  # held at the gate for good
-        if not wait:
-            assert bg.poll(PERIOD) is None  # not yet overdue
-            time.sleep(0.4)
-        with pytest.raises(WorkerError, match="timeout"):
-            bg.step(2 * PERIOD, START, None, wait=wait)
-        assert not w.alive
+        assert bg.poll(PERIOD) is None  # not overdue
+        w.timeout = 0.5
+        w._sent_at -= 1.0
+        with pytest.raises(WorkerError, match="timeout(.|\n)*closed"):
+            if wait:
+                bg.step(2 * PERIOD, START, None, wait=True)
+            else:
+                bg.poll(2 * PERIOD)
+        assert not w.alive and w._process.exitcode is not None
         with pytest.raises(WorkerError, match="closed"):
             bg.step(3 * PERIOD, START, None)
 
@@ -228,12 +250,13 @@ def test_the_worker_ignores_ctrl_c(worker):
 
 
 def test_the_worker_imports_the_callers_avp_and_modules(tmp_path):
-    """The worker gets the caller's sys.path: a decoy ``avp`` in the working directory (which a
-    plain ``python -c`` would put first) is not imported, and a replanner subclass in a module
-    beside the caller's script is found."""
+    """The worker gets the caller's sys.path: a decoy ``avp`` or ``json`` in the working
+    directory (which a plain ``python -c`` would put first) is not imported, and a replanner
+    subclass in a module beside the caller's script is found."""
     cwd, scripts = tmp_path / "cwd", tmp_path / "scripts"
     (cwd / "avp").mkdir(parents=True)
     (cwd / "avp" / "__init__.py").write_text("raise ImportError('the decoy avp was imported')\n")
+    (cwd / "json.py").write_text("raise ImportError('the decoy json was imported')\n")  # before sys.path is set
     scripts.mkdir()
     (scripts / "mine.py").write_text("import avp\n\nclass MyReplanner(avp.Replanner):\n    pass\n")
     (scripts / "run.py").write_text(
@@ -263,19 +286,61 @@ def test_a_replanner_that_has_stepped_carries_on(worker):
     assert not bg.pending
 
 
-def test_a_moving_estimates_time_is_checked_at_the_call(worker):
-    """A subclass's own input checks (a moving pad's estimate time) run at the call, before
-    anything is sent."""
+def test_a_subclass_checks_its_input_at_the_call(worker, monkeypatch):
+    """A subclass's own input checks (a moving pad's estimate time; for a first plan, the
+    constructor's estimate's) run at the call, before anything is sent to the worker."""
     from avp.moving import MovingConfig, MovingReplanner
     from avp.platform import MovingTarget
 
-    pad = MovingTarget.on_platform([0.0, 0.0, 1.0], incline=0.5, speed=2.0)
-    bg = BackgroundReplanner(MovingReplanner(pad, moving=MovingConfig()), worker=worker)
+    sent = []
+    real_submit = worker._submit
+    monkeypatch.setattr(worker, "_submit", lambda *a: (sent.append(a), real_submit(*a))[1])
     start = avp.State(position=[-3.0, 0.0, 1.0], velocity=[2.0, 0.0, 0.0])
     stale = MovingTarget.on_platform([0.0, 0.0, 1.0], incline=0.5, speed=2.0, time=1.7e9)
+    with pytest.raises(ConfigError) as exc:  # the first plan's estimate is the constructor's
+        BackgroundReplanner(MovingReplanner(stale, moving=MovingConfig()), worker=worker).step(0.0, start, None)
+    assert exc.value.field == "target.time" and not sent
+    pad = MovingTarget.on_platform([0.0, 0.0, 1.0], incline=0.5, speed=2.0)
+    bg = BackgroundReplanner(MovingReplanner(pad, moving=MovingConfig()), worker=worker)
+    assert bg.step(0.0, start, pad).adopted.action is ReplanAction.INITIAL_PLAN and len(sent) == 1
     with pytest.raises(ConfigError) as exc:
-        bg.step(0.0, start, stale)
-    assert exc.value.field == "target_estimate.time" and not bg.pending
+        bg.step(PERIOD, start, stale)
+    assert exc.value.field == "target_estimate.time" and len(sent) == 1 and not bg.pending
+
+
+def test_the_worker_has_the_callers_interpreter_flags(tmp_path):
+    """``python -O``'s flag reaches the worker (its asserts are off as the caller's are)."""
+    script = tmp_path / "run.py"
+    script.write_text(
+        f"import math, sys\nsys.path.insert(0, {str(HELPERS)!r})\nimport avp\n"
+        "from background_helpers import FlagsReplanner\n"
+        "wall = avp.PerchTarget.from_incline([4.5, 0.0, 1.5], math.radians(90.0))\n"
+        "with avp.BackgroundReplanner(FlagsReplanner(wall)) as bg:\n"
+        "    print(bg.step(0.0, avp.State.hover([0.0, 0.0, 1.5]), wall).adopted.reason)\n")
+    proc = subprocess.run([sys.executable, "-O", str(script)], capture_output=True, text=True, timeout=120,
+                          cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.strip() == "optimize=1"
+
+
+@pytest.mark.skipif("fork" not in start_methods(), reason="a fork worker")
+def test_a_fork_worker_ends_with_the_parents_end_of_the_pipe():
+    """A forked worker closes its copy of the parent's end: when the parent's end closes (the
+    parent died), the worker sees the end of the pipe and exits."""
+    w = PlanningWorker(start_method="fork")
+    BackgroundReplanner(Replanner(WALL), worker=w)  # started and serving
+    w._process.conn.close()
+    w._process.join(10.0)
+    assert w._process.exitcode == 0
+    w.close()
+
+
+def test_a_worker_that_cannot_start_is_a_worker_error(monkeypatch):
+    monkeypatch.setattr(sys, "executable", str(Path("/nonexistent/python")))
+    with pytest.raises(WorkerError, match="could not start a worker interpreter"):
+        PlanningWorker(start_method="subprocess")
+    with pytest.raises(ConfigError, match="^timeout: must be at most"):
+        PlanningWorker(timeout=1e10)
 
 
 def test_bad_input_is_refused_before_anything_is_sent(worker):
