@@ -32,7 +32,8 @@ at adoption).
 Waiting: the first plan (nothing to fly yet) is waited for. ``wait=True`` (a constructor default,
 or per call of :meth:`~BackgroundReplanner.step` and :meth:`~BackgroundReplanner.poll`) waits for
 the step in flight: with it the adoptions do not depend on the worker's speed (the simulator polls
-with it at its next control step: ``avp.sim.run.simulate(background=...)``). Without it a call
+with it at the tick's first control step, at the tick's own time:
+``avp.sim.run.simulate(background=...)``). Without it a call
 never waits once a plan is committed.
 
 The wrapped replanner is sent to the worker (pickled): the object passed in is not updated. The
@@ -41,7 +42,8 @@ replanners in turn to pay its start (about a second) once. A worker that dies, h
 flight for longer than its ``timeout`` (hung) or now hosts another replanner raises
 :class:`~avp.errors.WorkerError` at the next call (the first two close it); what the hosted
 replanner's step raised is raised at the call that adopts it, and that step's estimate goes with
-the next request. The worker ignores SIGINT: a loop that catches Ctrl-C keeps its worker.
+the next request (unless it was refused: a ``ConfigError``). The worker runs in its own session
+and ignores SIGINT: a loop that catches Ctrl-C keeps its worker.
 """
 
 from __future__ import annotations
@@ -448,7 +450,8 @@ class PlanningWorker:
 
 @dataclasses.dataclass(frozen=True, kw_only=True)
 class BackgroundStep:
-    """What one :meth:`BackgroundReplanner.step` call did.
+    """What one :meth:`BackgroundReplanner.step` (or an adopting :meth:`~BackgroundReplanner.poll`)
+    call did.
 
     ``adopted``: the worker's step that finished since the previous call and is now in force (its
     plan committed when ``adopted.committed``), or ``None``; ``requested``: the time of the request
