@@ -1,13 +1,20 @@
 """The command-line grid shared by the closed-loop sweeps: trials, first seed, inclines and
-stand-offs, defaulting to the realistic :class:`avp.sim.evaluate.SimConfig` grid; and the
-replanner's step budget option they share with ``bench_replan.py``."""
+stand-offs, defaulting to the realistic :class:`avp.sim.evaluate.SimConfig` grid; the
+replanner's step budget option they share with ``bench_replan.py``; and the grid, collector and
+simulator options of the step benchmarks (``bench_replan.py``, ``bench_background.py``)."""
 
 from __future__ import annotations
 
 import argparse
+import contextlib
+import dataclasses
+import gc
+import math
+from collections.abc import Iterator
 
 from avp.replan import ReplanConfig
 from avp.sim.evaluate import SimConfig
+from avp.sim.run import SimScenario
 
 
 def grid_parser(doc: str | None) -> argparse.ArgumentParser:
@@ -63,3 +70,46 @@ def replan_config(args: argparse.Namespace) -> ReplanConfig | None:
     return ReplanConfig(deadline=None if args.deadline_ms is None else args.deadline_ms * 1e-3,
                         adapt_latency=bool(args.adapt_latency), retime_backoff=not args.no_retime_backoff,
                         partial_min_correction=args.partial_min_correction)
+
+
+def add_loop_options(ap: argparse.ArgumentParser, seeds: int) -> None:
+    """The step benchmarks' grid (``--seeds``, ``--distances``, ``--inclines``), collector
+    (``--gc-freeze``, ``--gc-between-steps``) and simulator (``--realistic``, ``--backend``)
+    options; :func:`loop_scenario` builds a run's scenario from them."""
+    ap.add_argument("--seeds", type=int, default=seeds)
+    ap.add_argument("--distances", type=float, nargs="+", default=[1.5, 4.5, 7.5])
+    ap.add_argument("--inclines", type=float, nargs="+", default=[90.0, 45.0], help="degrees")
+    ap.add_argument("--gc-freeze", action="store_true",
+                    help="gc.freeze() after the imports and a first run, as a real-time loop would after its setup")
+    ap.add_argument("--gc-between-steps", action="store_true",
+                    help="the cyclic garbage collector off inside each step and on again after it, so that a "
+                         "collection that falls due runs between steps, as a real-time loop schedules it")
+    ap.add_argument("--realistic", action="store_true",
+                    help="the realistic simulator of the success sweeps (SimConfig().scenario: motor lag, "
+                         "odometry drift, biased detections) instead of SimScenario's defaults")
+    ap.add_argument("--backend", choices=["avp", "rotorpy"], default="avp",
+                    help="the simulator that integrates the vehicle (rotorpy: its rotor drag model, which the "
+                         "planner then knows, VehicleLimits.rotor_drag; needs avp[rotorpy])")
+
+
+def loop_scenario(args: argparse.Namespace, incline_deg: float, distance: float) -> SimScenario:
+    """The scenario of one run (:func:`add_loop_options`): the realistic one of the success
+    sweeps or ``SimScenario``'s defaults, on ``--backend``."""
+    sc = (SimConfig().scenario(incline_deg, distance) if args.realistic
+          else SimScenario(distance=distance, incline=math.radians(incline_deg)))
+    return dataclasses.replace(sc, backend=args.backend)
+
+
+@contextlib.contextmanager
+def collector_off(enabled: bool) -> Iterator[None]:
+    """With ``enabled`` (``--gc-between-steps``) and the collector on, the collector off inside
+    the block and on again after it: a collection that falls due runs at the next allocation,
+    outside the block."""
+    between = enabled and gc.isenabled()
+    if between:
+        gc.disable()
+    try:
+        yield
+    finally:
+        if between:
+            gc.enable()

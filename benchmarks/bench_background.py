@@ -24,21 +24,19 @@ machine and its load.
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import gc
-import math
 import time
 import warnings
 from collections import Counter
 from typing import Any
 
 import numpy as np
+from _grid import add_loop_options, collector_off, loop_scenario
 
 import avp.sim.run as sim_run
 from avp.background import BackgroundReplanner, BackgroundStep, PlanningWorker
 from avp.replan import ReplanConfig, Replanner, ReplanStep
-from avp.sim.evaluate import SimConfig
-from avp.sim.run import Mode, SimScenario, simulate
+from avp.sim.run import Mode, simulate
 
 HEAD = f"{'steps':>6} {'median':>7} {'p95':>7} {'p99':>7} {'max':>7} {'>1.5 ms':>8} {'>5 ms':>6}"
 _BETWEEN = [False]  # --gc-between-steps
@@ -53,16 +51,10 @@ def stats(ms: np.ndarray) -> str:
 
 
 def _timed(call: Any, records: list[dict[str, Any]], *args: Any) -> Any:
-    between = _BETWEEN[0] and gc.isenabled()
-    if between:
-        gc.disable()
-    try:
+    with collector_off(_BETWEEN[0]):
         w0, c0 = time.perf_counter(), time.thread_time()
         out = call(*args)
         c1, w1 = time.thread_time(), time.perf_counter()
-    finally:
-        if between:
-            gc.enable()
     records.append(dict(cpu=c1 - c0, wall=w1 - w0, out=out))
     return out
 
@@ -111,19 +103,9 @@ def _decisions(steps: tuple[ReplanStep, ...]) -> list[tuple[Any, ...]]:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--seeds", type=int, default=6)
-    ap.add_argument("--distances", type=float, nargs="+", default=[1.5, 4.5, 7.5])
-    ap.add_argument("--inclines", type=float, nargs="+", default=[90.0, 45.0])
+    add_loop_options(ap, seeds=6)
     ap.add_argument("--latency-ms", type=float, default=None,
                     help="ReplanConfig.latency (ms) of both runs (default: ReplanConfig's)")
-    ap.add_argument("--gc-freeze", action="store_true",
-                    help="after a set-up run, gc.collect() and gc.freeze(): the objects built so far leave the "
-                         "collector's generations")
-    ap.add_argument("--gc-between-steps", action="store_true",
-                    help="the cyclic collector off inside each loop call and on again after it")
-    ap.add_argument("--realistic", action="store_true",
-                    help="the realistic simulator of the success sweeps (SimConfig().scenario)")
-    ap.add_argument("--backend", choices=["avp", "rotorpy"], default="avp")
     args = ap.parse_args()
     warnings.simplefilter("ignore")
     _BETWEEN[0] = args.gc_between_steps
@@ -135,14 +117,10 @@ def main() -> None:
         sim_run.Replanner = TimedReplanner if timed else Replanner  # type: ignore[misc]
     rcfg = ReplanConfig() if args.latency_ms is None else ReplanConfig(latency=args.latency_ms * 1e-3)
 
-    def scenario(inc: float, d: float) -> SimScenario:
-        sc = SimConfig().scenario(inc, d) if args.realistic else SimScenario(distance=d, incline=math.radians(inc))
-        return dataclasses.replace(sc, backend=args.backend)
-
     worker = PlanningWorker()
     try:
         if args.gc_freeze:  # not counted: a set-up run of each
-            first = scenario(args.inclines[0], args.distances[0])
+            first = loop_scenario(args, args.inclines[0], args.distances[0])
             in_loop(True)
             simulate(first, Mode.AVP, seed=10**6, replan=rcfg)
             in_loop(False)
@@ -156,7 +134,7 @@ def main() -> None:
         for inc in args.inclines:
             for d in args.distances:
                 for seed in range(args.seeds):
-                    sc = scenario(inc, d)
+                    sc = loop_scenario(args, inc, d)
                     TimedReplanner.records = []
                     in_loop(True)
                     a = simulate(sc, Mode.AVP, seed=seed, replan=rcfg)

@@ -52,7 +52,6 @@ import dataclasses
 import gc
 import hashlib
 import json
-import math
 import time
 import warnings
 from collections import Counter, OrderedDict, defaultdict
@@ -60,7 +59,7 @@ from types import SimpleNamespace
 from typing import Any, ClassVar
 
 import numpy as np
-from _grid import add_timing_options, replan_config
+from _grid import add_loop_options, add_timing_options, collector_off, loop_scenario, replan_config
 
 import avp.sim.run as sim_run
 from avp import _avp_rust, replan, trackability
@@ -93,16 +92,10 @@ class TimedReplanner(Replanner):
     def step(self, t: float, odometry: Any, target_estimate: Any = None) -> Any:
         gc0, gc2 = _GC[0], _GC[1]
         _STAGE_ON[0] = _STAGE_CPU if self.trajectory is not None else None  # replans only
-        between = TimedReplanner.collect_between_steps and gc.isenabled()
-        if between:
-            gc.disable()
-        try:
+        with collector_off(TimedReplanner.collect_between_steps):
             w0, c0 = time.perf_counter(), time.thread_time()
             s = super().step(t, odometry, target_estimate)
             c1, w1 = time.thread_time(), time.perf_counter()
-        finally:
-            if between:  # a collection that fell due runs at the next allocation, outside the step
-                gc.enable()
         _STAGE_ON[0] = None
         traj = self.trajectory
         TimedReplanner.records.append(dict(
@@ -232,14 +225,7 @@ HEAD = f"{'steps':>6} {'median':>7} {'p95':>7} {'p99':>7} {'max':>7} {'>5 ms':>7
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--seeds", type=int, default=40)
-    ap.add_argument("--distances", type=float, nargs="+", default=[1.5, 4.5, 7.5])
-    ap.add_argument("--inclines", type=float, nargs="+", default=[90.0, 45.0], help="degrees")
-    ap.add_argument("--gc-freeze", action="store_true",
-                    help="gc.freeze() after the imports and a first run, as a real-time loop would after its setup")
-    ap.add_argument("--gc-between-steps", action="store_true",
-                    help="the cyclic garbage collector off inside each step and on again after it, so that a "
-                         "collection that falls due runs between steps, as a real-time loop schedules it")
+    add_loop_options(ap, seeds=40)
     ap.add_argument("--previous", action="store_true",
                     help="the previous code paths: Fraction snap coefficients, threaded BLAS in the step")
     ap.add_argument("--evict-mb", type=float, default=0.0,
@@ -248,12 +234,6 @@ def main() -> None:
                     help="also print where the steps' CPU goes, per planning call, in the loop and in the bare "
                          "replays of the same calls (wrappers add a little)")
     add_timing_options(ap)
-    ap.add_argument("--realistic", action="store_true",
-                    help="the realistic simulator of the success sweeps (SimConfig().scenario: motor lag, "
-                         "odometry drift, biased detections) instead of SimScenario's defaults")
-    ap.add_argument("--backend", choices=["avp", "rotorpy"], default="avp",
-                    help="the simulator that integrates the vehicle (rotorpy: its rotor drag model, which the "
-                         "planner then knows, VehicleLimits.rotor_drag; needs avp[rotorpy])")
     ap.add_argument("--alpha-range", type=float, nargs=2, metavar=("LO", "HI"),
                     help="PlannerConfig.alpha_range (m/s^2): the contact thrust free in a range")
     ap.add_argument("--free-velocity", choices=["slope", "normal", "lateral"],
@@ -302,8 +282,7 @@ def main() -> None:
             for seed in range(args.seeds):
                 TimedReplanner.records, TimedReplanner.calls = [], []
                 before = _factor_cache()
-                sc = SimConfig().scenario(inc, d) if args.realistic else SimScenario(distance=d, incline=math.radians(inc))
-                sc = dataclasses.replace(sc, backend=args.backend)
+                sc = loop_scenario(args, inc, d)
                 r = simulate(sc, Mode.AVP, seed=seed, config=planner_cfg(sc), replan=replan_cfg)
                 recs, calls = TimedReplanner.records, TimedReplanner.calls
                 after = _factor_cache()
