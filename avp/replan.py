@@ -280,19 +280,6 @@ def check_step_time(t: Any, last_t: float | None) -> float:
     return t
 
 
-def check_step_input(t: Any, last_t: float | None, odometry: Any, target_estimate: Any, target_type: type) -> float:
-    """The checks of :meth:`Replanner.step`'s input (``ConfigError`` naming the argument): ``t``
-    finite, within the time limit and not before ``last_t``; ``odometry`` a :class:`State`;
-    ``target_estimate`` ``None`` or a ``target_type``. Returns ``t`` as a float."""
-    t = check_step_time(t, last_t)
-    if not isinstance(odometry, State):
-        raise ConfigError("odometry", f"expected avp.State, got {type(odometry).__name__}")
-    if target_estimate is not None and not isinstance(target_estimate, target_type):
-        raise ConfigError("target_estimate",
-                          f"expected avp.{target_type.__name__}, got {type(target_estimate).__name__}")
-    return t
-
-
 def flown_plan(committed: Trajectory | None, previous: Trajectory | None, t: float) -> Trajectory:
     """The plan flown at ``t``: ``previous`` before the ``committed`` plan's start, ``committed``
     from then on (:meth:`Replanner.plan_at`)."""
@@ -801,7 +788,13 @@ class Replanner:
         would use when ``target_estimate`` is ``None`` (``None`` once a plan is committed). A
         subclass adds its own (a moving pad: the estimate's time). A class method, so that
         :class:`avp.BackgroundReplanner` checks a call before sending it to its worker."""
-        return check_step_input(t, last_t, odometry, target_estimate, cls._target_type)
+        t = check_step_time(t, last_t)
+        if not isinstance(odometry, State):
+            raise ConfigError("odometry", f"expected avp.State, got {type(odometry).__name__}")
+        if target_estimate is not None and not isinstance(target_estimate, cls._target_type):
+            raise ConfigError("target_estimate",
+                              f"expected avp.{cls._target_type.__name__}, got {type(target_estimate).__name__}")
+        return t
 
     def _change(self, a: Any, b: Any) -> tuple[float, float]:
         """Distance (m) and angle (rad) between two target estimates (the hold and reach tests).
