@@ -8,6 +8,14 @@ one thread the products are computed by the same kernel on the calling thread, a
 were the same bit for bit on the benchmark's closed-loop runs (row blocking instead of a thread
 limit was not: it changes the kernel OpenBLAS picks).
 
+Smaller calls thread too: SciPy's OpenBLAS splits the triangular solve of an SQP step's new
+rows (``PerchingQp.least_distance``: 48 rows and more over a 33 x 33 factor) over its threads,
+which then spin, waiting for more work, for about 110 ms of a second core's CPU after the call.
+Planned back to back, a default ``plan()`` with three SQP steps cost 2.2 ms of its own thread's
+CPU and 6.1 ms of the process's, and Gao et al.'s 90 deg perch 4.5 and 8.5 ms, on a 2-core
+machine (``benchmarks/bench_rounds.py`` prints both).
+The public planners (:func:`serial` below) therefore plan with one BLAS thread too.
+
 :func:`serial_blas` limits the BLAS libraries loaded in the process to one thread for the
 duration of a ``with`` block, through ``threadpoolctl`` (a dependency; without it the block does
 nothing). The limit is process-wide while it holds: another thread's BLAS call made meanwhile
@@ -17,11 +25,14 @@ runs serially too.
 from __future__ import annotations
 
 import contextlib
+import functools
 import threading
-from collections.abc import Iterator
-from typing import Any
+from collections.abc import Callable, Iterator
+from typing import Any, TypeVar
 
-__all__ = ["serial_blas", "warm"]
+__all__ = ["serial", "serial_blas", "warm"]
+
+_F = TypeVar("_F", bound=Callable[..., Any])
 
 _LIBS: list[list[Any]] = []  # [the BLAS library controllers of threadpoolctl], found on first use
 _LOCK = threading.Lock()
@@ -47,6 +58,15 @@ def warm() -> None:
 
 _DEPTH = [0]  # blocks open in the process (threads may nest or overlap them)
 _SAVED: list[int] = []  # the thread counts the first open block found
+
+
+def serial(fn: _F) -> _F:
+    """``fn`` with every call inside :func:`serial_blas` (the public planners)."""
+    @functools.wraps(fn)
+    def serially(*args: Any, **kwargs: Any) -> Any:
+        with serial_blas():
+            return fn(*args, **kwargs)
+    return serially  # type: ignore[return-value]
 
 
 @contextlib.contextmanager

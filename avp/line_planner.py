@@ -24,6 +24,7 @@ from typing import Any
 import numpy as np
 
 from . import _validate as v
+from ._blas import serial
 from ._typing import Array
 from .bounds import BoundReport, Certificate, certify_trajectory
 from .config import ContactVelocity, PlannerConfig, Workspace
@@ -550,6 +551,7 @@ def _search(build: Any, certify: Any, factors: tuple[float, ...], T0: Array, cfg
     return best
 
 
+@serial  # one BLAS thread: no helper threads spinning after the call (avp._blas)
 def plan_line(
     state: State,
     line: LineTarget,

@@ -40,6 +40,7 @@ from typing import Any
 import numpy as np
 
 from . import _validate as v
+from ._blas import serial
 from ._typing import Array
 from ._validate import LIMITS
 from .bounds import BoundReport, certify_trajectory
@@ -321,6 +322,7 @@ class _Eval:
         return frozenset(x.bound.value for x in self.report.violations) or frozenset({"undecided"})
 
 
+@serial  # one BLAS thread: no helper threads spinning after the call (avp._blas)
 def plan_moving_detailed(
     state: State,
     target: MovingTarget,

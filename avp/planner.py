@@ -13,6 +13,7 @@ from typing import Any
 import numpy as np
 
 from . import _validate as v
+from ._blas import serial
 from ._typing import Array
 from .attempt import Attempt, no_time_for, solve_at
 from .bounds import BoundReport, certify_trajectory
@@ -243,6 +244,7 @@ def _fit_initvals(warm: Trajectory, layout: DecisionLayout, knots: Array) -> Arr
     return out.reshape(-1)
 
 
+@serial  # one BLAS thread: no helper threads spinning after the call (avp._blas)
 def plan_detailed(
     state: State,
     target: PerchTarget,

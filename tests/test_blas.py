@@ -1,5 +1,6 @@
 """avp._blas.serial_blas: one BLAS thread inside the block, restored after it, and the same
-plans bit for bit as with the default threads (the replanner's steps run inside it)."""
+plans bit for bit as with the default threads (the replanner's steps and the public planners
+run inside it)."""
 
 from __future__ import annotations
 
@@ -55,10 +56,52 @@ def test_plans_under_serial_blas_are_the_plans_with_default_threads():
     state = avp.State(position=d[0, :3], velocity=d[1, :3], acceleration=d[2, :3], jerk=d[3, :3],
                       yaw=float(d[0, 3]), yaw_rate=float(d[1, 3]), time=mid)
     durations = np.full(first.trajectory.n_segments, (first.trajectory.tf - mid) / first.trajectory.n_segments)
-    default = avp.plan_detailed(state, moved, durations=durations, previous=first.trajectory)
-    with serial_blas():
-        serial = avp.plan_detailed(state, moved, durations=durations, previous=first.trajectory)
-    assert default.status is serial.status
-    assert default.trajectory is not None and serial.trajectory is not None
-    assert np.array_equal(default.trajectory.coefficients, serial.trajectory.coefficients)
-    assert np.array_equal(default.trajectory.knots, serial.trajectory.knots)
+    threaded = avp.planner.plan_detailed.__wrapped__  # the planner without its serial block
+    default = threaded(state, moved, durations=durations, previous=first.trajectory)
+    serial = avp.plan_detailed(state, moved, durations=durations, previous=first.trajectory)
+    _same_plan(default, serial)
+
+
+def _same_plan(a: avp.PlanResult, b: avp.PlanResult) -> None:
+    assert a.status is b.status and a.log == b.log
+    assert a.trajectory is not None and b.trajectory is not None
+    assert np.array_equal(a.trajectory.coefficients, b.trajectory.coefficients)
+    assert np.array_equal(a.trajectory.knots, b.trajectory.knots)
+
+
+def test_a_first_plan_with_sqp_steps_is_the_same_with_default_threads():
+    # three SQP steps, each adding about a hundred FoV rows: their triangular solve (SciPy's
+    # BLAS trsm) runs on several threads by default, and the helpers spin after it
+    start = avp.State.hover([-7.5, 0.0, 1.5])
+    target = avp.PerchTarget.from_incline([0.0, 0.0, 1.5], math.radians(60.0))
+    serial = avp.plan_detailed(start, target)
+    assert any(line.startswith("SQP step 2: visibility") for line in serial.log)
+    _same_plan(avp.planner.plan_detailed.__wrapped__(start, target), serial)
+
+
+@pytest.mark.parametrize("planner", ["plan_detailed", "plan_moving_detailed", "plan_line"])
+def test_the_public_planners_plan_with_one_blas_thread(planner, monkeypatch):
+    seen: list[list[int]] = []
+    import avp.qp.assemble
+
+    real = avp.qp.assemble.PerchingQp.stacked_equalities  # every planner's QPs pass here
+
+    def recording(self):
+        seen.append(_blas_threads())
+        return real(self)
+
+    monkeypatch.setattr(avp.qp.assemble.PerchingQp, "stacked_equalities", recording)
+    before = _blas_threads()
+    start = avp.State.hover([0.0, 0.0, 1.5])
+    if planner == "plan_detailed":
+        result = avp.plan_detailed(start, avp.PerchTarget.from_incline([4.5, 0.0, 1.5], math.radians(90.0)))
+    elif planner == "plan_moving_detailed":
+        pad = avp.MovingTarget.on_platform([0.0, 0.0, 1.0], incline=0.5, speed=2.0)
+        moving_start = avp.State(position=pad.point - [3.0, 0.0, -1.0], velocity=pad.velocity)
+        result = avp.plan_moving_detailed(moving_start, pad, avp.PlannerConfig(alpha=5.5))
+    else:
+        line = avp.LineTarget.segment([2.0, -1.5, 3.7], [2.0, 1.5, 3.7], pitch=0.0, gripper_offset=0.15)
+        result = avp.plan_line(avp.State.hover([0.0, 0.0, 2.5]), line)
+    assert result.status is not None
+    assert seen and all(threads and all(n == 1 for n in threads) for threads in seen)
+    assert _blas_threads() == before
