@@ -60,6 +60,24 @@ _DEPTH = [0]  # blocks open in the process (threads may nest or overlap them)
 _SAVED: list[int] = []  # the thread counts the first open block found
 
 
+def _set_threads(lib: Any, n: int) -> None:
+    """``lib.set_num_threads(n)`` from any thread. threadpoolctl (3.6 and later) lets only the
+    first thread that sets OpenBLAS's shared pool (the main thread, usually) set it again; other
+    threads' calls do nothing, so a replanner stepped in a thread of its own planned with every
+    BLAS thread. The pool is process-wide either way: when the call did nothing, the controlling
+    thread is released before the call and after it (``clear_controlling_thread``, public API,
+    as ``threadpool_limits`` does when it ends)."""
+    lib.set_num_threads(n)
+    clear = getattr(type(lib), "clear_controlling_thread", None)
+    if clear is None or lib.get_num_threads() == n:
+        return
+    clear(force=True)
+    try:
+        lib.set_num_threads(n)
+    finally:
+        clear()
+
+
 def serial(fn: _F) -> _F:
     """``fn`` with every call inside :func:`serial_blas` (the public planners)."""
     @functools.wraps(fn)
@@ -79,8 +97,9 @@ def serial_blas() -> Iterator[None]:
     with _LOCK:
         if _DEPTH[0] == 0:
             _SAVED[:] = [lib.get_num_threads() for lib in libs]
-            for lib in libs:
-                lib.set_num_threads(1)
+            for lib, n in zip(libs, _SAVED, strict=True):
+                if n != 1:
+                    _set_threads(lib, 1)
         _DEPTH[0] += 1
     try:
         yield
@@ -89,4 +108,5 @@ def serial_blas() -> Iterator[None]:
             _DEPTH[0] -= 1
             if _DEPTH[0] == 0:
                 for lib, n in zip(libs, _SAVED, strict=True):
-                    lib.set_num_threads(n)
+                    if n != 1:
+                        _set_threads(lib, n)

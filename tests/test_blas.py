@@ -44,6 +44,31 @@ def test_nested_and_overlapping_blocks_restore_the_first_counts():
     assert _blas_threads() == before
 
 
+def test_serial_blas_holds_in_any_thread():
+    # threadpoolctl lets only the first thread that set OpenBLAS's pool set it again: a block
+    # opened in another thread (a replanner stepped in a thread of its own) did nothing
+    import threading
+
+    before = _blas_threads()
+    with serial_blas():  # the main thread sets the pool first
+        pass
+    seen: list[list[int]] = []
+
+    def planning_thread() -> None:
+        with serial_blas():
+            seen.append(_blas_threads())
+        seen.append(_blas_threads())
+
+    thread = threading.Thread(target=planning_thread)
+    thread.start()
+    thread.join()
+    assert seen[0] and all(n == 1 for n in seen[0])
+    assert seen[1] == before == _blas_threads()
+    with serial_blas():  # and the main thread still can
+        assert all(n == 1 for n in _blas_threads())
+    assert _blas_threads() == before
+
+
 def test_plans_under_serial_blas_are_the_plans_with_default_threads():
     # a replan-like call whose reduction products (rows x 96 x 33) exceed OpenBLAS's threading threshold
     start = avp.State.hover([0.0, 0.0, 1.5])
