@@ -69,6 +69,24 @@ def test_serial_blas_holds_in_any_thread():
     assert _blas_threads() == before
 
 
+def test_libraries_other_than_a_pooled_openblas_are_set_through_threadpoolctl():
+    from avp._blas import _pool
+
+    class Controller:  # what threadpoolctl gives for MKL, BLIS or an OpenMP-threaded OpenBLAS
+        def __init__(self, internal_api: str, threading_layer: str) -> None:
+            self.internal_api, self.threading_layer, self.dynlib = internal_api, threading_layer, object()
+
+        def get_num_threads(self) -> int:
+            return 4
+
+        def set_num_threads(self, n: int) -> None:
+            pass
+
+    for lib in (Controller("mkl", "intel"), Controller("openblas", "openmp")):
+        get, put = _pool(lib)
+        assert get == lib.get_num_threads and put == lib.set_num_threads
+
+
 def test_plans_under_serial_blas_are_the_plans_with_default_threads():
     # a replan-like call whose reduction products (rows x 96 x 33) exceed OpenBLAS's threading threshold
     start = avp.State.hover([0.0, 0.0, 1.5])
