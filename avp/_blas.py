@@ -8,13 +8,14 @@ one thread the products are computed by the same kernel on the calling thread, a
 were the same bit for bit on the benchmark's closed-loop runs (row blocking instead of a thread
 limit was not: it changes the kernel OpenBLAS picks).
 
-Smaller calls thread too: SciPy's OpenBLAS splits the triangular solve of an SQP step's new
-rows (``PerchingQp.least_distance``: 48 rows and more over a 33 x 33 factor) over its threads,
-which then spin, waiting for more work, for about 110 ms of a second core's CPU after the call.
-Planned back to back, a default ``plan()`` with three SQP steps cost 2.2 ms of its own thread's
-CPU and 6.1 ms of the process's, and Gao et al.'s 90 deg perch 4.5 and 8.5 ms, on a 2-core
-machine (``benchmarks/bench_rounds.py`` prints both).
-The public planners (:func:`serial` below) therefore plan with one BLAS thread too.
+Smaller calls thread too: SciPy's OpenBLAS splits a triangular solve with 32 right-hand sides
+or more over a 33 x 33 factor over its threads (``PerchingQp.least_distance``: every QP's
+inequality rows, 45 in a default plan, and an SQP step's new rows), and its helper thread then
+spins, waiting for more work, for about 110 ms of a second core's CPU after the call. A single
+default ``plan()`` cost that much of a second core; planned back to back, one with three SQP
+steps cost 2.2 ms of its own thread's CPU and 6.1 ms of the process's, and Gao et al.'s 90 deg
+perch 4.5 and 8.5 ms, on a 2-core machine (``benchmarks/bench_rounds.py`` prints both). The
+public planners (:func:`serial` below) therefore plan with one BLAS thread too.
 
 :func:`serial_blas` limits the BLAS libraries loaded in the process to one thread for the
 duration of a ``with`` block; :func:`serial` wraps a function in it. ``threadpoolctl`` (a

@@ -113,8 +113,8 @@ def _same_plan(a: avp.PlanResult, b: avp.PlanResult) -> None:
 
 
 def test_a_first_plan_with_sqp_steps_is_the_same_with_default_threads():
-    # three SQP steps, each adding about a hundred FoV rows: their triangular solve (SciPy's
-    # BLAS trsm) runs on several threads by default, and the helpers spin after it
+    # three SQP steps, each adding 48 FoV rows: the triangular solve of 32 rows or more (SciPy's
+    # BLAS trsm, PerchingQp.least_distance) runs on several threads by default
     start = avp.State.hover([-7.5, 0.0, 1.5])
     target = avp.PerchTarget.from_incline([0.0, 0.0, 1.5], math.radians(60.0))
     serial = avp.plan_detailed(start, target)
