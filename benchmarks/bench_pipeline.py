@@ -20,8 +20,9 @@ order, interleaved so both see the same machine load:
   without any cache), solved in full form by DAQP through qpsolvers, and a floating-point Sturm
   check (``numpy.polynomial``, not sound) of the thrust bounds; no FoV rows.
 
-Prints medians, p95, p99 and max (ms) of both, their ratio, and the per-stage medians and mean
-shares; then the floor of the solve stage: the reduced QP of each scenario (no FoV rows) solved
+Prints medians, p95, p99 and max (ms) of both (wall clock, the calling thread's CPU, and the
+process's CPU: every thread, so BLAS helper threads too), their ratio, and the per-stage medians
+and mean shares; then the floor of the solve stage: the reduced QP of each scenario (no FoV rows) solved
 through avp's path (``solve_perching_qp``), through ``qpsolvers.solve_problem`` alone, and by
 ``daqp.solve`` called directly with two-sided rows (what DAQP itself costs). Nothing is asserted;
 the numbers are for this machine and this load.

@@ -1,5 +1,7 @@
 """Per-case CPU time of plan_detailed (minimum over rounds of the round's median) and a plan digest.
 
+The CPU time is the calling thread's and the process's (every thread: BLAS helper threads too).
+
 The digest is for bit-for-bit comparisons between two versions of the code.
 
     python benchmarks/bench_rounds.py [--rounds 8] [--repeats 7]
