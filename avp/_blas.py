@@ -21,10 +21,12 @@ public planners (:func:`serial` below) therefore plan with one BLAS thread too.
 duration of a ``with`` block; :func:`serial` wraps a function in it. ``threadpoolctl`` (a
 dependency; without it the block does nothing) finds the libraries; an OpenBLAS with its own
 thread pool is then set through its own ``openblas_set_num_threads`` from any Python thread
-(threadpoolctl 3.6 and later lets only the first thread that set that pool set it again, so a
-replanner stepped in a thread of its own planned with every BLAS thread), other libraries
-through threadpoolctl. The limit is process-wide while it holds: another thread's BLAS call
-made meanwhile runs serially too.
+(threadpoolctl 3.8 lets only the first thread that set that pool set it again, so a replanner
+stepped in a thread of its own planned with every BLAS thread), other libraries through
+threadpoolctl. A shared pool's limit is process-wide while it holds: another thread's BLAS call
+made meanwhile runs serially too, and a ``threadpool_limits`` block another thread opens and
+closes meanwhile restores what it found (one thread, which then stays). Libraries limited per
+thread (MKL, an OpenMP-threaded OpenBLAS) are limited in the planning thread only.
 """
 
 from __future__ import annotations
@@ -32,8 +34,10 @@ from __future__ import annotations
 import contextlib
 import functools
 import itertools
+import os
 import threading
 from collections.abc import Callable, Iterator
+from dataclasses import dataclass
 from typing import Any, TypeVar
 
 __all__ = ["serial", "serial_blas", "warm"]
@@ -41,37 +45,51 @@ __all__ = ["serial", "serial_blas", "warm"]
 _F = TypeVar("_F", bound=Callable[..., Any])
 _Pool = tuple[Callable[[], Any], Callable[[int], Any]]  # a library's (get, set) of its thread count
 
-_POOLS: list[list[_Pool]] = []  # [the BLAS libraries' thread-count calls], found on first use
+
+@dataclass(frozen=True)
+class _Pools:
+    """The BLAS libraries' thread-count calls: process-wide pools (one count for every thread),
+    and libraries whose count is per thread."""
+
+    shared: list[_Pool]
+    per_thread: list[_Pool]
+
+
+_POOLS: list[_Pools] = []  # found on first use
 _LOCK = threading.Lock()
 
 
-def _pool(lib: Any) -> _Pool:
-    """``(get, set)`` of a threadpoolctl controller's thread count: an OpenBLAS with its own
-    thread pool through its own symbols (``[scipy_]openblas_{get,set}_num_threads[64_|_64]``,
-    the names threadpoolctl looks up), which act from any thread; otherwise the controller's
-    calls (an OpenMP-threaded OpenBLAS is limited per thread, which they do)."""
+def _pool(lib: Any) -> tuple[_Pool, bool]:
+    """``((get, set), per_thread)`` of a threadpoolctl controller's thread count. An OpenBLAS with
+    its own thread pool is called through its own symbols
+    (``[scipy_]openblas_{get,set}_num_threads[64_|_64]``, the names threadpoolctl looks up),
+    which act from any thread; other libraries through the controller. MKL (threadpoolctl sets
+    ``MKL_Set_Num_Threads_Local``) and an OpenMP-threaded OpenBLAS (``omp_set_num_threads``)
+    are limited per thread; BLIS and FlexiBLAS process-wide."""
+    api = getattr(lib, "internal_api", None)
+    openmp = getattr(lib, "threading_layer", None) == "openmp"
     dynlib = getattr(lib, "dynlib", None)
-    if getattr(lib, "internal_api", None) == "openblas" and getattr(lib, "threading_layer", None) != "openmp" \
-            and dynlib is not None:
+    if api == "openblas" and not openmp and dynlib is not None:
         for prefix, suffix in itertools.product(("", "scipy_"), ("", "64_", "_64")):
             get = getattr(dynlib, f"{prefix}openblas_get_num_threads{suffix}", None)
             put = getattr(dynlib, f"{prefix}openblas_set_num_threads{suffix}", None)
             if get is not None and put is not None:
-                return get, put
-    return lib.get_num_threads, lib.set_num_threads
+                return (get, put), False
+    return (lib.get_num_threads, lib.set_num_threads), api == "mkl" or (api == "openblas" and openmp)
 
 
-def _pools() -> list[_Pool]:
+def _pools() -> _Pools:
     with _LOCK:
         if not _POOLS:
+            found: list[tuple[_Pool, bool]] = []
             try:
                 from threadpoolctl import ThreadpoolController
             except ImportError:  # pragma: no cover - a dependency, but optional at run time
-                _POOLS.append([])
+                pass
             else:
                 import scipy.linalg  # noqa: F401  # load every BLAS the planner uses first
-                libs = [lib for lib in ThreadpoolController().lib_controllers if lib.user_api == "blas"]
-                _POOLS.append([_pool(lib) for lib in libs])
+                found = [_pool(lib) for lib in ThreadpoolController().lib_controllers if lib.user_api == "blas"]
+            _POOLS.append(_Pools([p for p, local in found if not local], [p for p, local in found if local]))
         return _POOLS[0]
 
 
@@ -81,28 +99,77 @@ def warm() -> None:
 
 
 _DEPTH = [0]  # blocks open in the process (threads may nest or overlap them)
-_SAVED: list[Any] = []  # the thread counts the first open block found
+_SAVED: list[Any] = []  # the shared pools' thread counts the first open block found
+_LOCAL = threading.local()  # depth and saved counts of the per-thread libraries, per thread
+
+
+def _reset_lock_in_child() -> None:
+    global _LOCK
+    _LOCK = threading.Lock()  # a fork while another thread held it: the child's copy stays held
+
+
+if hasattr(os, "register_at_fork"):
+    os.register_at_fork(after_in_child=_reset_lock_in_child)
+
+
+def _set_all(pools: list[_Pool], counts: list[Any]) -> None:
+    """Set each pool whose count is not 1 to one thread; on an error, the pools already set get
+    their counts back before it propagates."""
+    done: list[tuple[_Pool, Any]] = []
+    try:
+        for pool, n in zip(pools, counts, strict=True):
+            if n != 1:
+                pool[1](1)
+                done.append((pool, n))
+    except BaseException:
+        for (_, put), n in reversed(done):
+            put(n)
+        raise
+
+
+def _put_back(pools: list[_Pool], counts: list[Any]) -> None:
+    for (_, put), n in zip(pools, counts, strict=True):
+        if n != 1:
+            put(n)
 
 
 def _limit() -> None:
     pools = _pools()
     with _LOCK:
         if _DEPTH[0] == 0:
-            _SAVED[:] = [get() for get, _ in pools]
-            for (_, put), n in zip(pools, _SAVED, strict=True):
-                if n != 1:
-                    put(1)
+            saved = [get() for get, _ in pools.shared]
+            _set_all(pools.shared, saved)
+            _SAVED[:] = saved
         _DEPTH[0] += 1
+    if pools.per_thread:
+        depth = getattr(_LOCAL, "depth", 0)
+        if depth == 0:
+            saved = [get() for get, _ in pools.per_thread]
+            try:
+                _set_all(pools.per_thread, saved)
+            except BaseException:
+                _restore_shared(pools)
+                raise
+            _LOCAL.saved = saved
+        _LOCAL.depth = depth + 1
+
+
+def _restore_shared(pools: _Pools) -> None:
+    with _LOCK:
+        _DEPTH[0] -= 1
+        if _DEPTH[0] == 0:
+            _put_back(pools.shared, _SAVED)
 
 
 def _restore() -> None:
     pools = _pools()
-    with _LOCK:
-        _DEPTH[0] -= 1
-        if _DEPTH[0] == 0:
-            for (_, put), n in zip(pools, _SAVED, strict=True):
-                if n != 1:
-                    put(n)
+    try:
+        if pools.per_thread:
+            _LOCAL.depth -= 1
+            if _LOCAL.depth == 0:
+                _put_back(pools.per_thread, _LOCAL.saved)
+    finally:
+        _restore_shared(pools)
 
 
 def serial(fn: _F) -> _F:
@@ -121,8 +188,9 @@ def serial(fn: _F) -> _F:
 def serial_blas() -> Iterator[None]:
     """Run the block with one BLAS thread (module docstring); 6 us to enter and leave in a
     tight loop, 17 us around a plan (colder caches), about 2 % of a plan without SQP steps.
-    Blocks may nest or overlap across threads: the first to open saves the thread counts, the
-    last to close restores them."""
+    Blocks may nest or overlap across threads: for the shared pools the first to open saves the
+    thread counts and the last to close restores them; a per-thread library is limited and
+    restored by each thread's outermost block."""
     _limit()
     try:
         yield

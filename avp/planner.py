@@ -260,6 +260,7 @@ def plan_detailed(
     Solves the perching QP (5), certifies the vehicle limits on the whole trajectory (Alg. 1,
     Rust), and when a bound fails searches the total duration (``config.bounds``), then relaxes
     the problem step by step (:class:`~avp.config.Relaxation`), recording each change in ``log``.
+    Runs with one BLAS thread, process-wide while it runs (``avp._blas``).
 
     Parameters
     ----------

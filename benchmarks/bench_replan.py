@@ -169,6 +169,9 @@ def use_previous_paths() -> None:
         certify_below_many=_avp_rust.certify_below_many)
     replan.serial_blas = contextlib.nullcontext  # type: ignore[attr-defined]
     globals()["serial_blas"] = contextlib.nullcontext
+    threaded = getattr(plan_detailed, "__wrapped__", plan_detailed)  # the planner without its own limit
+    replan.plan_detailed = threaded  # type: ignore[attr-defined]
+    globals()["plan_detailed"] = threaded
 
 
 _WITHIN: OrderedDict[Any, Any] = getattr(assemble, "_WITHIN", OrderedDict())  # absent before the two-stage elimination

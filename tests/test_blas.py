@@ -5,6 +5,7 @@ run inside it)."""
 from __future__ import annotations
 
 import math
+import threading
 
 import numpy as np
 import pytest
@@ -69,22 +70,171 @@ def test_serial_blas_holds_in_any_thread():
     assert _blas_threads() == before
 
 
+class _Controller:
+    """What threadpoolctl gives for a library avp does not call directly."""
+
+    def __init__(self, internal_api: str, threading_layer: str) -> None:
+        self.internal_api, self.threading_layer, self.dynlib = internal_api, threading_layer, object()
+
+    def get_num_threads(self) -> int:
+        return 4
+
+    def set_num_threads(self, n: int) -> None:
+        pass
+
+
 def test_libraries_other_than_a_pooled_openblas_are_set_through_threadpoolctl():
     from avp._blas import _pool
 
-    class Controller:  # what threadpoolctl gives for MKL, BLIS or an OpenMP-threaded OpenBLAS
-        def __init__(self, internal_api: str, threading_layer: str) -> None:
-            self.internal_api, self.threading_layer, self.dynlib = internal_api, threading_layer, object()
-
-        def get_num_threads(self) -> int:
-            return 4
-
-        def set_num_threads(self, n: int) -> None:
-            pass
-
-    for lib in (Controller("mkl", "intel"), Controller("openblas", "openmp")):
-        get, put = _pool(lib)
+    for api, layer, per_thread in (("mkl", "intel", True), ("openblas", "openmp", True), ("blis", "pthreads", False),
+                                   ("flexiblas", "pthreads", False)):
+        lib = _Controller(api, layer)
+        (get, put), local = _pool(lib)
         assert get == lib.get_num_threads and put == lib.set_num_threads
+        assert local is per_thread
+
+
+class _PerThreadLibrary:
+    """A BLAS whose thread count is per thread, as threadpoolctl presents MKL (its local limit)."""
+
+    user_api, internal_api, threading_layer, dynlib = "blas", "mkl", "intel", None
+
+    def __init__(self, default: int = 4) -> None:
+        self.local, self.default = threading.local(), default
+
+    def get_num_threads(self) -> int:
+        return getattr(self.local, "n", self.default)
+
+    def set_num_threads(self, n: int) -> None:
+        self.local.n = n
+
+
+class _SharedLibrary:
+    """A BLAS with one process-wide count, as threadpoolctl presents BLIS."""
+
+    user_api, internal_api, threading_layer, dynlib = "blas", "blis", "pthreads", None
+
+    def __init__(self) -> None:
+        self.n = 4
+
+    def get_num_threads(self) -> int:
+        return self.n
+
+    def set_num_threads(self, n: int) -> None:
+        self.n = n
+
+
+@pytest.fixture
+def fake_pools(monkeypatch):
+    """Make the given fake controllers the process's BLAS libraries (found by ``_pools``) for
+    one test."""
+    import avp._blas as blas
+
+    def install(*libraries: object) -> None:
+        monkeypatch.setattr(threadpoolctl, "ThreadpoolController",
+                            lambda: type("Controller", (), {"lib_controllers": list(libraries)})())
+        monkeypatch.setattr(blas, "_POOLS", [])
+        monkeypatch.setattr(blas, "_DEPTH", [0])
+        monkeypatch.setattr(blas, "_SAVED", [])
+        monkeypatch.setattr(blas, "_LOCAL", threading.local())
+
+    return install
+
+
+def test_a_per_thread_library_is_limited_in_each_planning_thread(fake_pools):
+    # a process-wide count would limit only the first thread to open a block, and the last to
+    # close would write the saved count into its own thread
+    lib = _PerThreadLibrary()
+    fake_pools(lib)
+    seen: dict[str, int] = {}
+    a_in, b_in, a_out = threading.Event(), threading.Event(), threading.Event()
+
+    def a() -> None:
+        with serial_blas():
+            seen["A inside"] = lib.get_num_threads()
+            a_in.set()
+            b_in.wait(5)
+        seen["A after"] = lib.get_num_threads()
+        a_out.set()
+
+    def b() -> None:
+        a_in.wait(5)
+        with serial_blas():
+            seen["B inside, overlapping A"] = lib.get_num_threads()
+            b_in.set()
+            a_out.wait(5)
+        seen["B after"] = lib.get_num_threads()
+
+    threads = [threading.Thread(target=a), threading.Thread(target=b)]
+    for th in threads:
+        th.start()
+    for th in threads:
+        th.join(10)
+    assert seen == {"A inside": 1, "B inside, overlapping A": 1, "A after": 4, "B after": 4}
+
+
+def test_a_limit_that_fails_part_way_is_undone(fake_pools):
+    import avp._blas as blas
+
+    def refusing_once(lib):
+        real = lib.set_num_threads
+        calls = []
+
+        def set_num_threads(n: int) -> None:
+            calls.append(n)
+            if len(calls) == 1:
+                raise OSError("the library refused")
+            real(n)
+
+        lib.set_num_threads = set_num_threads
+        return lib
+
+    for broken in (refusing_once(_SharedLibrary()), refusing_once(_PerThreadLibrary())):
+        for_all = (_SharedLibrary(), _PerThreadLibrary())
+        fake_pools(*for_all, broken)
+        with pytest.raises(OSError), serial_blas():
+            pass
+        # the libraries set before the error have their counts back, and nothing stays open
+        assert [lib.get_num_threads() for lib in for_all] == [4, 4] and blas._DEPTH == [0]
+        with serial_blas():
+            assert [lib.get_num_threads() for lib in (*for_all, broken)] == [1, 1, 1]
+        assert [lib.get_num_threads() for lib in (*for_all, broken)] == [4, 4, 4]
+
+
+def test_a_planner_that_raises_restores_the_thread_count():
+    before = _blas_threads()
+    with pytest.raises(avp.ConfigError):
+        avp.plan_detailed(avp.State.hover([0.0, 0.0, 1.5]), "not a target")  # type: ignore[arg-type]
+    assert _blas_threads() == before
+
+
+def test_scipys_blas_leaves_no_helper_thread_spinning_after_a_limited_call():
+    # SciPy's OpenBLAS runs this triangular solve (48 rows over a 33 x 33 factor, as in an SQP
+    # step) on two threads by default, and its helper then spins for about 0.1 s; inside the
+    # limit nothing may run after the call. The limit must find SciPy's library at all (the
+    # threadpoolctl releases before 3.5 did not know the libscipy_openblas of current wheels).
+    import os
+    import time
+
+    import scipy.linalg.blas
+
+    if (os.cpu_count() or 1) < 2:
+        pytest.skip("one core: OpenBLAS starts no helper thread")
+    rng = np.random.default_rng(0)
+    R = np.triu(rng.random((33, 33))) + 5.0 * np.eye(33)
+    G = rng.random((48, 33))
+
+    def others_cpu(call) -> float:  # CPU of the process's other threads during the call and 0.2 s after
+        p0, t0 = time.process_time(), time.thread_time()
+        call()
+        time.sleep(0.2)
+        return (time.process_time() - p0) - (time.thread_time() - t0)
+
+    time.sleep(0.2)  # an earlier test's spin ends
+    idle = others_cpu(lambda: None)
+    with serial_blas():
+        limited = others_cpu(lambda: scipy.linalg.blas.dtrsm(1.0, R, G.T, side=0, lower=0, trans_a=1))
+    assert limited < idle + 0.02
 
 
 def test_plans_under_serial_blas_are_the_plans_with_default_threads():
