@@ -98,18 +98,20 @@ def warm() -> None:
     _pools()
 
 
-_DEPTH = [0]  # blocks open in the process (threads may nest or overlap them)
+_DEPTH = [0]  # shared-pool blocks open in the process (threads may nest or overlap them)
 _SAVED: list[Any] = []  # the shared pools' thread counts the first open block found
-_LOCAL = threading.local()  # depth and saved counts of the per-thread libraries, per thread
+_SHARES: dict[int, int] = {}  # open shared-pool blocks per thread (by ident): a forked child keeps its own
+_LOCAL = threading.local()  # depth of the per-thread libraries' blocks, per thread
 
 
-def _reset_lock_in_child() -> None:
-    global _LOCK
-    _LOCK = threading.Lock()  # a fork while another thread held it: the child's copy stays held
+@dataclass(frozen=True)
+class _Hold:
+    """What one open block changed: the pools, the opening thread, and the per-thread libraries'
+    counts when it was that thread's outermost block (``None`` otherwise)."""
 
-
-if hasattr(os, "register_at_fork"):
-    os.register_at_fork(after_in_child=_reset_lock_in_child)
+    pools: _Pools
+    thread: int
+    local_saved: list[Any] | None
 
 
 def _set_all(pools: list[_Pool], counts: list[Any]) -> None:
@@ -122,65 +124,110 @@ def _set_all(pools: list[_Pool], counts: list[Any]) -> None:
                 pool[1](1)
                 done.append((pool, n))
     except BaseException:
-        for (_, put), n in reversed(done):
-            put(n)
+        _put_back([pool for pool, _ in done], [n for _, n in done], quiet=True)
         raise
 
 
-def _put_back(pools: list[_Pool], counts: list[Any]) -> None:
+def _put_back(pools: list[_Pool], counts: list[Any], quiet: bool = False) -> None:
+    """Give every pool whose count is not 1 its count back; a library that refuses does not stop
+    the others (the first error is raised after them, unless ``quiet``)."""
+    error: BaseException | None = None
     for (_, put), n in zip(pools, counts, strict=True):
         if n != 1:
-            put(n)
+            try:
+                put(n)
+            except Exception as exc:  # raised below, after the others
+                error = error or exc
+    if error is not None and not quiet:
+        raise error
 
 
-def _limit() -> None:
+def _limit() -> _Hold:
     pools = _pools()
+    me = threading.get_ident()
     with _LOCK:
         if _DEPTH[0] == 0:
             saved = [get() for get, _ in pools.shared]
             _set_all(pools.shared, saved)
             _SAVED[:] = saved
         _DEPTH[0] += 1
-    if pools.per_thread:
-        depth = getattr(_LOCAL, "depth", 0)
-        if depth == 0:
-            saved = [get() for get, _ in pools.per_thread]
-            try:
-                _set_all(pools.per_thread, saved)
-            except BaseException:
-                _restore_shared(pools)
-                raise
-            _LOCAL.saved = saved
-        _LOCAL.depth = depth + 1
+        _SHARES[me] = _SHARES.get(me, 0) + 1
+    local_saved = None
+    try:
+        if pools.per_thread:
+            depth = getattr(_LOCAL, "depth", 0)
+            if depth == 0:
+                counts = [get() for get, _ in pools.per_thread]
+                _set_all(pools.per_thread, counts)
+                local_saved = counts
+            _LOCAL.depth = depth + 1
+    except BaseException:
+        _release_shared(pools, me)
+        raise
+    return _Hold(pools, me, local_saved)
 
 
-def _restore_shared(pools: _Pools) -> None:
+def _release_shared(pools: _Pools, thread: int) -> None:
     with _LOCK:
         _DEPTH[0] -= 1
+        left = _SHARES.get(thread, 1) - 1
+        if left > 0:
+            _SHARES[thread] = left
+        else:
+            _SHARES.pop(thread, None)
         if _DEPTH[0] == 0:
             _put_back(pools.shared, _SAVED)
 
 
-def _restore() -> None:
-    pools = _pools()
+def _restore(hold: _Hold) -> None:
+    """Close ``hold``. Its per-thread libraries are the opening thread's: closed in another thread
+    (a generator finished elsewhere), that part is left as it is (the opening thread's libraries
+    stay limited until its outermost block closes there); the shared pools are released anyway."""
     try:
-        if pools.per_thread:
-            _LOCAL.depth -= 1
-            if _LOCAL.depth == 0:
-                _put_back(pools.per_thread, _LOCAL.saved)
+        if hold.pools.per_thread and threading.get_ident() == hold.thread:
+            _LOCAL.depth = max(0, getattr(_LOCAL, "depth", 1) - 1)
+            if hold.local_saved is not None:
+                _put_back(hold.pools.per_thread, hold.local_saved)
     finally:
-        _restore_shared(pools)
+        _release_shared(hold.pools, hold.thread)
+
+
+def _fork_prepare() -> None:
+    _LOCK.acquire()  # no block half opened or closed in the child
+
+
+def _fork_parent() -> None:
+    _LOCK.release()
+
+
+def _fork_child() -> None:
+    """Only the forking thread lives on: the shared depth is its own blocks, and when it had
+    none open the shared pools get the counts other threads' blocks had saved."""
+    global _LOCK
+    me = threading.get_ident()
+    mine = _SHARES.get(me, 0)
+    _SHARES.clear()
+    if mine:
+        _SHARES[me] = mine
+    if _DEPTH[0] and not mine and _POOLS:
+        _put_back(_POOLS[0].shared, _SAVED, quiet=True)
+    _DEPTH[0] = mine
+    _LOCK = threading.Lock()
+
+
+if hasattr(os, "register_at_fork"):
+    os.register_at_fork(before=_fork_prepare, after_in_parent=_fork_parent, after_in_child=_fork_child)
 
 
 def serial(fn: _F) -> _F:
     """``fn`` with every call inside :func:`serial_blas` (the public planners)."""
     @functools.wraps(fn)
     def serially(*args: Any, **kwargs: Any) -> Any:
-        _limit()
+        hold = _limit()
         try:
             return fn(*args, **kwargs)
         finally:
-            _restore()
+            _restore(hold)
     return serially  # type: ignore[return-value]
 
 
@@ -190,9 +237,11 @@ def serial_blas() -> Iterator[None]:
     tight loop, 17 us around a plan (colder caches), about 2 % of a plan without SQP steps.
     Blocks may nest or overlap across threads: for the shared pools the first to open saves the
     thread counts and the last to close restores them; a per-thread library is limited and
-    restored by each thread's outermost block."""
-    _limit()
+    restored by each thread's outermost block. A ``KeyboardInterrupt`` that lands inside the
+    limit's own bookkeeping (a few lines) can leave a block open: the libraries then stay at
+    one thread until the process ends."""
+    hold = _limit()
     try:
         yield
     finally:
-        _restore()
+        _restore(hold)

@@ -20,6 +20,12 @@ def _blas_threads() -> list[int]:
     return [lib["num_threads"] for lib in threadpoolctl.threadpool_info() if lib["user_api"] == "blas"]
 
 
+__import__("scipy.linalg")  # SciPy's BLAS loaded before the marker below looks
+threaded = pytest.mark.skipif(max(_blas_threads(), default=1) <= 1,
+                              reason="every BLAS already runs on one thread here (one core, or OPENBLAS_NUM_THREADS=1)")
+
+
+@threaded
 def test_serial_blas_limits_and_restores_the_thread_count():
     before = _blas_threads()
     with serial_blas():
@@ -45,6 +51,7 @@ def test_nested_and_overlapping_blocks_restore_the_first_counts():
     assert _blas_threads() == before
 
 
+@threaded
 def test_serial_blas_holds_in_any_thread():
     # threadpoolctl lets only the first thread that set OpenBLAS's pool set it again: a block
     # opened in another thread (a replanner stepped in a thread of its own) did nothing
@@ -137,6 +144,7 @@ def fake_pools(monkeypatch):
         monkeypatch.setattr(blas, "_DEPTH", [0])
         monkeypatch.setattr(blas, "_SAVED", [])
         monkeypatch.setattr(blas, "_LOCAL", threading.local())
+        monkeypatch.setattr(blas, "_SHARES", {})
 
     return install
 
@@ -201,6 +209,100 @@ def test_a_limit_that_fails_part_way_is_undone(fake_pools):
         assert [lib.get_num_threads() for lib in (*for_all, broken)] == [4, 4, 4]
 
 
+def test_a_library_that_fails_to_answer_or_to_restore_leaves_nothing_open(fake_pools):
+    import avp._blas as blas
+
+    shared, local = _SharedLibrary(), _PerThreadLibrary()
+    asked = []
+    real_get = local.get_num_threads
+
+    def get_once_fails() -> int:
+        asked.append(1)
+        if len(asked) == 1:
+            raise OSError("the library did not answer")
+        return real_get()
+
+    local.get_num_threads = get_once_fails  # type: ignore[method-assign]
+    fake_pools(shared, local)
+    with pytest.raises(OSError), serial_blas():
+        pass
+    assert blas._DEPTH == [0] and shared.get_num_threads() == 4  # the shared block opened first was closed
+    # a library that refuses its count back does not keep the others at one thread
+    first, refusing, last = _SharedLibrary(), _SharedLibrary(), _SharedLibrary()
+    real_set = refusing.set_num_threads
+    refusing.set_num_threads = lambda n: real_set(n) if n == 1 else (_ for _ in ()).throw(OSError("refused"))  # type: ignore[method-assign]
+    fake_pools(first, refusing, last)
+    with pytest.raises(OSError), serial_blas():
+        pass
+    assert (first.get_num_threads(), last.get_num_threads()) == (4, 4) and blas._DEPTH == [0]
+
+
+def test_a_block_closed_in_another_thread_leaves_that_threads_blocks_alone(fake_pools):
+    # a generator holding a block, advanced here and finished in another thread
+    import avp._blas as blas
+
+    shared, local = _SharedLibrary(), _PerThreadLibrary()
+    fake_pools(shared, local)
+
+    def holder():
+        with serial_blas():
+            yield
+
+    gen = holder()
+    next(gen)
+    seen: dict[str, object] = {}
+
+    def other() -> None:
+        try:
+            with serial_blas():
+                gen.close()  # the other thread's block closes here
+                seen["inside"] = (shared.get_num_threads(), local.get_num_threads())
+            seen["after"] = (shared.get_num_threads(), local.get_num_threads())
+            with serial_blas():
+                seen["again"] = local.get_num_threads()
+        except BaseException as exc:  # pragma: no cover - reported below
+            seen["error"] = exc
+
+    thread = threading.Thread(target=other)
+    thread.start()
+    thread.join(10)
+    assert "error" not in seen
+    assert seen["inside"] == (1, 1) and seen["after"] == (4, 4) and seen["again"] == 1
+    assert blas._DEPTH == [0] and shared.get_num_threads() == 4
+
+
+@pytest.mark.skipif(not hasattr(__import__("os"), "fork"), reason="POSIX fork")
+def test_a_forked_child_is_not_left_inside_another_threads_block(fake_pools):
+    import os
+
+    import avp._blas as blas
+
+    shared = _SharedLibrary()
+    fake_pools(shared)
+    inside, done = threading.Event(), threading.Event()
+
+    def planning() -> None:
+        with serial_blas():
+            inside.set()
+            done.wait(10)
+
+    thread = threading.Thread(target=planning)
+    thread.start()
+    inside.wait(10)
+    pid = os.fork()
+    if pid == 0:  # the child: only this thread lives on, with no block of its own open
+        ok = blas._DEPTH == [0] and shared.get_num_threads() == 4
+        with serial_blas():  # takes the lock and limits (a lock held at the fork would hang here)
+            ok = ok and shared.get_num_threads() == 1
+        os._exit(0 if ok and shared.get_num_threads() == 4 else 1)
+    done.set()
+    thread.join(10)
+    _, status = os.waitpid(pid, 0)
+    assert os.waitstatus_to_exitcode(status) == 0
+    assert shared.get_num_threads() == 4 and blas._DEPTH == [0]
+
+
+@threaded
 def test_a_planner_that_raises_restores_the_thread_count():
     before = _blas_threads()
     with pytest.raises(avp.ConfigError):
@@ -208,6 +310,7 @@ def test_a_planner_that_raises_restores_the_thread_count():
     assert _blas_threads() == before
 
 
+@threaded
 def test_scipys_blas_leaves_no_helper_thread_spinning_after_a_limited_call():
     # SciPy's OpenBLAS runs this triangular solve (48 rows over a 33 x 33 factor, as in an SQP
     # step) on two threads by default, and its helper then spins for about 0.1 s; inside the
@@ -272,6 +375,7 @@ def test_a_first_plan_with_sqp_steps_is_the_same_with_default_threads():
     _same_plan(avp.planner.plan_detailed.__wrapped__(start, target), serial)
 
 
+@threaded
 @pytest.mark.parametrize("planner", ["plan_detailed", "plan_moving_detailed", "plan_line"])
 def test_the_public_planners_plan_with_one_blas_thread(planner, monkeypatch):
     seen: list[list[int]] = []
