@@ -98,9 +98,8 @@ def warm() -> None:
     _pools()
 
 
-_DEPTH = [0]  # shared-pool blocks open in the process (threads may nest or overlap them)
 _SAVED: list[Any] = []  # the shared pools' thread counts the first open block found
-_SHARES: dict[int, int] = {}  # open shared-pool blocks per thread (by ident): a forked child keeps its own
+_SHARES: dict[int, int] = {}  # open blocks per thread (by ident; threads may nest or overlap them)
 _LOCAL = threading.local()  # depth of the per-thread libraries' blocks, per thread
 
 
@@ -146,11 +145,10 @@ def _limit() -> _Hold:
     pools = _pools()
     me = threading.get_ident()
     with _LOCK:
-        if _DEPTH[0] == 0:
+        if not _SHARES:
             saved = [get() for get, _ in pools.shared]
             _set_all(pools.shared, saved)
             _SAVED[:] = saved
-        _DEPTH[0] += 1
         _SHARES[me] = _SHARES.get(me, 0) + 1
     local_saved = None
     try:
@@ -169,13 +167,12 @@ def _limit() -> _Hold:
 
 def _release_shared(pools: _Pools, thread: int) -> None:
     with _LOCK:
-        _DEPTH[0] -= 1
         left = _SHARES.get(thread, 1) - 1
         if left > 0:
             _SHARES[thread] = left
         else:
             _SHARES.pop(thread, None)
-        if _DEPTH[0] == 0:
+        if not _SHARES:
             _put_back(pools.shared, _SAVED)
 
 
@@ -201,17 +198,16 @@ def _fork_parent() -> None:
 
 
 def _fork_child() -> None:
-    """Only the forking thread lives on: the shared depth is its own blocks, and when it had
-    none open the shared pools get the counts other threads' blocks had saved."""
+    """Only the forking thread lives on: its own blocks stay open, and when it had none the
+    shared pools get the counts other threads' blocks had saved."""
     global _LOCK
     me = threading.get_ident()
     mine = _SHARES.get(me, 0)
+    if _SHARES and not mine and _POOLS:
+        _put_back(_POOLS[0].shared, _SAVED, quiet=True)
     _SHARES.clear()
     if mine:
         _SHARES[me] = mine
-    if _DEPTH[0] and not mine and _POOLS:
-        _put_back(_POOLS[0].shared, _SAVED, quiet=True)
-    _DEPTH[0] = mine
     _LOCK = threading.Lock()
 
 

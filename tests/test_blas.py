@@ -141,7 +141,6 @@ def fake_pools(monkeypatch):
         monkeypatch.setattr(threadpoolctl, "ThreadpoolController",
                             lambda: type("Controller", (), {"lib_controllers": list(libraries)})())
         monkeypatch.setattr(blas, "_POOLS", [])
-        monkeypatch.setattr(blas, "_DEPTH", [0])
         monkeypatch.setattr(blas, "_SAVED", [])
         monkeypatch.setattr(blas, "_LOCAL", threading.local())
         monkeypatch.setattr(blas, "_SHARES", {})
@@ -203,7 +202,7 @@ def test_a_limit_that_fails_part_way_is_undone(fake_pools):
         with pytest.raises(OSError), serial_blas():
             pass
         # the libraries set before the error have their counts back, and nothing stays open
-        assert [lib.get_num_threads() for lib in for_all] == [4, 4] and blas._DEPTH == [0]
+        assert [lib.get_num_threads() for lib in for_all] == [4, 4] and blas._SHARES == {}
         with serial_blas():
             assert [lib.get_num_threads() for lib in (*for_all, broken)] == [1, 1, 1]
         assert [lib.get_num_threads() for lib in (*for_all, broken)] == [4, 4, 4]
@@ -226,7 +225,7 @@ def test_a_library_that_fails_to_answer_or_to_restore_leaves_nothing_open(fake_p
     fake_pools(shared, local)
     with pytest.raises(OSError), serial_blas():
         pass
-    assert blas._DEPTH == [0] and shared.get_num_threads() == 4  # the shared block opened first was closed
+    assert blas._SHARES == {} and shared.get_num_threads() == 4  # the shared block opened first was closed
     # a library that refuses its count back does not keep the others at one thread
     first, refusing, last = _SharedLibrary(), _SharedLibrary(), _SharedLibrary()
     real_set = refusing.set_num_threads
@@ -234,7 +233,7 @@ def test_a_library_that_fails_to_answer_or_to_restore_leaves_nothing_open(fake_p
     fake_pools(first, refusing, last)
     with pytest.raises(OSError), serial_blas():
         pass
-    assert (first.get_num_threads(), last.get_num_threads()) == (4, 4) and blas._DEPTH == [0]
+    assert (first.get_num_threads(), last.get_num_threads()) == (4, 4) and blas._SHARES == {}
 
 
 def test_a_block_closed_in_another_thread_leaves_that_threads_blocks_alone(fake_pools):
@@ -268,7 +267,7 @@ def test_a_block_closed_in_another_thread_leaves_that_threads_blocks_alone(fake_
     thread.join(10)
     assert "error" not in seen
     assert seen["inside"] == (1, 1) and seen["after"] == (4, 4) and seen["again"] == 1
-    assert blas._DEPTH == [0] and shared.get_num_threads() == 4
+    assert blas._SHARES == {} and shared.get_num_threads() == 4
 
 
 @pytest.mark.skipif(not hasattr(__import__("os"), "fork"), reason="POSIX fork")
@@ -291,7 +290,7 @@ def test_a_forked_child_is_not_left_inside_another_threads_block(fake_pools):
     inside.wait(10)
     pid = os.fork()
     if pid == 0:  # the child: only this thread lives on, with no block of its own open
-        ok = blas._DEPTH == [0] and shared.get_num_threads() == 4
+        ok = blas._SHARES == {} and shared.get_num_threads() == 4
         with serial_blas():  # takes the lock and limits (a lock held at the fork would hang here)
             ok = ok and shared.get_num_threads() == 1
         os._exit(0 if ok and shared.get_num_threads() == 4 else 1)
@@ -299,7 +298,7 @@ def test_a_forked_child_is_not_left_inside_another_threads_block(fake_pools):
     thread.join(10)
     _, status = os.waitpid(pid, 0)
     assert os.waitstatus_to_exitcode(status) == 0
-    assert shared.get_num_threads() == 4 and blas._DEPTH == [0]
+    assert shared.get_num_threads() == 4 and blas._SHARES == {}
 
 
 @threaded
