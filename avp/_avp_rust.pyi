@@ -8,6 +8,7 @@ __all__ = [
     "KernelError",
     "__version__",
     "anticipate",
+    "append_rows",
     "bound_polynomial",
     "certify_below",
     "certify_below_many",
@@ -19,12 +20,13 @@ __all__ = [
     "fov_gradient",
     "fov_linearise",
     "fov_row_matrices",
+    "fov_step_rows",
     "kkt_residuals",
     "max_violation",
     "scaled_excess",
+    "spline_visibility",
     "sturm_count",
     "trackability_rows",
-    "visibility_fractions",
 ]
 
 __version__: str
@@ -135,19 +137,90 @@ def fov_row_matrices(
     ``KernelError`` on bad shapes, a segment outside ``0..n_segments`` or rows wider than
     65536 columns."""
 
-def visibility_fractions(
+def spline_visibility(
+    coeffs: npt.NDArray[np.float64],
+    knots: npt.NDArray[np.float64],
     times: npt.NDArray[np.float64],
-    flat: npt.NDArray[np.float64],
+    rotor_drag: float,
     s: npt.NDArray[np.float64],
     axis_B: npt.NDArray[np.float64],
     cos_half: float,
     g: float,
 ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.float64]]:
-    """Visibility of ``s`` from ``k`` plans (:func:`avp.metrics.visibility_many`, cone (7) only):
-    ``times (n,)`` (at least 2) and ``flat (2, n, k, 4)``, orders 0 and 2 of the plans' flat
-    outputs as ``eval_spline`` returns them for stacked coefficients. Returns the trapezoid
-    time fractions, path fractions and first times out of view (NaN: never) ``(k,)`` each.
-    Raises ``KernelError`` on bad shapes or non-finite ``s``, ``axis_B``, ``cos_half``, ``g``."""
+    """Visibility of ``s`` from ``k`` plans (:func:`avp.metrics.visibility_many`, cone (7) only)
+    whose stacked coefficients ``coeffs (S, 4k, C)`` (x, y, z, yaw of each plan in turn) on
+    ``knots (S + 1,)`` the kernel evaluates at their relative ``times (n,)`` (at least 2), with
+    the thrust direction ``a + rotor_drag v``. Returns the trapezoid time fractions, path
+    fractions and first times out of view (NaN: never) ``(k,)`` each. Raises ``KernelError`` on
+    bad shapes, a negative or non-finite ``rotor_drag``, or non-finite ``s``, ``axis_B``,
+    ``cos_half``, ``g``."""
+
+def fov_step_rows(
+    coeffs: npt.NDArray[np.float64],
+    knots: npt.NDArray[np.float64],
+    tau: npt.NDArray[np.float64],
+    rotor_drag: float,
+    s: npt.NDArray[np.float64],
+    axis_B: npt.NDArray[np.float64],
+    cos_half: float,
+    g: float,
+    trust: tuple[float, float, float],
+    margin: float,
+    reach_fraction: float,
+    progress_fraction: float,
+    policy: str,
+    n_segments: int,
+    seg: npt.NDArray[np.int64],
+    p0: npt.NDArray[np.float64],
+    p2: npt.NDArray[np.float64],
+) -> tuple[
+    tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.bool_], npt.NDArray[np.bool_], bool],
+    tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.float64],
+          npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.float64]],
+    tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.float64],
+          npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.float64],
+          npt.NDArray[np.float64], npt.NDArray[np.float64]],
+]:
+    """The FoV rows of one SQP step (:func:`avp.qp.fov.linearise_on_spline`), linearised on the
+    reference spline ``coeffs (S, 4, C)``, ``knots (S + 1,)`` at its relative times ``tau (m,)``
+    (acceleration ``a + rotor_drag v``): the terms as :func:`fov_linearise` gives them and the
+    placed points' rows as :func:`fov_row_matrices` gives them, on the QP's point basis ``seg
+    (m,)``, ``p0``, ``p2 (m, C)`` of ``n_segments`` segments. Returns ``((h0, reachable, placed,
+    progress, hold), (gx, ga, gp, rhs, x0, a0, psi0), (row8, rx, x_lo, x_hi, ra, a_lo, a_hi, ryaw,
+    yaw_lo, yaw_hi))``: per point, then per placed point, then the blocks (trust bounds: the
+    point minus and plus its radius). Raises ``KernelError`` on bad shapes, no point, a spline
+    without 4 axes, a negative or non-finite ``rotor_drag`` or the :func:`fov_linearise`
+    conditions."""
+
+# --- the rows appended to an eliminated QP (reduce.rs) -------------------------------------------
+
+def append_rows(
+    g: npt.NDArray[np.float64],
+    lower: npt.NDArray[np.float64],
+    upper: npt.NDArray[np.float64],
+    g_z: npt.NDArray[np.float64],
+    lower_z: npt.NDArray[np.float64],
+    upper_z: npt.NDArray[np.float64],
+    m_rows: npt.NDArray[np.float64] | None,
+    blocks: list[tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.float64]]],
+    z_basis: npt.NDArray[np.float64],
+    c_p: npt.NDArray[np.float64],
+    r: npt.NDArray[np.float64] | None,
+) -> tuple[
+    npt.NDArray[np.float64],
+    npt.NDArray[np.float64],
+    npt.NDArray[np.float64],
+    npt.NDArray[np.float64],
+    npt.NDArray[np.float64],
+    npt.NDArray[np.float64],
+    npt.NDArray[np.float64] | None,
+]:
+    """A QP's rows with ``blocks`` (``(matrix, lower, upper)`` triples) appended
+    (:meth:`avp.qp.assemble.PerchingQp.with_inequalities`): ``(g, lower, upper)`` in the
+    coefficients ``c``, ``(g_z, lower_z, upper_z)`` in ``z`` with ``c = c_p + z_basis z``, and
+    ``m_rows = g_z R^-1`` (``r``: the reduced Hessian's upper Cholesky factor) or ``None`` without
+    ``r`` or ``m_rows``, or when a new row is not finite. New arrays; the inputs are not changed.
+    Raises ``KernelError`` on bad shapes or an empty ``c_p``."""
 
 # --- bound certificates (sturm.rs, exact.rs, certify.rs, bounds.rs) ---------------------------
 

@@ -122,20 +122,22 @@ def _visibility_checked(trajectories: Sequence[Trajectory], target: PerchTarget,
     t = first._sample_rel(step)  # since the plans' start: exact durations at any clock value
     t0 = first.t0
     coeffs = first.coefficients if k == 1 else np.concatenate([tr.coefficients for tr in trajectories], axis=1)
+    if cam.horizontal_fov is None and cam.vertical_fov is None and not math.isfinite(cam.range) and t.size >= 2:
+        # The cone (7) alone: h <= 0 with the Rust FoV kernel's own arithmetic (the same test as
+        # Camera.sees; a degenerate attitude gives a NaN h: not seen), and the trapezoid sums,
+        # in one call for all samples of all plans, which it evaluates (position, yaw and the
+        # thrust's a + d v, VehicleLimits.rotor_drag)
+        tf, pf, lost_at = _avp_rust.spline_visibility(
+            coeffs, first.knots_rel, t, float(drag), np.ascontiguousarray(target.point, dtype=float), cam.axis_B,
+            math.cos(cam.half_fov), first.g)
+        return [Visibility(float(a), float(b), None if math.isnan(c) else t0 + float(c))
+                for a, b, c in zip(tf, pf, lost_at, strict=True)]
     if drag:  # position and the thrust's a + d v (VehicleLimits.rotor_drag)
         pva = _avp_rust.eval_spline(coeffs, first.knots_rel, t, [0, 1, 2]).reshape(3, t.size, k, 4)
         pva[2, :, :, :3] = frames.drag_acceleration(pva[2, :, :, :3], pva[1, :, :, :3], drag)
         ev = np.ascontiguousarray(pva[[0, 2]])
     else:
         ev = _avp_rust.eval_spline(coeffs, first.knots_rel, t, [0, 2]).reshape(2, t.size, k, 4)
-    if cam.horizontal_fov is None and cam.vertical_fov is None and not math.isfinite(cam.range) and t.size >= 2:
-        # The cone (7) alone: h <= 0 with the Rust FoV kernel's own arithmetic (the same test as
-        # Camera.sees; a degenerate attitude gives a NaN h: not seen), and the trapezoid sums,
-        # in one call for all samples of all plans
-        tf, pf, lost_at = _avp_rust.visibility_fractions(
-            t, ev, np.ascontiguousarray(target.point, dtype=float), cam.axis_B, math.cos(cam.half_fov), first.g)
-        return [Visibility(float(a), float(b), None if math.isnan(c) else t0 + float(c))
-                for a, b, c in zip(tf, pf, lost_at, strict=True)]
     x = ev[0, :, :, :3]  # (n, k, 3)
     R = frames.attitude(ev[1, :, :, :3], ev[0, :, :, 3], first.g)  # (n, k, 3, 3), (11), (13)
     flags = cam.sees(x, R, target.point).astype(float)

@@ -21,10 +21,9 @@ import numpy as np
 
 from ._typing import Array
 from .config import PlannerConfig
-from .frames import drag_acceleration
 from .metrics import _visibility_checked
 from .qp.assemble import ConstraintBlock, PerchingQp
-from .qp.fov import FovLinearisation, fov_blocks, fov_times
+from .qp.fov import FovLinearisation, fov_blocks, fov_times, linearise_on_spline
 from .solve import ITERATIVE_SOLVERS, KKT_TOL, backend, incompatibility
 from .trajectory import Trajectory
 from .types import PerchTarget, State
@@ -63,16 +62,11 @@ def linearise_on(
                           target.point, cfg.fov, cfg.g)
     start = max(qp.t0, reference.t0)
     t_ref = (qp.t0 + times * (reference.tf - start) / tf).clip(reference.t0, reference.tf)
-    drag = cfg.limits.rotor_drag
     tau = reference._relative(t_ref)  # within the reference (clipped): Trajectory.derivatives' times, unchecked
-    if drag:  # the attitude of the thrust a + g e3 + d v (VehicleLimits.rotor_drag)
-        d = reference._derivatives_rel(tau, [0, 1, 2])
-        a0 = drag_acceleration(d[2, :, :3], d[1, :, :3], drag)
-    else:
-        d = reference._derivatives_rel(tau, [0, 2])
-        a0 = d[1, :, :3]
-    return fov_blocks(qp.layout, knots, times, d[0, :, :3], d[0, :, 3], a0,
-                      target.point, cfg.fov, cfg.g, rotor_drag=drag)
+    # the reference's points and their rows in one kernel call; with rotor drag the attitude is
+    # the one of the thrust a + g e3 + d v (VehicleLimits.rotor_drag)
+    return linearise_on_spline(qp.layout, knots, times, reference.coefficients, reference.knots_rel, tau,
+                               target.point, cfg.fov, cfg.g, rotor_drag=cfg.limits.rotor_drag)
 
 
 def _fov_config(cfg: PlannerConfig) -> PlannerConfig:

@@ -6,6 +6,7 @@ Coefficients have shape ``(segments, 4, degree + 1)`` in ascending powers of loc
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 from enum import IntEnum
@@ -29,6 +30,19 @@ MAX_ORDER = 64
 MAX_SAMPLES = 10**7
 """Most samples :meth:`Trajectory.sample` returns (times only: 80 MB); a sampled export holds
 far fewer rows, :data:`avp.export.MAX_EXPORT_SAMPLES`."""
+
+_GRID_CACHE_SAMPLES = 4096
+"""Sample grids of at most this many steps are cached (:func:`_sample_grid`)."""
+
+
+@functools.lru_cache(maxsize=64)
+def _sample_grid(dt: float, steps: int, duration: float) -> Array:
+    """``min(dt k, duration)`` for ``k = 0..steps``, read-only: :meth:`Trajectory._sample_rel`'s
+    grid, cached (the SQP steps of a plan score their candidates on the same one)."""
+    grid = np.minimum(dt * np.arange(steps + 1), duration)
+    grid.setflags(write=False)
+    return grid
+
 
 TIME_TOL = 1e-9
 """Times this far outside ``[t0, tf]`` (s) are accepted and evaluated at the end points."""
@@ -346,13 +360,16 @@ class Trajectory:
         return np.minimum(self._t0 + self._sample_rel(dt), self._tf)
 
     def _sample_rel(self, dt: float) -> Array:
-        """:meth:`sample` relative to ``t0``: ``0, dt, ...`` up to and including :attr:`duration`."""
+        """:meth:`sample` relative to ``t0``: ``0, dt, ...`` up to and including :attr:`duration`
+        (read-only: a grid of a few thousand samples or fewer is cached by its arguments)."""
         dt = v.positive_float("dt", dt)
         span = self.duration / dt  # a float first: a dt of 1e-308 overflows ceil
         steps = max(1, math.ceil(span - 1e-9)) if span < MAX_SAMPLES else MAX_SAMPLES  # t0 and tf at least
         if steps >= MAX_SAMPLES:
             raise ConfigError("dt", f"{dt:g} s gives {span + 1:.3g} samples over {self.duration:.3g} s; at most "
                               f"{MAX_SAMPLES:g}: sample at dt >= {self.duration / (MAX_SAMPLES - 1):.3g} s")
+        if steps <= _GRID_CACHE_SAMPLES:  # the planner's scoring grid: every SQP step samples the same one
+            return _sample_grid(dt, int(steps), self.duration)
         return np.minimum(dt * np.arange(int(steps) + 1), self.duration)
 
     # -- exports (avp.export) ---------------------------------------------------------------

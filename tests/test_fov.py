@@ -554,3 +554,53 @@ def test_fov_rows_of_integer_knots_and_times_are_those_of_their_values() -> None
     assert not np.array_equal(shifted[0].matrix, floats[0].matrix)
     with_drag = fov_rows(replace(rows, rotor_drag=0.3))  # the acceleration columns carry b2 + d b1
     assert not np.array_equal(with_drag[0].matrix, floats[0].matrix)
+
+
+@settings(max_examples=200, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), policy=st.sampled_from(list(FovPointPolicy)),
+       radii=st.tuples(*(st.sampled_from([0.05, 0.5, 2.0, math.inf]) for _ in range(3))),
+       drag=st.sampled_from([0.0, 0.2, 0.7]), margin=st.sampled_from([0.0, 0.04]),
+       n_seg=st.integers(1, 4), degree=st.sampled_from([5, 7]), m=st.integers(1, 12))
+def test_rows_on_a_spline_equal_fov_blocks_at_its_points_bit_for_bit(
+    seed: int, policy: FovPointPolicy, radii: tuple[float, float, float], drag: float, margin: float,
+    n_seg: int, degree: int, m: int,
+) -> None:
+    """``linearise_on_spline`` (one kernel call: evaluation, terms, rows) gives the same
+    linearisation and blocks, bit for bit, as evaluating the spline with ``eval_spline`` and
+    calling ``fov_blocks`` on the points (a + d v with rotor drag), whatever the policy, trust
+    radii, drag or layout; and its blocks are those ``fov_rows`` builds from its row inputs."""
+    from avp.frames import drag_acceleration
+    from avp.qp.fov import fov_rows, linearise_on_spline
+    from avp.qp.layout import layout_for
+
+    rng = np.random.default_rng(seed)
+    ref_knots = np.concatenate([[0.0], np.cumsum(rng.uniform(0.3, 1.5, int(rng.integers(1, 4))))])
+    coeffs = rng.normal(0.0, 1.0, (ref_knots.size - 1, 4, 8))
+    coeffs[:, 2, 0] += 1.0
+    reference = avp.Trajectory(coeffs, ref_knots)
+    layout = layout_for(n_seg, degree)
+    knots = np.concatenate([[0.0], np.cumsum(rng.uniform(0.3, 1.5, n_seg))])
+    times = np.sort(rng.uniform(0.0, knots[-1], m))
+    tau = np.sort(rng.uniform(0.0, ref_knots[-1], m))
+    s = rng.normal(0.0, 2.0, 3) + np.array([4.0, 0.0, 1.0])
+    fov = FovConfig(point_policy=policy, trust_position=radii[0], trust_acceleration=radii[1], trust_yaw=radii[2],
+                    margin=margin)
+    new = linearise_on_spline(layout, knots, times, reference.coefficients, reference.knots_rel, tau, s, fov,
+                              rotor_drag=drag)
+    d = avp._avp_rust.eval_spline(reference.coefficients, reference.knots_rel, tau, [0, 1, 2])
+    a0 = drag_acceleration(d[2, :, :3], d[1, :, :3], drag) if drag else d[2, :, :3]
+    old = fov_blocks(layout, knots, times, d[0, :, :3], d[0, :, 3], a0, s, fov, rotor_drag=drag)
+    for name in ("times", "h0", "reachable", "placed", "progress"):
+        np.testing.assert_array_equal(getattr(new, name), getattr(old, name), err_msg=name)
+    assert new.hold_at_linearisation == old.hold_at_linearisation
+    assert new.rows is not None and old.rows is not None
+    for name in ("times", "gx", "ga", "gp", "rhs", "x0", "a0", "psi0"):
+        u, v = getattr(new.rows, name), getattr(old.rows, name)
+        assert u.shape == v.shape and np.array_equal(u, v), name
+    assert new.rows.rotor_drag == old.rows.rotor_drag
+    for built in (new.blocks, fov_rows(new.rows)):
+        assert [b.name for b in built] == [b.name for b in old.blocks]
+        for b_new, b_old in zip(built, old.blocks, strict=True):
+            for name in ("matrix", "lower", "upper"):
+                u, v = getattr(b_new, name), getattr(b_old, name)
+                assert u.shape == v.shape and np.array_equal(u, v), (b_new.name, name)

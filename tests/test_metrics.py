@@ -6,6 +6,8 @@ import math
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from avp import Camera, Trajectory, Visibility, visibility
 from avp.errors import ConfigError
@@ -131,3 +133,35 @@ def test_cone_only_fast_path_equals_the_camera_test(incline) -> None:
         assert cone.first_loss == generic.first_loss
         assert cone.time_fraction == pytest.approx(generic.time_fraction, rel=1e-12, abs=1e-12)
         assert cone.path_fraction == pytest.approx(generic.path_fraction, rel=1e-12, abs=1e-12)
+
+
+@settings(max_examples=150, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), k=st.integers(1, 3), drag=st.sampled_from([0.0, 0.3, 0.8]),
+       half=st.floats(15.0, 70.0), steps=st.integers(2, 400))
+def test_the_cone_kernel_counts_what_camera_sees_counts(seed: int, k: int, drag: float, half: float,
+                                                          steps: int) -> None:
+    """The cone-only score (one kernel call that evaluates the plans and tests the cone) against
+    the general NumPy path (``Camera.sees`` on the flatness attitude), taken with a range no
+    sample reaches: the same fractions and first loss, for one to three plans on the same knots,
+    with and without rotor drag, on dense and coarse grids."""
+    from avp.metrics import visibility_many
+
+    rng = np.random.default_rng(seed)
+    knots = np.concatenate([[0.0], np.cumsum(rng.uniform(0.3, 1.5, int(rng.integers(1, 4))))])
+    trajs = []
+    for _ in range(k):
+        c = rng.normal(0.0, 0.5, (knots.size - 1, 4, 8))
+        c[:, 0, 0] -= 2.0
+        trajs.append(Trajectory(c, knots))
+    target = _target(rng.normal(0.0, 1.0, 3) + np.array([2.0, 0.0, 0.0]))
+    cone = Camera(half_fov=math.radians(half))
+    far = Camera(half_fov=math.radians(half), range=1e9)
+    dt = float(knots[-1]) / steps
+    fast = visibility_many(trajs, target, cone, dt, rotor_drag=drag)
+    slow = visibility_many(trajs, target, far, dt, rotor_drag=drag)
+    for a, b in zip(fast, slow, strict=True):
+        assert a.time_fraction == pytest.approx(b.time_fraction, abs=1e-12)
+        assert a.path_fraction == pytest.approx(b.path_fraction, abs=1e-12)
+        assert (a.first_loss is None) == (b.first_loss is None)
+        if a.first_loss is not None:
+            assert a.first_loss == b.first_loss

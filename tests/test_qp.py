@@ -435,3 +435,78 @@ def test_the_least_distance_form_is_the_reduced_qp_whitened(n, seed, shift, m) -
     np.testing.assert_allclose(ldp.reduced(R @ z), z, atol=1e-12 * scale * max(1.0, np.abs(z).max()))
     assert cholesky_factor(-H) is None  # negative definite: no factor
     assert cholesky_factor(np.zeros((0, 0))) is None
+
+
+@settings(max_examples=300, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), n=st.integers(1, 40), m=st.integers(1, 30), k0=st.integers(0, 6),
+       sizes=st.lists(st.integers(0, 12), min_size=0, max_size=4), density=st.sampled_from([0.1, 0.5, 1.0]),
+       factor=st.sampled_from(["cholesky", "none", "singular"]), ldp=st.booleans())
+def test_appended_rows_equal_numpy_and_blas_reductions(seed, n, m, k0, sizes, density, factor, ldp) -> None:
+    """``_avp_rust.append_rows`` (the kernel behind ``PerchingQp.with_inequalities``' reduction)
+    against NumPy and BLAS: the stacked rows and bounds as given (bit for bit), ``G Z`` and the
+    bounds minus ``G c_p`` to rounding (infinite bounds stay infinite), and the least-distance
+    rows ``M`` with ``M R = G Z`` to rounding (SciPy's ``trsm``), or ``None`` without a factor or
+    parent rows, or when the factor is singular; the parent's rows come first, unchanged."""
+    import scipy.linalg
+
+    rng = np.random.default_rng(seed)
+    Z, c_p = rng.normal(size=(n, m)), rng.normal(size=n)
+    A = rng.normal(size=(m, m))
+    R = np.ascontiguousarray(np.linalg.cholesky(A @ A.T + m * np.eye(m)).T)  # upper, well conditioned
+    if factor == "singular":
+        R[m // 2, m // 2] = 0.0
+    blocks = []
+    for size in sizes:
+        G = rng.normal(size=(size, n)) * (rng.uniform(size=(size, n)) < density)
+        lo = np.where(rng.uniform(size=size) < 0.3, -np.inf, rng.normal(size=size) - 1.0)
+        hi = np.where(rng.uniform(size=size) < 0.3, np.inf, rng.normal(size=size) + 1.0)
+        blocks.append((np.ascontiguousarray(G), lo, hi))
+    G0 = rng.normal(size=(k0, n))
+    Gz0, lo0, hi0 = rng.normal(size=(k0, m)), -np.ones(k0), np.ones(k0)
+    M0 = rng.normal(size=(k0, m)) if ldp else None
+    out = avp._avp_rust.append_rows(G0, lo0, hi0, Gz0, lo0 - 1.0, hi0 + 1.0, M0, blocks, Z, c_p,
+                                    None if factor == "none" else R)
+    G, lo, hi, Gz, lo_z, hi_z, M = out
+    Gn = np.concatenate([G0] + [b[0] for b in blocks]) if blocks else G0
+    new = Gn[k0:]
+    assert np.array_equal(G, Gn) and G.shape == (Gn.shape[0], n)
+    assert np.array_equal(lo, np.concatenate([lo0] + [b[1] for b in blocks]))
+    assert np.array_equal(hi, np.concatenate([hi0] + [b[2] for b in blocks]))
+    assert np.array_equal(Gz[:k0], Gz0) and np.array_equal(lo_z[:k0], lo0 - 1.0) and np.array_equal(hi_z[:k0], hi0 + 1.0)
+    scale = np.abs(new) @ np.abs(Z) + 1.0  # the size of the terms summed in each entry
+    assert np.all(np.abs(Gz[k0:] - new @ Z) <= 1e-13 * scale)
+    gc, gc_scale = new @ c_p, np.abs(new) @ np.abs(c_p) + 1.0
+    for got, bound in ((lo_z[k0:], lo[k0:]), (hi_z[k0:], hi[k0:])):
+        fin = np.isfinite(bound)
+        assert np.array_equal(got[~fin], bound[~fin])
+        assert np.all(np.abs(got[fin] - (bound[fin] - gc[fin])) <= 1e-13 * (gc_scale[fin] + np.abs(bound[fin])))
+    if factor == "none" or not ldp or (factor == "singular" and new.shape[0]):
+        assert M is None  # no factor or parent rows; or a zero pivot: 0/0 or x/0 in every new row
+        return
+    assert M is not None and M.shape == (G.shape[0], m) and M.flags.c_contiguous and M.flags.writeable
+    assert np.array_equal(M[:k0], M0)
+    want = scipy.linalg.solve_triangular(R, Gz[k0:].T, trans="T", lower=False).T  # M R = G Z
+    assert np.all(np.abs(M[k0:] - want) <= 1e-12 * (np.abs(want) + np.abs(Gz[k0:]).max(initial=0.0) + 1.0))
+
+
+def test_append_rows_refuses_bad_shapes_naming_the_argument() -> None:
+    """A block with the wrong number of columns or bounds, or parent rows of another width: a
+    ``KernelError`` naming the argument."""
+    n, m = 4, 3
+    Z, c_p, R = np.ones((n, m)), np.ones(n), np.eye(m)
+    e = np.zeros((0, n)), np.zeros(0), np.zeros(0), np.zeros((0, m)), np.zeros(0), np.zeros(0), np.zeros((0, m))
+    good = (np.ones((2, n)), np.zeros(2), np.ones(2))
+    assert avp._avp_rust.append_rows(*e, [good], Z, c_p, R)[6] is not None
+    for blocks, arg in (([(np.ones((2, n + 1)), np.zeros(2), np.ones(2))], "blocks.matrix"),
+                        ([(np.ones((2, n)), np.zeros(3), np.ones(2))], "blocks.matrix"),
+                        ([(np.ones((2, n)), np.zeros(2), np.ones(1))], "blocks.upper")):
+        with pytest.raises(avp._avp_rust.KernelError) as info:
+            avp._avp_rust.append_rows(*e, blocks, Z, c_p, R)
+        assert info.value.arg == arg
+    with pytest.raises(avp._avp_rust.KernelError) as info:  # parent rows of another width
+        avp._avp_rust.append_rows(np.zeros((1, n + 1)), np.zeros(1), np.ones(1), np.zeros((1, m)), np.zeros(1),
+                                  np.ones(1), np.zeros((1, m)), [good], Z, c_p, R)
+    assert info.value.arg == "g"
+    with pytest.raises(avp._avp_rust.KernelError) as info:  # a factor of another size
+        avp._avp_rust.append_rows(*e, [good], Z, c_p, np.eye(m + 1))
+    assert info.value.arg == "r"

@@ -41,6 +41,7 @@ import scipy.linalg
 import scipy.linalg.blas
 import scipy.linalg.lapack
 
+from .. import _avp_rust
 from .._typing import Array
 from ..config import PlannerConfig
 from ..errors import InfeasibleError
@@ -89,6 +90,11 @@ _FACTORS: OrderedDict[tuple[object, ...], list[_Factor]] = OrderedDict()
 several matrices that the fingerprint does not tell apart."""
 _FACTORS_LOCK = threading.Lock()
 _WEIGHTS = np.random.default_rng(0).uniform(0.5, 1.5, 1 << 16)
+
+
+def _f64(a: Array) -> Array:
+    """``a`` as a row-major float64 array (no copy when it is one): what the kernels take."""
+    return np.ascontiguousarray(a, dtype=np.float64)
 
 
 def _read_only(M: Array) -> Array:
@@ -481,6 +487,8 @@ class PerchingQp:
     @cached_property
     def _stacked_inequalities(self) -> tuple[Array, Array, Array]:
         n = self.layout.n_variables
+        if self._appended():
+            return self.__dict__["_stacked_inequalities"]  # type: ignore[no-any-return]
         parent = self.__dict__.get("_parent")
         if parent is not None and "_stacked_inequalities" in parent.__dict__:
             # a copy with more blocks: the parent's stacked rows, then the new blocks
@@ -604,6 +612,8 @@ class PerchingQp:
         R = self._cholesky
         if R is None:
             return None
+        if self._appended():
+            return self.__dict__["_least_distance"]  # type: ignore[no-any-return]
         red = self._reduced
         parent = self.__dict__.get("_parent")
         if parent is not None and parent.__dict__.get("_least_distance") is not None:
@@ -619,8 +629,43 @@ class PerchingQp:
             return None
         return LeastDistanceQp(R, M, v)
 
+    def _appended(self) -> bool:
+        """For a copy with more blocks (:meth:`with_inequalities`) of a QP whose stacked, reduced
+        and least-distance rows all exist (a QP solved in the reduced form, as every SQP step's
+        base is): this copy's three, with the new rows appended, by one kernel call
+        (``avp._avp_rust.append_rows``) instead of a dozen NumPy calls, stored in place; ``True``
+        then (or when already stored). ``False`` otherwise: the properties compute them one by one.
+        The new rows' products are the kernel's (left-to-right sums, a forward substitution), so
+        they can differ from BLAS's in the last bits."""
+        d = self.__dict__
+        if "_reduced" in d and "_least_distance" in d and "_stacked_inequalities" in d:
+            return True
+        parent = d.get("_parent")
+        if parent is None or "_reduced" in d or "_least_distance" in d or "_stacked_inequalities" in d:
+            return False
+        pd = parent.__dict__
+        if not ("_stacked_inequalities" in pd and "_reduced" in pd and "_least_distance" in pd):
+            return False
+        new = self.inequalities[len(parent.inequalities):]
+        Z, c_p, H, g = self.elimination
+        r0: ReducedQp = pd["_reduced"]
+        p: LeastDistanceQp | None = pd["_least_distance"]
+        if not new or r0.Z is not Z or r0.g is not g or (p is not None and p.R is not self._cholesky):
+            return False
+        G0, lo0, hi0 = pd["_stacked_inequalities"]
+        G, lo, hi, Gz, lo_z, hi_z, M = _avp_rust.append_rows(
+            G0, lo0, hi0, _f64(r0.G), _f64(r0.lower), _f64(r0.upper), None if p is None else _f64(p.M),
+            [(_f64(b.matrix), _f64(b.lower), _f64(b.upper)) for b in new], _f64(Z), _f64(c_p),
+            None if p is None else _f64(p.R))
+        d["_stacked_inequalities"] = (_read_only(G), _read_only(lo), _read_only(hi))
+        d["_reduced"] = ReducedQp(H=H, g=g, G=Gz, lower=lo_z, upper=hi_z, Z=Z, c_p=c_p)
+        d["_least_distance"] = None if p is None or M is None else LeastDistanceQp(p.R, M, p.v)
+        return True
+
     @cached_property
     def _reduced(self) -> ReducedQp:
+        if self._appended():
+            return self.__dict__["_reduced"]  # type: ignore[no-any-return]
         Z, c_p, H, g = self.elimination
         parent = self.__dict__.get("_parent")
         if parent is not None and "_reduced" in parent.__dict__:

@@ -43,6 +43,7 @@ __all__ = [
     "fov_h",
     "fov_rows",
     "fov_times",
+    "linearise_on_spline",
 ]
 
 FOV_PREFIX = "fov"
@@ -206,10 +207,14 @@ class FovLinearisation:
     (to 1e-9 relative to its right-hand side, as the rows are checked elsewhere), the trust
     region (9) is centred on it, and no row asks for progress (those need a decrease)."""
     rows: FovRowInputs | None = field(default=None, repr=False)
+    built: tuple[ConstraintBlock, ...] | None = field(default=None, repr=False)
+    """The blocks, when built with the rows (:func:`linearise_on_spline`)."""
 
     @cached_property
     def blocks(self) -> tuple[ConstraintBlock, ...]:
         """Blocks ``"fov rows (8)"`` and ``"fov trust region (9) x|a|yaw"`` (built once)."""
+        if self.built is not None:
+            return self.built
         return fov_rows(self.rows) if self.rows is not None else ()
 
     @property
@@ -284,3 +289,56 @@ def fov_blocks(
     for arr in (t, h0, reachable, placed, progress):
         arr.setflags(write=False)
     return FovLinearisation(t, h0, reachable, placed, progress, hold, rows)
+
+
+_ROW8 = f"{FOV_PREFIX} rows (8)"
+_TRUST = {label: f"{FOV_PREFIX} trust region (9) {label}" for label in ("x", "a", "yaw")}
+
+
+def linearise_on_spline(
+    layout: DecisionLayout,
+    knots_rel: Array,
+    times: Array,
+    coefficients: Array,
+    spline_knots_rel: Array,
+    tau: Array,
+    target_point: Array,
+    fov: FovConfig,
+    g: float = GRAVITY,
+    rotor_drag: float = 0.0,
+) -> FovLinearisation:
+    """:func:`fov_blocks` at the points of a reference spline (``coefficients`` on
+    ``spline_knots_rel``, at its relative times ``tau``, one per entry of ``times``): its
+    position, yaw and acceleration (``a + rotor_drag v``) there, with the blocks built at once.
+    One kernel call (``avp._avp_rust.fov_step_rows``) evaluates the points, computes the row
+    terms and fills the rows, with the kernels :func:`fov_blocks` and :func:`fov_rows` call, in
+    the same order of operations: the result is the same bits as theirs on the evaluated
+    points. ``rotor_drag`` is taken as validated (the planner's configuration)."""
+    t = np.array(times, dtype=float)
+    seg, p0, p2 = _point_basis(layout, np.ascontiguousarray(knots_rel, dtype=np.float64).tobytes(), t.tobytes(),
+                               float(rotor_drag))
+    cam = fov.camera
+    point, inputs, mats = _avp_rust.fov_step_rows(
+        coefficients, spline_knots_rel, tau, float(rotor_drag), np.ascontiguousarray(target_point, dtype=float),
+        cam.axis_B, math.cos(cam.half_fov), float(g), (fov.trust_position, fov.trust_acceleration, fov.trust_yaw),
+        fov.margin, fov.reach_fraction, fov.progress_fraction, fov.point_policy.name.lower(), layout.n_segments,
+        seg, p0, p2)
+    h0, reachable, placed, progress, hold = point
+    gx, ga, gp, rhs, x0, a0, psi0 = inputs
+    row8, Rx, x_lo, x_hi, Ra, a_lo, a_hi, Ryaw, y_lo, y_hi = mats
+    k = rhs.size
+    built: list[ConstraintBlock] = []
+    if k:
+        built.append(ConstraintBlock(_ROW8, row8, np.full(k, -np.inf), rhs))
+        if math.isfinite(fov.trust_position):
+            built.append(ConstraintBlock(_TRUST["x"], Rx, x_lo, x_hi))
+        if math.isfinite(fov.trust_acceleration):
+            built.append(ConstraintBlock(_TRUST["a"], Ra, a_lo, a_hi))
+        if math.isfinite(fov.trust_yaw):
+            built.append(ConstraintBlock(_TRUST["yaw"], Ryaw, y_lo, y_hi))
+    knots = np.array(knots_rel, dtype=float)
+    rows = FovRowInputs(layout, knots, t if k == t.size else t[placed], gx, ga, gp, rhs, x0, a0, psi0, fov,
+                        float(rotor_drag))
+    for arr in (t, h0, reachable, placed, progress):
+        arr.setflags(write=False)
+    return FovLinearisation(t, h0, reachable, placed, progress, hold, rows, tuple(built))

@@ -12,7 +12,8 @@
 //! Built on them: [`fov_linearise`] (the terms of the rows (8), the trust box (9)'s largest
 //! decrease, the point policy and whether every row holds at its linearisation point, in the
 //! order of operations of the NumPy code it replaced), [`fov_row_matrices`] (the dense rows
-//! (8)-(9)) and [`visibility_fractions`] (the visibility score of plans, cone only).
+//! (8)-(9)), [`visibility_fractions`] (the visibility score of plans, cone only) and
+//! [`spline_visibility`] (the same score of plans it evaluates itself).
 use crate::error::{check_finite, check_len, Error, Result};
 
 type V3 = [f64; 3];
@@ -574,6 +575,52 @@ pub fn visibility_fractions(
     Ok(out)
 }
 
+/// [`visibility_fractions`] of the `k = axes / 4` plans whose stacked coefficients `spline`
+/// holds (axes x, y, z, yaw of each plan in turn, all on the same knots) at its relative
+/// `times`: their positions, yaw and accelerations there (with rotor drag `d > 0` the
+/// acceleration of the thrust direction, `a + d v`), evaluated as `avp._avp_rust.eval_spline`
+/// does and laid out as `visibility_fractions` takes them, in one call.
+pub fn spline_visibility(
+    spline: &crate::spline::SplineView<'_>,
+    times: &[f64],
+    rotor_drag: f64,
+    s: &[f64],
+    axis_b: &[f64],
+    cos_half: f64,
+    g: f64,
+) -> Result<Vec<(f64, f64, f64)>> {
+    let axes = spline.n_axes();
+    if axes % 4 != 0 {
+        return Err(Error::Shape {
+            arg: "coeffs",
+            detail: format!("{axes} axes are not (x, y, z, yaw) of whole plans"),
+        });
+    }
+    if rotor_drag.is_nan() || rotor_drag < 0.0 || rotor_drag.is_infinite() {
+        return Err(Error::Invalid {
+            arg: "rotor_drag",
+            detail: format!("must be finite and >= 0, got {rotor_drag}"),
+        });
+    }
+    let n = times.len();
+    let flat = if rotor_drag != 0.0 {
+        let mut pva = crate::spline::evaluate(spline, times, &[0, 1, 2])?;
+        let block = n * axes;
+        let (pv, acc) = pva.split_at_mut(2 * block);
+        let vel = &pv[block..];
+        for (a4, v4) in acc.chunks_exact_mut(4).zip(vel.chunks_exact(4)) {
+            for c in 0..3 {
+                a4[c] += rotor_drag * v4[c];
+            }
+        }
+        pva.drain(block..2 * block);
+        pva
+    } else {
+        crate::spline::evaluate(spline, times, &[0, 2])?
+    };
+    visibility_fractions(times, &flat, axes / 4, s, axis_b, cos_half, g)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -731,5 +778,36 @@ mod tests {
                 .arg(),
             "times"
         );
+    }
+
+    #[test]
+    fn spline_visibility_equals_the_fractions_of_its_evaluated_points() {
+        // two plans of one segment on [0, 2] (degree 2), stacked: 8 axes
+        let c = vec![
+            0.0, 1.0, 0.0, 0.0, 0.0, 0.5, 1.0, 0.0, 0.0, 0.2, 0.0, 0.0, // plan 0
+            0.0, 1.0, 0.2, 0.5, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.1, 0.0, // plan 1
+        ];
+        let knots = [0.0, 2.0];
+        let view = crate::spline::SplineView::new(&c, (1, 8, 3), &knots).unwrap();
+        let times: Vec<f64> = (0..=20).map(|i| 0.1 * i as f64).collect();
+        let (s, axis) = ([3.0, 0.5, 1.0], [1.0, 0.0, 0.0]);
+        for drag in [0.0, 0.4] {
+            let got = spline_visibility(&view, &times, drag, &s, &axis, 0.7, 9.81).unwrap();
+            let pva = crate::spline::evaluate(&view, &times, &[0, 1, 2]).unwrap();
+            let block = times.len() * 8;
+            let mut flat = pva[..block].to_vec();
+            flat.extend(
+                pva[2 * block..]
+                    .iter()
+                    .zip(&pva[block..2 * block])
+                    .enumerate()
+                    .map(|(i, (a, v))| if i % 4 < 3 { a + drag * v } else { *a }),
+            );
+            let want = visibility_fractions(&times, &flat, 2, &s, &axis, 0.7, 9.81).unwrap();
+            assert_eq!(format!("{got:?}"), format!("{want:?}"));
+        }
+        let five = crate::spline::SplineView::new(&c[..15], (1, 5, 3), &knots).unwrap();
+        let err = spline_visibility(&five, &times, 0.0, &s, &axis, 0.7, 9.81).unwrap_err();
+        assert_eq!(err.arg(), "coeffs");
     }
 }

@@ -3,8 +3,8 @@
 //! from here, never from each other.
 use numpy::ndarray::Dimension;
 use numpy::{
-    Element, IntoPyArray, PyArray2, PyReadonlyArray, PyReadonlyArray1, PyReadonlyArray3,
-    PyUntypedArrayMethods,
+    Element, IntoPyArray, PyArray2, PyReadonlyArray, PyReadonlyArray1, PyReadonlyArray2,
+    PyReadonlyArray3, PyUntypedArrayMethods,
 };
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
@@ -56,6 +56,20 @@ pub(crate) fn contiguous<'a, T: Element, D: Dimension>(
         return Err(bad());
     }
     arr.as_slice().map_err(|_| bad())
+}
+
+/// `m` (named `arg`) has `n` columns, or no rows (an empty `(0, k)` stack of rows fits any
+/// width).
+pub(crate) fn columns(arg: &'static str, m: &PyReadonlyArray2<'_, f64>, n: usize) -> PyResult<()> {
+    let shape = m.shape();
+    if shape[1] == n || shape[0] == 0 {
+        Ok(())
+    } else {
+        Err(kernel_err(
+            arg,
+            format!("wrong shape: expected {n} columns, got {:?}", shape),
+        ))
+    }
 }
 
 /// A kernel's row-major output `v` as a `(rows, cols)` NumPy array.

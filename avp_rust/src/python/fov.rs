@@ -1,13 +1,14 @@
 //! PyO3 wrappers of the field-of-view kernels (7)-(9): `h` and its gradient, the linearised
-//! rows' terms, the dense rows and the visibility fractions (`crate::fov`).
+//! rows' terms, the dense rows, the visibility fractions of plans (`crate::fov`) and the rows of
+//! one SQP step on a reference plan (`crate::fov_step`).
 #![allow(clippy::useless_conversion)]
 use numpy::{
-    IntoPyArray, PyArray1, PyArray2, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray4,
+    IntoPyArray, PyArray1, PyArray2, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3,
     PyUntypedArrayMethods,
 };
 use pyo3::prelude::*;
 
-use super::common::{contiguous, kernel_err, matrix, to_py_err};
+use super::common::{contiguous, kernel_err, matrix, spline_view, to_py_err};
 use crate::error::guarded;
 
 /// Rejects a 2-D array whose rows are not 3-vectors (a `(3m, 1)` array has the right length
@@ -20,6 +21,42 @@ fn rows_of_three(arg: &'static str, a: &PyReadonlyArray2<'_, f64>) -> PyResult<(
             format!("wrong shape: expected (m, 3), got (m, {c})"),
         )),
     }
+}
+
+/// The settings of a linearisation from the wrappers' arguments (`policy` by name).
+fn linearisation_settings(
+    cos_half: f64,
+    g: f64,
+    trust: (f64, f64, f64),
+    margin: f64,
+    reach_fraction: f64,
+    progress_fraction: f64,
+    policy: &str,
+) -> PyResult<crate::fov::LinearisationSettings> {
+    Ok(crate::fov::LinearisationSettings {
+        cos_half,
+        g,
+        trust: [trust.0, trust.1, trust.2],
+        margin,
+        reach_fraction,
+        progress_fraction,
+        policy: crate::fov::PointPolicy::from_name(policy).map_err(to_py_err)?,
+    })
+}
+
+/// The number of coefficients of the basis rows `p0` and `p2`, which have the same shape.
+fn basis_width(p0: &PyReadonlyArray2<'_, f64>, p2: &PyReadonlyArray2<'_, f64>) -> PyResult<usize> {
+    if p2.shape() != p0.shape() {
+        return Err(kernel_err(
+            "p2",
+            format!(
+                "wrong shape: expected {:?} as p0, got {:?}",
+                p0.shape(),
+                p2.shape()
+            ),
+        ));
+    }
+    Ok(p0.shape()[1])
 }
 
 /// `h` of the FoV cone (7) and its gradient at `m` points: `x (m, 3)`, `psi (m,)`, `a (m, 3)`,
@@ -106,16 +143,15 @@ fn fov_linearise_py<'py>(
     let as_ = contiguous("a0", &a0)?;
     let ss = contiguous("s", &s)?;
     let ds = contiguous("axis_B", &axis_B)?;
-    let policy = crate::fov::PointPolicy::from_name(policy).map_err(to_py_err)?;
-    let settings = crate::fov::LinearisationSettings {
+    let settings = linearisation_settings(
         cos_half,
         g,
-        trust: [trust.0, trust.1, trust.2],
+        trust,
         margin,
         reach_fraction,
         progress_fraction,
         policy,
-    };
+    )?;
     let (terms, hold) =
         guarded(|| crate::fov::fov_linearise(xs, ps, as_, ss, ds, &settings)).map_err(to_py_err)?;
     let m = terms.len();
@@ -159,17 +195,7 @@ fn fov_row_matrices_py<'py>(
 )> {
     rows_of_three("gx", &gx)?;
     rows_of_three("ga", &ga)?;
-    if p2.shape() != p0.shape() {
-        return Err(kernel_err(
-            "p2",
-            format!(
-                "wrong shape: expected {:?} as p0, got {:?}",
-                p0.shape(),
-                p2.shape()
-            ),
-        ));
-    }
-    let n_coeffs = p0.shape()[1];
+    let n_coeffs = basis_width(&p0, &p2)?;
     let segs = contiguous("seg", &seg)?;
     let (p0s, p2s) = (contiguous("p0", &p0)?, contiguous("p2", &p2)?);
     let (gxs, gas, gps) = (
@@ -190,16 +216,18 @@ fn fov_row_matrices_py<'py>(
     ))
 }
 
-/// Visibility fractions of `k` plans (`avp.metrics.visibility_many`, cone only): `times (n,)`
-/// and `flat (2, n, k, 4)` (orders 0 and 2 of the plans' flat outputs, as `eval_spline` returns
-/// them for stacked coefficients). Returns `(time_fraction (k,), path_fraction (k,),
-/// first_lost (k,))` with NaN where the point never leaves the view.
-#[pyfunction(name = "visibility_fractions")]
+/// The visibility fractions (`crate::fov::visibility_fractions`) of the plans whose stacked
+/// coefficients `coeffs (S, 4k, C)` on `knots (S + 1,)` hold, at their relative `times (n,)`,
+/// evaluated in the kernel (with rotor drag `d > 0` in the thrust direction `a + d v`).
+/// Returns `(time_fraction (k,), path_fraction (k,), first_lost (k,))`.
+#[pyfunction(name = "spline_visibility")]
 #[allow(clippy::type_complexity, clippy::too_many_arguments, non_snake_case)]
-fn visibility_fractions_py<'py>(
+fn spline_visibility_py<'py>(
     py: Python<'py>,
+    coeffs: PyReadonlyArray3<'py, f64>,
+    knots: PyReadonlyArray1<'py, f64>,
     times: PyReadonlyArray1<'py, f64>,
-    flat: PyReadonlyArray4<'py, f64>,
+    rotor_drag: f64,
     s: PyReadonlyArray1<'py, f64>,
     axis_B: PyReadonlyArray1<'py, f64>,
     cos_half: f64,
@@ -209,27 +237,164 @@ fn visibility_fractions_py<'py>(
     Bound<'py, PyArray1<f64>>,
     Bound<'py, PyArray1<f64>>,
 )> {
-    let shape = flat.shape().to_vec();
+    let view = spline_view(&coeffs, &knots)?;
     let ts = contiguous("times", &times)?;
-    if shape[0] != 2 || shape[1] != ts.len() || shape[3] != 4 {
-        return Err(kernel_err(
-            "flat",
-            format!("expected shape (2, {}, k, 4), got {shape:?}", ts.len()),
-        ));
-    }
-    let fl = contiguous("flat", &flat)?;
     let (ss, ds) = (contiguous("s", &s)?, contiguous("axis_B", &axis_B)?);
-    let out = guarded(|| crate::fov::visibility_fractions(ts, fl, shape[2], ss, ds, cos_half, g))
+    let out = guarded(|| crate::fov::spline_visibility(&view, ts, rotor_drag, ss, ds, cos_half, g))
         .map_err(to_py_err)?;
     let col =
         |f: fn(&(f64, f64, f64)) -> f64| out.iter().map(f).collect::<Vec<f64>>().into_pyarray(py);
     Ok((col(|r| r.0), col(|r| r.1), col(|r| r.2)))
 }
 
+type StepOut<'py> = (
+    (
+        Bound<'py, PyArray1<f64>>,
+        Bound<'py, PyArray1<f64>>,
+        Bound<'py, PyArray1<bool>>,
+        Bound<'py, PyArray1<bool>>,
+        bool,
+    ),
+    (
+        Bound<'py, PyArray2<f64>>,
+        Bound<'py, PyArray2<f64>>,
+        Bound<'py, PyArray1<f64>>,
+        Bound<'py, PyArray1<f64>>,
+        Bound<'py, PyArray2<f64>>,
+        Bound<'py, PyArray2<f64>>,
+        Bound<'py, PyArray1<f64>>,
+    ),
+    (
+        Bound<'py, PyArray2<f64>>,
+        Bound<'py, PyArray2<f64>>,
+        Bound<'py, PyArray1<f64>>,
+        Bound<'py, PyArray1<f64>>,
+        Bound<'py, PyArray2<f64>>,
+        Bound<'py, PyArray1<f64>>,
+        Bound<'py, PyArray1<f64>>,
+        Bound<'py, PyArray2<f64>>,
+        Bound<'py, PyArray1<f64>>,
+        Bound<'py, PyArray1<f64>>,
+    ),
+);
+
+/// The rows of one SQP step linearised on the reference spline `coeffs (S, 4, C)`, `knots
+/// (S + 1,)` at its relative times `tau (m,)` (`avp.perception.linearise_on`): the reference's
+/// points (acceleration `a + rotor_drag v`), their row terms as `fov_linearise` gives them, and
+/// the placed points' rows as `fov_row_matrices` gives them, on the QP's point basis `seg (m,)`,
+/// `p0`, `p2 (m, n_coeffs)` of `n_segments` segments. Returns three tuples: per point `(h0,
+/// reachable, placed, progress, hold)`; per placed point (`k`) the row inputs `(gx (k, 3), ga
+/// (k, 3), gp, rhs, x0 (k, 3), a0 (k, 3), psi0)`; and the blocks `(row8 (k, n), rx (3k, n), x_lo,
+/// x_hi, ra (3k, n), a_lo, a_hi, ryaw (k, n), yaw_lo, yaw_hi)`, the trust region's bounds being
+/// the point minus and plus its radius.
+#[pyfunction(name = "fov_step_rows")]
+#[allow(clippy::too_many_arguments, non_snake_case)]
+fn fov_step_rows_py<'py>(
+    py: Python<'py>,
+    coeffs: PyReadonlyArray3<'py, f64>,
+    knots: PyReadonlyArray1<'py, f64>,
+    tau: PyReadonlyArray1<'py, f64>,
+    rotor_drag: f64,
+    s: PyReadonlyArray1<'py, f64>,
+    axis_B: PyReadonlyArray1<'py, f64>,
+    cos_half: f64,
+    g: f64,
+    trust: (f64, f64, f64),
+    margin: f64,
+    reach_fraction: f64,
+    progress_fraction: f64,
+    policy: &str,
+    n_segments: usize,
+    seg: PyReadonlyArray1<'py, i64>,
+    p0: PyReadonlyArray2<'py, f64>,
+    p2: PyReadonlyArray2<'py, f64>,
+) -> PyResult<StepOut<'py>> {
+    let view = spline_view(&coeffs, &knots)?;
+    let ts = contiguous("tau", &tau)?;
+    let (ss, ds) = (contiguous("s", &s)?, contiguous("axis_B", &axis_B)?);
+    let settings = linearisation_settings(
+        cos_half,
+        g,
+        trust,
+        margin,
+        reach_fraction,
+        progress_fraction,
+        policy,
+    )?;
+    let n_coeffs = basis_width(&p0, &p2)?;
+    let basis = crate::fov_step::PointBasis {
+        n_segments,
+        seg: contiguous("seg", &seg)?,
+        p0: contiguous("p0", &p0)?,
+        p2: contiguous("p2", &p2)?,
+    };
+    let out = guarded(|| {
+        crate::fov_step::rows_on_spline(&view, ts, rotor_drag, ss, ds, &settings, &basis)
+    })
+    .map_err(to_py_err)?;
+    let (k, n) = (out.placed.len(), 4 * n_segments * n_coeffs);
+    let terms = &out.terms;
+    let per_point = |f: fn(&crate::fov::FovRowTerms) -> f64| {
+        terms.iter().map(f).collect::<Vec<f64>>().into_pyarray(py)
+    };
+    let flag = |f: fn(&crate::fov::FovRowTerms) -> bool| {
+        terms.iter().map(f).collect::<Vec<bool>>().into_pyarray(py)
+    };
+    let placed = &out.placed;
+    let per_placed = |f: fn(&crate::fov::FovRowTerms) -> f64| {
+        placed.iter().map(|&i| f(&terms[i])).collect::<Vec<f64>>()
+    };
+    let triples = |f: fn(&crate::fov::FovRowTerms) -> [f64; 3]| {
+        placed
+            .iter()
+            .flat_map(|&i| f(&terms[i]))
+            .collect::<Vec<f64>>()
+    };
+    let of_points = |v: &[f64], w: usize| {
+        placed
+            .iter()
+            .flat_map(|&i| v[i * w..][..w].iter().copied())
+            .collect::<Vec<f64>>()
+    };
+    let point = (
+        per_point(|t| t.h0),
+        per_point(|t| t.reachable),
+        flag(|t| t.placed),
+        flag(|t| t.progress),
+        out.hold,
+    );
+    let inputs = (
+        matrix(py, k, 3, triples(|t| t.gx))?,
+        matrix(py, k, 3, triples(|t| t.ga))?,
+        per_placed(|t| t.gp).into_pyarray(py),
+        per_placed(|t| t.rhs).into_pyarray(py),
+        matrix(py, k, 3, of_points(&out.x0, 3))?,
+        matrix(py, k, 3, of_points(&out.a0, 3))?,
+        of_points(&out.psi0, 1).into_pyarray(py),
+    );
+    let (x_lo, x_hi) = out.x_bounds;
+    let (a_lo, a_hi) = out.a_bounds;
+    let (y_lo, y_hi) = out.yaw_bounds;
+    let blocks = (
+        matrix(py, k, n, out.row8)?,
+        matrix(py, 3 * k, n, out.rx)?,
+        x_lo.into_pyarray(py),
+        x_hi.into_pyarray(py),
+        matrix(py, 3 * k, n, out.ra)?,
+        a_lo.into_pyarray(py),
+        a_hi.into_pyarray(py),
+        matrix(py, k, n, out.ryaw)?,
+        y_lo.into_pyarray(py),
+        y_hi.into_pyarray(py),
+    );
+    Ok((point, inputs, blocks))
+}
+
 pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(fov_gradient_py, m)?)?;
     m.add_function(wrap_pyfunction!(fov_linearise_py, m)?)?;
     m.add_function(wrap_pyfunction!(fov_row_matrices_py, m)?)?;
-    m.add_function(wrap_pyfunction!(visibility_fractions_py, m)?)?;
+    m.add_function(wrap_pyfunction!(fov_step_rows_py, m)?)?;
+    m.add_function(wrap_pyfunction!(spline_visibility_py, m)?)?;
     Ok(())
 }

@@ -1,6 +1,6 @@
 //! Thin PyO3 wrappers, one module per kernel family (`spline`, `fov`, `bounds`, `regions`,
-//! `time_scaling`, `qp_check`), sharing only [`common`]: convert NumPy arrays to slices, call a kernel,
-//! convert back. Every kernel error becomes `KernelError` (a `ValueError` with `.arg` and
+//! `time_scaling`, `qp_check`, `reduce`), sharing only [`common`]: convert NumPy arrays to
+//! slices, call a kernel, convert back. Every kernel error becomes `KernelError` (a `ValueError` with `.arg` and
 //! `.detail`); kernels return `Result` and do not panic on input paths.
 use pyo3::prelude::*;
 
@@ -8,6 +8,7 @@ mod bounds;
 mod common;
 mod fov;
 mod qp_check;
+mod reduce;
 mod regions;
 mod spline;
 mod time_scaling;
@@ -22,5 +23,6 @@ pub fn _avp_rust(m: &Bound<'_, PyModule>) -> PyResult<()> {
     regions::register(m)?;
     time_scaling::register(m)?;
     qp_check::register(m)?;
+    reduce::register(m)?;
     Ok(())
 }

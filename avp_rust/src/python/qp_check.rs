@@ -3,21 +3,9 @@
 use numpy::{PyReadonlyArray1, PyReadonlyArray2, PyUntypedArrayMethods};
 use pyo3::prelude::*;
 
-use super::common::{contiguous, kernel_err, to_py_err};
+use super::common::{columns, contiguous, kernel_err, to_py_err};
 use crate::error::guarded;
 use crate::qp_check;
-
-fn columns(arg: &'static str, m: &PyReadonlyArray2<'_, f64>, n: usize) -> PyResult<()> {
-    let shape = m.shape();
-    if shape[1] == n || shape[0] == 0 {
-        Ok(())
-    } else {
-        Err(kernel_err(
-            arg,
-            format!("wrong shape: expected {n} columns, got {:?}", shape),
-        ))
-    }
-}
 
 /// `vector` (named `arg`) has one entry per row of `m` (named `matrix`).
 fn one_per_row(
