@@ -451,8 +451,10 @@ def test_appended_rows_equal_numpy_and_blas_reductions(seed, n, m, k0, sizes, de
 
     rng = np.random.default_rng(seed)
     Z, c_p = rng.normal(size=(n, m)), rng.normal(size=n)
+    if seed % 2:
+        Z = np.asfortranarray(Z)  # any layout is read by its values (the planner's Z is Fortran-ordered)
     A = rng.normal(size=(m, m))
-    R = np.ascontiguousarray(np.linalg.cholesky(A @ A.T + m * np.eye(m)).T)  # upper, well conditioned
+    R = np.linalg.cholesky(A @ A.T + m * np.eye(m)).T  # upper, well conditioned; Fortran-ordered, as the planner's
     if factor == "singular":
         R[m // 2, m // 2] = 0.0
     blocks = []
@@ -497,6 +499,10 @@ def test_append_rows_refuses_bad_shapes_naming_the_argument() -> None:
     e = np.zeros((0, n)), np.zeros(0), np.zeros(0), np.zeros((0, m)), np.zeros(0), np.zeros(0), np.zeros((0, m))
     good = (np.ones((2, n)), np.zeros(2), np.ones(2))
     assert avp._avp_rust.append_rows(*e, [good], Z, c_p, R)[6] is not None
+    as_ints = avp._avp_rust.append_rows(*e, [(np.ones((2, n), dtype=int), np.zeros(2, dtype=int), np.ones(2, dtype=int))],
+                                        Z, c_p, R)  # integer rows: read by their values
+    for a, b in zip(as_ints, avp._avp_rust.append_rows(*e, [good], Z, c_p, R), strict=True):
+        assert a.dtype == np.float64 and np.array_equal(a, b)
     for blocks, arg in (([(np.ones((2, n + 1)), np.zeros(2), np.ones(2))], "blocks.matrix"),
                         ([(np.ones((2, n)), np.zeros(3), np.ones(2))], "blocks.matrix"),
                         ([(np.ones((2, n)), np.zeros(2), np.ones(1))], "blocks.upper")):

@@ -92,11 +92,6 @@ _FACTORS_LOCK = threading.Lock()
 _WEIGHTS = np.random.default_rng(0).uniform(0.5, 1.5, 1 << 16)
 
 
-def _f64(a: Array) -> Array:
-    """``a`` as a row-major float64 array (no copy when it is one): what the kernels take."""
-    return np.ascontiguousarray(a, dtype=np.float64)
-
-
 def _read_only(M: Array) -> Array:
     M.setflags(write=False)
     return M
@@ -653,10 +648,9 @@ class PerchingQp:
         if not new or r0.Z is not Z or r0.g is not g or (p is not None and p.R is not self._cholesky):
             return False
         G0, lo0, hi0 = pd["_stacked_inequalities"]
-        G, lo, hi, Gz, lo_z, hi_z, M = _avp_rust.append_rows(
-            G0, lo0, hi0, _f64(r0.G), _f64(r0.lower), _f64(r0.upper), None if p is None else _f64(p.M),
-            [(_f64(b.matrix), _f64(b.lower), _f64(b.upper)) for b in new], _f64(Z), _f64(c_p),
-            None if p is None else _f64(p.R))
+        G, lo, hi, Gz, lo_z, hi_z, M = _avp_rust.append_rows(  # reads any layout (Z, R are Fortran-ordered)
+            G0, lo0, hi0, r0.G, r0.lower, r0.upper, None if p is None else p.M,
+            [(b.matrix, b.lower, b.upper) for b in new], Z, c_p, None if p is None else p.R)
         d["_stacked_inequalities"] = (_read_only(G), _read_only(lo), _read_only(hi))
         d["_reduced"] = ReducedQp(H=H, g=g, G=Gz, lower=lo_z, upper=hi_z, Z=Z, c_p=c_p)
         d["_least_distance"] = None if p is None or M is None else LeastDistanceQp(p.R, M, p.v)

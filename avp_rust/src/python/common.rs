@@ -1,6 +1,8 @@
 //! What every wrapper family shares: the [`KernelError`] exception, error conversion and the
 //! NumPy-array-to-slice helpers. The families (`spline`, `fov`, `bounds`, `regions`) import only
 //! from here, never from each other.
+use std::borrow::Cow;
+
 use numpy::ndarray::Dimension;
 use numpy::{
     Element, IntoPyArray, PyArray2, PyReadonlyArray, PyReadonlyArray1, PyReadonlyArray2,
@@ -69,6 +71,15 @@ pub(crate) fn columns(arg: &'static str, m: &PyReadonlyArray2<'_, f64>, n: usize
             arg,
             format!("wrong shape: expected {n} columns, got {:?}", shape),
         ))
+    }
+}
+
+/// The values of `arr` in row-major order: its own buffer when it is C-contiguous, a copy
+/// otherwise (a Fortran-ordered factor, a strided view).
+pub(crate) fn row_major<'a, D: Dimension>(arr: &'a PyReadonlyArray<'_, f64, D>) -> Cow<'a, [f64]> {
+    match arr.as_slice() {
+        Ok(s) if arr.is_c_contiguous() => Cow::Borrowed(s),
+        _ => Cow::Owned(arr.as_array().iter().copied().collect()),
     }
 }
 

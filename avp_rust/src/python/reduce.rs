@@ -1,11 +1,12 @@
 //! PyO3 wrapper of the rows appended to an eliminated QP (`crate::reduce`).
 #![allow(clippy::useless_conversion)]
 use numpy::{
-    IntoPyArray, PyArray1, PyArray2, PyReadonlyArray1, PyReadonlyArray2, PyUntypedArrayMethods,
+    AllowTypeChange, IntoPyArray, PyArray1, PyArray2, PyArrayLike1, PyArrayLike2,
+    PyUntypedArrayMethods,
 };
 use pyo3::prelude::*;
 
-use super::common::{columns, contiguous, matrix, to_py_err};
+use super::common::{columns, matrix, row_major, to_py_err};
 use crate::error::guarded;
 use crate::reduce::{append_rows, Elimination, QpRows, RowBlock};
 
@@ -19,30 +20,32 @@ type Rows<'py> = (
     Option<Bound<'py, PyArray2<f64>>>,
 );
 
+/// A float array of any layout or dtype (converted to `float64` when it is not).
+type F1<'py> = PyArrayLike1<'py, f64, AllowTypeChange>;
+/// A float matrix of any layout or dtype.
+type F2<'py> = PyArrayLike2<'py, f64, AllowTypeChange>;
+
 /// The QP's rows `(g, lower, upper)` in the coefficients, `(g_z, lower_z, upper_z)` in `z` and
 /// `m_rows` in `u = R z` (or `None`), with the rows of `blocks` (`(matrix, lower, upper)`
 /// triples) appended: `c = c_p + z_basis z`, `r` the reduced Hessian's upper Cholesky factor
-/// (or `None`). Returns the seven arrays, new; `m_rows` is `None` without a factor or when a new
-/// row is not finite.
+/// (or `None`). Any layout (a Fortran-ordered factor) and float dtype is read by its values.
+/// Returns the seven arrays, new; `m_rows` is `None` without a factor or when a new row is not
+/// finite.
 #[pyfunction(name = "append_rows")]
 #[allow(clippy::too_many_arguments)]
 fn append_rows_py<'py>(
     py: Python<'py>,
-    g: PyReadonlyArray2<'py, f64>,
-    lower: PyReadonlyArray1<'py, f64>,
-    upper: PyReadonlyArray1<'py, f64>,
-    g_z: PyReadonlyArray2<'py, f64>,
-    lower_z: PyReadonlyArray1<'py, f64>,
-    upper_z: PyReadonlyArray1<'py, f64>,
-    m_rows: Option<PyReadonlyArray2<'py, f64>>,
-    blocks: Vec<(
-        PyReadonlyArray2<'py, f64>,
-        PyReadonlyArray1<'py, f64>,
-        PyReadonlyArray1<'py, f64>,
-    )>,
-    z_basis: PyReadonlyArray2<'py, f64>,
-    c_p: PyReadonlyArray1<'py, f64>,
-    r: Option<PyReadonlyArray2<'py, f64>>,
+    g: F2<'py>,
+    lower: F1<'py>,
+    upper: F1<'py>,
+    g_z: F2<'py>,
+    lower_z: F1<'py>,
+    upper_z: F1<'py>,
+    m_rows: Option<F2<'py>>,
+    blocks: Vec<(F2<'py>, F1<'py>, F1<'py>)>,
+    z_basis: F2<'py>,
+    c_p: F1<'py>,
+    r: Option<F2<'py>>,
 ) -> PyResult<Rows<'py>> {
     let (n, m) = (z_basis.shape()[0], z_basis.shape()[1]);
     columns("g", &g, n)?;
@@ -56,30 +59,34 @@ fn append_rows_py<'py>(
     for (b, _, _) in &blocks {
         columns("blocks.matrix", b, n)?;
     }
-    let mut views = Vec::with_capacity(blocks.len());
-    for (b, lo, hi) in &blocks {
-        views.push(RowBlock {
-            matrix: contiguous("blocks.matrix", b)?,
-            lower: contiguous("blocks.lower", lo)?,
-            upper: contiguous("blocks.upper", hi)?,
-        });
-    }
+    let block_values: Vec<_> = blocks
+        .iter()
+        .map(|(b, lo, hi)| (row_major(b), row_major(lo), row_major(hi)))
+        .collect();
+    let views: Vec<RowBlock<'_>> = block_values
+        .iter()
+        .map(|(b, lo, hi)| RowBlock {
+            matrix: b,
+            lower: lo,
+            upper: hi,
+        })
+        .collect();
+    let m_values = m_rows.as_ref().map(|a| row_major(a));
     let rows = QpRows::from_parts(
-        contiguous("g", &g)?,
-        contiguous("lower", &lower)?,
-        contiguous("upper", &upper)?,
-        contiguous("g_z", &g_z)?,
-        contiguous("lower_z", &lower_z)?,
-        contiguous("upper_z", &upper_z)?,
-        m_rows
-            .as_ref()
-            .map(|a| contiguous("m_rows", a))
-            .transpose()?,
+        &row_major(&g),
+        &row_major(&lower),
+        &row_major(&upper),
+        &row_major(&g_z),
+        &row_major(&lower_z),
+        &row_major(&upper_z),
+        m_values.as_deref(),
     );
+    let (z_values, c_values) = (row_major(&z_basis), row_major(&c_p));
+    let r_values = r.as_ref().map(|a| row_major(a));
     let elim = Elimination {
-        z: contiguous("z_basis", &z_basis)?,
-        c_p: contiguous("c_p", &c_p)?,
-        r: r.as_ref().map(|a| contiguous("r", a)).transpose()?,
+        z: &z_values,
+        c_p: &c_values,
+        r: r_values.as_deref(),
     };
     let out = guarded(|| append_rows(rows, &views, &elim)).map_err(to_py_err)?;
     let k = out.lower.len();
