@@ -173,13 +173,14 @@ def fov_step_rows(
     seg: npt.NDArray[np.int64],
     p0: npt.NDArray[np.float64],
     p2: npt.NDArray[np.float64],
+    build_rows: bool,
 ) -> tuple[
     tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.bool_], npt.NDArray[np.bool_], bool],
     tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.float64],
           npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.float64]],
     tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.float64],
           npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.float64],
-          npt.NDArray[np.float64], npt.NDArray[np.float64]],
+          npt.NDArray[np.float64], npt.NDArray[np.float64]] | None,
 ]:
     """The FoV rows of one SQP step (:func:`avp.qp.fov.linearise_on_spline`), linearised on the
     reference spline ``coeffs (S, 4, C)``, ``knots (S + 1,)`` at its relative times ``tau (m,)``
@@ -188,9 +189,9 @@ def fov_step_rows(
     (m,)``, ``p0``, ``p2 (m, C)`` of ``n_segments`` segments. Returns ``((h0, reachable, placed,
     progress, hold), (gx, ga, gp, rhs, x0, a0, psi0), (row8, rx, x_lo, x_hi, ra, a_lo, a_hi, ryaw,
     yaw_lo, yaw_hi))``: per point, then per placed point, then the blocks (trust bounds: the
-    point minus and plus its radius). Raises ``KernelError`` on bad shapes, no point, a spline
-    without 4 axes, a negative or non-finite ``rotor_drag`` or the :func:`fov_linearise`
-    conditions."""
+    point minus and plus its radius), or ``None`` unless ``build_rows``. Raises ``KernelError``
+    on bad shapes, no point, a spline without 4 axes, a negative or non-finite ``rotor_drag`` or
+    the :func:`fov_linearise` conditions."""
 
 # --- the rows appended to an eliminated QP (reduce.rs) -------------------------------------------
 

@@ -344,7 +344,8 @@ def solve_fov(
         without a solve; so it is too when ``worth()`` is False (a first plan whose FoV-free
         solution already breaks a sampled limit: a time search follows)."""
         tb = time.perf_counter()
-        lin = perception.linearise_on(base, reference, target, cfg)
+        # with the FoV-free optimum, the rows may hold there and never be needed: built on demand
+        lin = perception.linearise_on(base, reference, target, cfg, build_blocks=optimum is None)
         ledger.build += time.perf_counter() - tb
         n_vis = np.count_nonzero(lin.h0 <= 0.0)
         desc = (f"{label}: {np.count_nonzero(lin.placed)}/{lin.times.size} FoV points placed "

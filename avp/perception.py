@@ -45,7 +45,7 @@ def __getattr__(name: str) -> Any:
 
 
 def linearise_on(
-    qp: PerchingQp, reference: Trajectory, target: PerchTarget, cfg: PlannerConfig
+    qp: PerchingQp, reference: Trajectory, target: PerchTarget, cfg: PlannerConfig, *, build_blocks: bool = True,
 ) -> FovLinearisation:
     """FoV blocks for ``qp`` linearised on ``reference`` at the ``n_p`` gated times.
 
@@ -53,6 +53,9 @@ def linearise_on(
     ``t0_new + t (tf_ref - t0_new)/tf``: the same absolute time when both plans end together.
     With ``cfg.limits.rotor_drag = d`` the attitude is the one of the thrust ``a + g e3 + d v``
     (the rows' acceleration variable is ``a + d v``: :func:`~avp.qp.fov.fov_blocks`).
+    ``build_blocks``: build the blocks with the terms, in the same kernel call; ``False`` for a
+    caller that may only ask whether the rows hold at the reference (they are then built on
+    first access).
     """
     knots = qp.knots_rel
     tf = float(knots[-1])
@@ -66,7 +69,8 @@ def linearise_on(
     # the reference's points and their rows in one kernel call; with rotor drag the attitude is
     # the one of the thrust a + g e3 + d v (VehicleLimits.rotor_drag)
     return linearise_on_spline(qp.layout, knots, times, reference.coefficients, reference.knots_rel, tau,
-                               target.point, cfg.fov, cfg.g, rotor_drag=cfg.limits.rotor_drag)
+                               target.point, cfg.fov, cfg.g, rotor_drag=cfg.limits.rotor_drag,
+                               build_blocks=build_blocks)
 
 
 def _fov_config(cfg: PlannerConfig) -> PlannerConfig:

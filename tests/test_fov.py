@@ -560,15 +560,16 @@ def test_fov_rows_of_integer_knots_and_times_are_those_of_their_values() -> None
 @given(seed=st.integers(0, 2**32 - 1), policy=st.sampled_from(list(FovPointPolicy)),
        radii=st.tuples(*(st.sampled_from([0.05, 0.5, 2.0, math.inf]) for _ in range(3))),
        drag=st.sampled_from([0.0, 0.2, 0.7]), margin=st.sampled_from([0.0, 0.04]),
-       n_seg=st.integers(1, 4), degree=st.sampled_from([5, 7]), m=st.integers(1, 12))
+       n_seg=st.integers(1, 4), degree=st.sampled_from([5, 7]), m=st.integers(1, 12), build=st.booleans())
 def test_rows_on_a_spline_equal_fov_blocks_at_its_points_bit_for_bit(
     seed: int, policy: FovPointPolicy, radii: tuple[float, float, float], drag: float, margin: float,
-    n_seg: int, degree: int, m: int,
+    n_seg: int, degree: int, m: int, build: bool,
 ) -> None:
     """``linearise_on_spline`` (one kernel call: evaluation, terms, rows) gives the same
     linearisation and blocks, bit for bit, as evaluating the spline with ``eval_spline`` and
     calling ``fov_blocks`` on the points (a + d v with rotor drag), whatever the policy, trust
-    radii, drag or layout; and its blocks are those ``fov_rows`` builds from its row inputs."""
+    radii, drag or layout, with its blocks built in the call or on first access; and its blocks
+    are those ``fov_rows`` builds from its row inputs."""
     from avp.frames import drag_acceleration
     from avp.qp.fov import fov_rows, linearise_on_spline
     from avp.qp.layout import layout_for
@@ -586,7 +587,8 @@ def test_rows_on_a_spline_equal_fov_blocks_at_its_points_bit_for_bit(
     fov = FovConfig(point_policy=policy, trust_position=radii[0], trust_acceleration=radii[1], trust_yaw=radii[2],
                     margin=margin)
     new = linearise_on_spline(layout, knots, times, reference.coefficients, reference.knots_rel, tau, s, fov,
-                              rotor_drag=drag)
+                              rotor_drag=drag, build_blocks=build)
+    assert (new.built is not None) == build
     d = avp._avp_rust.eval_spline(reference.coefficients, reference.knots_rel, tau, [0, 1, 2])
     a0 = drag_acceleration(d[2, :, :3], d[1, :, :3], drag) if drag else d[2, :, :3]
     old = fov_blocks(layout, knots, times, d[0, :, :3], d[0, :, 3], a0, s, fov, rotor_drag=drag)

@@ -306,14 +306,18 @@ def linearise_on_spline(
     fov: FovConfig,
     g: float = GRAVITY,
     rotor_drag: float = 0.0,
+    *,
+    build_blocks: bool = True,
 ) -> FovLinearisation:
     """:func:`fov_blocks` at the points of a reference spline (``coefficients`` on
     ``spline_knots_rel``, at its relative times ``tau``, one per entry of ``times``): its
-    position, yaw and acceleration (``a + rotor_drag v``) there, with the blocks built at once.
-    One kernel call (``avp._avp_rust.fov_step_rows``) evaluates the points, computes the row
-    terms and fills the rows, with the kernels :func:`fov_blocks` and :func:`fov_rows` call, in
-    the same order of operations: the result is the same bits as theirs on the evaluated
-    points. ``rotor_drag`` is taken as validated (the planner's configuration)."""
+    position, yaw and acceleration (``a + rotor_drag v``) there, with the blocks built at once
+    when ``build_blocks`` (otherwise on first access, by :func:`fov_rows`, as
+    :func:`fov_blocks` does). One kernel call (``avp._avp_rust.fov_step_rows``) evaluates the
+    points, computes the row terms and fills the rows, with the kernels :func:`fov_blocks` and
+    :func:`fov_rows` call, in the same order of operations: the result is the same bits as
+    theirs on the evaluated points. ``rotor_drag`` is taken as validated (the planner's
+    configuration)."""
     t = np.array(times, dtype=float)
     seg, p0, p2 = _point_basis(layout, np.ascontiguousarray(knots_rel, dtype=np.float64).tobytes(), t.tobytes(),
                                float(rotor_drag))
@@ -322,23 +326,26 @@ def linearise_on_spline(
         coefficients, spline_knots_rel, tau, float(rotor_drag), np.ascontiguousarray(target_point, dtype=float),
         cam.axis_B, math.cos(cam.half_fov), float(g), (fov.trust_position, fov.trust_acceleration, fov.trust_yaw),
         fov.margin, fov.reach_fraction, fov.progress_fraction, fov.point_policy.name.lower(), layout.n_segments,
-        seg, p0, p2)
+        seg, p0, p2, build_blocks)
     h0, reachable, placed, progress, hold = point
     gx, ga, gp, rhs, x0, a0, psi0 = inputs
-    row8, Rx, x_lo, x_hi, Ra, a_lo, a_hi, Ryaw, y_lo, y_hi = mats
     k = rhs.size
-    built: list[ConstraintBlock] = []
-    if k:
-        built.append(ConstraintBlock(_ROW8, row8, np.full(k, -np.inf), rhs))
-        if math.isfinite(fov.trust_position):
-            built.append(ConstraintBlock(_TRUST["x"], Rx, x_lo, x_hi))
-        if math.isfinite(fov.trust_acceleration):
-            built.append(ConstraintBlock(_TRUST["a"], Ra, a_lo, a_hi))
-        if math.isfinite(fov.trust_yaw):
-            built.append(ConstraintBlock(_TRUST["yaw"], Ryaw, y_lo, y_hi))
+    built: tuple[ConstraintBlock, ...] | None = None  # None: built on first access (fov_rows)
+    if mats is not None:
+        row8, Rx, x_lo, x_hi, Ra, a_lo, a_hi, Ryaw, y_lo, y_hi = mats
+        blocks: list[ConstraintBlock] = []
+        if k:
+            blocks.append(ConstraintBlock(_ROW8, row8, np.full(k, -np.inf), rhs))
+            if math.isfinite(fov.trust_position):
+                blocks.append(ConstraintBlock(_TRUST["x"], Rx, x_lo, x_hi))
+            if math.isfinite(fov.trust_acceleration):
+                blocks.append(ConstraintBlock(_TRUST["a"], Ra, a_lo, a_hi))
+            if math.isfinite(fov.trust_yaw):
+                blocks.append(ConstraintBlock(_TRUST["yaw"], Ryaw, y_lo, y_hi))
+        built = tuple(blocks)
     knots = np.array(knots_rel, dtype=float)
     rows = FovRowInputs(layout, knots, t if k == t.size else t[placed], gx, ga, gp, rhs, x0, a0, psi0, fov,
                         float(rotor_drag))
     for arr in (t, h0, reachable, placed, progress):
         arr.setflags(write=False)
-    return FovLinearisation(t, h0, reachable, placed, progress, hold, rows, tuple(built))
+    return FovLinearisation(t, h0, reachable, placed, progress, hold, rows, built)

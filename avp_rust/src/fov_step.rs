@@ -19,10 +19,8 @@ pub struct PointBasis<'a> {
     pub p2: &'a [f64],
 }
 
-/// The rows of one linearisation: per point (`m`) the terms and the linearisation point; per
-/// placed point (`k`, in order) the row (8) `(k, n)` with its right-hand side, and the trust
-/// region (9) in position `(3k, n)`, acceleration `(3k, n)` and yaw `(k, n)` with their bounds
-/// (the linearisation point minus and plus the radius).
+/// The rows of one linearisation: per point (`m`) the terms and the linearisation point, the
+/// placed points' indices, and their blocks when asked for.
 #[derive(Debug, Clone, PartialEq)]
 pub struct StepRows {
     pub terms: Vec<FovRowTerms>,
@@ -31,6 +29,14 @@ pub struct StepRows {
     pub psi0: Vec<f64>,
     pub a0: Vec<f64>,
     pub placed: Vec<usize>,
+    pub blocks: Option<StepBlocks>,
+}
+
+/// Per placed point (`k`, in order) the row (8) `(k, n)`, and the trust region (9) in position
+/// `(3k, n)`, acceleration `(3k, n)` and yaw `(k, n)` with their bounds (the linearisation point
+/// minus and plus the radius).
+#[derive(Debug, Clone, PartialEq)]
+pub struct StepBlocks {
     pub row8: Vec<f64>,
     pub rx: Vec<f64>,
     pub ra: Vec<f64>,
@@ -40,7 +46,10 @@ pub struct StepRows {
     pub yaw_bounds: (Vec<f64>, Vec<f64>),
 }
 
-/// The rows at the points `x0 (m, 3)`, `psi0 (m,)`, `a0 (m, 3)` (flattened row-major).
+/// The rows at the points `x0 (m, 3)`, `psi0 (m,)`, `a0 (m, 3)` (flattened row-major), with
+/// their blocks when `build` (a caller that first asks whether the rows hold at the
+/// linearisation point itself may never need them).
+#[allow(clippy::too_many_arguments)]
 pub fn rows_at_points(
     x0: Vec<f64>,
     psi0: Vec<f64>,
@@ -49,6 +58,7 @@ pub fn rows_at_points(
     axis_b: &[f64],
     st: &LinearisationSettings,
     basis: &PointBasis<'_>,
+    build: bool,
 ) -> Result<StepRows> {
     let m = psi0.len();
     check_len("x0", x0.len(), 3 * m)?;
@@ -73,6 +83,17 @@ pub fn rows_at_points(
     check_len("p2", basis.p2.len(), m * n_coeffs)?;
     let (terms, hold) = fov_linearise(&x0, &psi0, &a0, s, axis_b, st)?;
     let placed: Vec<usize> = (0..m).filter(|&i| terms[i].placed).collect();
+    if !build {
+        return Ok(StepRows {
+            terms,
+            hold,
+            x0,
+            psi0,
+            a0,
+            placed,
+            blocks: None,
+        });
+    }
     let gather = |v: &[f64], w: usize| -> Vec<f64> {
         placed
             .iter()
@@ -109,19 +130,22 @@ pub fn rows_at_points(
         psi0,
         a0,
         placed,
-        row8,
-        rx,
-        ra,
-        ryaw,
-        x_bounds,
-        a_bounds,
-        yaw_bounds,
+        blocks: Some(StepBlocks {
+            row8,
+            rx,
+            ra,
+            ryaw,
+            x_bounds,
+            a_bounds,
+            yaw_bounds,
+        }),
     })
 }
 
 /// The rows at the points of the `reference` spline (axes x, y, z, yaw) at its relative times
 /// `tau`: position and yaw, and the acceleration `a + d v` with rotor drag `d > 0` (`a` alone
 /// with `d = 0`), the attitude's thrust direction (`avp.frames.drag_acceleration`).
+#[allow(clippy::too_many_arguments)]
 pub fn rows_on_spline(
     reference: &SplineView<'_>,
     tau: &[f64],
@@ -130,6 +154,7 @@ pub fn rows_on_spline(
     axis_b: &[f64],
     st: &LinearisationSettings,
     basis: &PointBasis<'_>,
+    build: bool,
 ) -> Result<StepRows> {
     if reference.n_axes() != 4 {
         return Err(Error::Shape {
@@ -163,7 +188,7 @@ pub fn rows_on_spline(
             a0.extend_from_slice(&a[..3]);
         }
     }
-    rows_at_points(x0, psi0, a0, s, axis_b, st, basis)
+    rows_at_points(x0, psi0, a0, s, axis_b, st, basis, build)
 }
 
 #[cfg(test)]
@@ -204,7 +229,8 @@ mod tests {
         };
         let (s, axis) = ([5.0, 1.0, 2.0], [1.0, 0.0, 0.0]);
         for drag in [0.0, 0.3] {
-            let on = rows_on_spline(&view, &tau, drag, &s, &axis, &settings(), &basis).unwrap();
+            let on =
+                rows_on_spline(&view, &tau, drag, &s, &axis, &settings(), &basis, true).unwrap();
             // the points by hand: x = (1 + t, 0.5 t^2, 2), v = (1, t, 0), a = (0, 1, 0), yaw 0.1 t
             let mut x0 = vec![];
             let mut a0 = vec![];
@@ -213,12 +239,16 @@ mod tests {
                 a0.extend([0.0 + drag * 1.0, 1.0 + drag * t, 0.0 + drag * 0.0]);
             }
             let psi0 = tau.iter().map(|t| 0.1 * t).collect();
-            let at = rows_at_points(x0, psi0, a0, &s, &axis, &settings(), &basis).unwrap();
+            let at = rows_at_points(x0, psi0, a0, &s, &axis, &settings(), &basis, true).unwrap();
             assert_eq!(on, at);
             assert_eq!(on.placed, vec![0, 1]);
-            assert_eq!(on.x_bounds.0[0], 1.5 - 0.2);
-            assert_eq!(on.yaw_bounds.1[1], f64::INFINITY);
-            assert_eq!(on.row8.len(), 2 * 12);
+            let blocks = on.blocks.as_ref().unwrap();
+            assert_eq!(blocks.x_bounds.0[0], 1.5 - 0.2);
+            assert_eq!(blocks.yaw_bounds.1[1], f64::INFINITY);
+            assert_eq!(blocks.row8.len(), 2 * 12);
+            let terms_only =
+                rows_on_spline(&view, &tau, drag, &s, &axis, &settings(), &basis, false).unwrap();
+            assert_eq!(terms_only, StepRows { blocks: None, ..on });
         }
     }
 
@@ -234,7 +264,8 @@ mod tests {
             p2: &p,
         };
         let (s, axis) = ([5.0, 1.0, 2.0], [1.0, 0.0, 0.0]);
-        let err = rows_on_spline(&view, &[0.5], -1.0, &s, &axis, &settings(), &basis).unwrap_err();
+        let err =
+            rows_on_spline(&view, &[0.5], -1.0, &s, &axis, &settings(), &basis, true).unwrap_err();
         assert_eq!(err.arg(), "rotor_drag");
         let short = PointBasis {
             n_segments: 1,
@@ -242,10 +273,12 @@ mod tests {
             p0: &p,
             p2: &p,
         };
-        let err = rows_on_spline(&view, &[0.5], 0.0, &s, &axis, &settings(), &short).unwrap_err();
+        let err =
+            rows_on_spline(&view, &[0.5], 0.0, &s, &axis, &settings(), &short, true).unwrap_err();
         assert_eq!(err.arg(), "seg");
         let three = SplineView::new(&c[..9], (1, 3, 3), &k).unwrap();
-        let err = rows_on_spline(&three, &[0.5], 0.0, &s, &axis, &settings(), &basis).unwrap_err();
+        let err =
+            rows_on_spline(&three, &[0.5], 0.0, &s, &axis, &settings(), &basis, true).unwrap_err();
         assert_eq!(err.arg(), "coeffs");
     }
 }

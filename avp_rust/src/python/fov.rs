@@ -247,6 +247,19 @@ fn spline_visibility_py<'py>(
     Ok((col(|r| r.0), col(|r| r.1), col(|r| r.2)))
 }
 
+type StepBlocksOut<'py> = (
+    Bound<'py, PyArray2<f64>>,
+    Bound<'py, PyArray2<f64>>,
+    Bound<'py, PyArray1<f64>>,
+    Bound<'py, PyArray1<f64>>,
+    Bound<'py, PyArray2<f64>>,
+    Bound<'py, PyArray1<f64>>,
+    Bound<'py, PyArray1<f64>>,
+    Bound<'py, PyArray2<f64>>,
+    Bound<'py, PyArray1<f64>>,
+    Bound<'py, PyArray1<f64>>,
+);
+
 type StepOut<'py> = (
     (
         Bound<'py, PyArray1<f64>>,
@@ -264,18 +277,7 @@ type StepOut<'py> = (
         Bound<'py, PyArray2<f64>>,
         Bound<'py, PyArray1<f64>>,
     ),
-    (
-        Bound<'py, PyArray2<f64>>,
-        Bound<'py, PyArray2<f64>>,
-        Bound<'py, PyArray1<f64>>,
-        Bound<'py, PyArray1<f64>>,
-        Bound<'py, PyArray2<f64>>,
-        Bound<'py, PyArray1<f64>>,
-        Bound<'py, PyArray1<f64>>,
-        Bound<'py, PyArray2<f64>>,
-        Bound<'py, PyArray1<f64>>,
-        Bound<'py, PyArray1<f64>>,
-    ),
+    Option<StepBlocksOut<'py>>,
 );
 
 /// The rows of one SQP step linearised on the reference spline `coeffs (S, 4, C)`, `knots
@@ -286,7 +288,7 @@ type StepOut<'py> = (
 /// reachable, placed, progress, hold)`; per placed point (`k`) the row inputs `(gx (k, 3), ga
 /// (k, 3), gp, rhs, x0 (k, 3), a0 (k, 3), psi0)`; and the blocks `(row8 (k, n), rx (3k, n), x_lo,
 /// x_hi, ra (3k, n), a_lo, a_hi, ryaw (k, n), yaw_lo, yaw_hi)`, the trust region's bounds being
-/// the point minus and plus its radius.
+/// the point minus and plus its radius, or `None` unless `build_rows`.
 #[pyfunction(name = "fov_step_rows")]
 #[allow(clippy::too_many_arguments, non_snake_case)]
 fn fov_step_rows_py<'py>(
@@ -308,6 +310,7 @@ fn fov_step_rows_py<'py>(
     seg: PyReadonlyArray1<'py, i64>,
     p0: PyReadonlyArray2<'py, f64>,
     p2: PyReadonlyArray2<'py, f64>,
+    build_rows: bool,
 ) -> PyResult<StepOut<'py>> {
     let view = spline_view(&coeffs, &knots)?;
     let ts = contiguous("tau", &tau)?;
@@ -329,7 +332,9 @@ fn fov_step_rows_py<'py>(
         p2: contiguous("p2", &p2)?,
     };
     let out = guarded(|| {
-        crate::fov_step::rows_on_spline(&view, ts, rotor_drag, ss, ds, &settings, &basis)
+        crate::fov_step::rows_on_spline(
+            &view, ts, rotor_drag, ss, ds, &settings, &basis, build_rows,
+        )
     })
     .map_err(to_py_err)?;
     let (k, n) = (out.placed.len(), 4 * n_segments * n_coeffs);
@@ -372,21 +377,24 @@ fn fov_step_rows_py<'py>(
         matrix(py, k, 3, of_points(&out.a0, 3))?,
         of_points(&out.psi0, 1).into_pyarray(py),
     );
-    let (x_lo, x_hi) = out.x_bounds;
-    let (a_lo, a_hi) = out.a_bounds;
-    let (y_lo, y_hi) = out.yaw_bounds;
-    let blocks = (
-        matrix(py, k, n, out.row8)?,
-        matrix(py, 3 * k, n, out.rx)?,
-        x_lo.into_pyarray(py),
-        x_hi.into_pyarray(py),
-        matrix(py, 3 * k, n, out.ra)?,
-        a_lo.into_pyarray(py),
-        a_hi.into_pyarray(py),
-        matrix(py, k, n, out.ryaw)?,
-        y_lo.into_pyarray(py),
-        y_hi.into_pyarray(py),
-    );
+    let blocks = match out.blocks {
+        None => None,
+        Some(b) => {
+            let ((x_lo, x_hi), (a_lo, a_hi), (y_lo, y_hi)) = (b.x_bounds, b.a_bounds, b.yaw_bounds);
+            Some((
+                matrix(py, k, n, b.row8)?,
+                matrix(py, 3 * k, n, b.rx)?,
+                x_lo.into_pyarray(py),
+                x_hi.into_pyarray(py),
+                matrix(py, 3 * k, n, b.ra)?,
+                a_lo.into_pyarray(py),
+                a_hi.into_pyarray(py),
+                matrix(py, k, n, b.ryaw)?,
+                y_lo.into_pyarray(py),
+                y_hi.into_pyarray(py),
+            ))
+        }
+    };
     Ok((point, inputs, blocks))
 }
 
