@@ -25,7 +25,8 @@ with ``time.thread_time`` (the minimum over ``--rounds`` of the mean per call):
   work outside the stages (trajectory objects, the endpoint checks, the time search's own
   sampling), the floor of a design that keeps those decisions in Python;
 * the reduced QPs of the same calls back to back: ``daqp.solve`` alone, its inputs prepared
-  outside the timing (the back-end's own share of the solve stage), and with avp's wrapper.
+  outside the timing (in the least-distance form avp gives it: the back-end's own share of the
+  solve stage), and with avp's wrapper.
 
 A played-back result is returned as its producer returned it: a shallow copy without the
 values cached on it afterwards (a FoV linearisation's rows, a QP's reduction), so the planner
@@ -240,12 +241,16 @@ def back_end_alone(calls: list[Call], rounds: int) -> tuple[float, float, int]:
     qps: list[tuple[Any, ...]] = []
     original = solve._solve_two_sided
 
-    def record(H: Any, g: Any, G: Any, lower: Any, upper: Any, options: dict[str, Any]) -> Any:
+    def record(H: Any, g: Any, G: Any, lower: Any, upper: Any, options: dict[str, Any], ldp: Any = None) -> Any:
         opts = {k: v for k, v in options.items() if k != "verbose"}
-        qps.append(((H, g, G, lower, upper, options),
-                    (np.array(H), g, np.ascontiguousarray(G), np.where(np.isfinite(upper), upper, solve._INF),
-                     np.where(np.isfinite(lower), lower, -solve._INF), np.zeros(G.shape[0], dtype=np.intc), opts)))
-        return original(H, g, G, lower, upper, options)
+        bu, bl = np.where(np.isfinite(upper), upper, solve._INF), np.where(np.isfinite(lower), lower, -solve._INF)
+        sense = np.zeros(G.shape[0], dtype=np.intc)
+        if ldp is not None and solve._VARIABLE_OPTIONS.isdisjoint(opts):  # the least-distance form, as avp gives it
+            inputs = (np.eye(H.shape[0]), ldp.v, ldp.M, bu, bl, sense, opts)
+        else:
+            inputs = (np.array(H), g, np.ascontiguousarray(G), bu, bl, sense, opts)
+        qps.append(((H, g, G, lower, upper, options, ldp), inputs))
+        return original(H, g, G, lower, upper, options, ldp)
 
     solve._solve_two_sided = record  # type: ignore[assignment]
     try:
