@@ -291,6 +291,7 @@ def fov_blocks(
     return FovLinearisation(t, h0, reachable, placed, progress, hold, rows)
 
 
+_NO_BASIS = (np.zeros(0, dtype=np.int64), np.zeros((0, 0)), np.zeros((0, 0)))
 _ROW8 = f"{FOV_PREFIX} rows (8)"
 _TRUST = {label: f"{FOV_PREFIX} trust region (9) {label}" for label in ("x", "a", "yaw")}
 
@@ -319,8 +320,11 @@ def linearise_on_spline(
     theirs on the evaluated points. ``rotor_drag`` is taken as validated (the planner's
     configuration)."""
     t = np.array(times, dtype=float)
-    seg, p0, p2 = _point_basis(layout, np.ascontiguousarray(knots_rel, dtype=np.float64).tobytes(), t.tobytes(),
-                               float(rotor_drag))
+    if build_blocks:
+        seg, p0, p2 = _point_basis(layout, np.ascontiguousarray(knots_rel, dtype=np.float64).tobytes(), t.tobytes(),
+                                   float(rotor_drag))
+    else:  # no rows to fill: no basis (fov_rows evaluates the placed points' if the blocks are asked for)
+        seg, p0, p2 = _NO_BASIS
     cam = fov.camera
     point, inputs, mats = _avp_rust.fov_step_rows(
         coefficients, spline_knots_rel, tau, float(rotor_drag), np.ascontiguousarray(target_point, dtype=float),

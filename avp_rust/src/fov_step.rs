@@ -48,7 +48,7 @@ pub struct StepBlocks {
 
 /// The rows at the points `x0 (m, 3)`, `psi0 (m,)`, `a0 (m, 3)` (flattened row-major), with
 /// their blocks when `build` (a caller that first asks whether the rows hold at the
-/// linearisation point itself may never need them).
+/// linearisation point itself may never need them; `basis` is read only then).
 #[allow(clippy::too_many_arguments)]
 pub fn rows_at_points(
     x0: Vec<f64>,
@@ -63,24 +63,12 @@ pub fn rows_at_points(
     let m = psi0.len();
     check_len("x0", x0.len(), 3 * m)?;
     check_len("a0", a0.len(), 3 * m)?;
-    check_len("seg", basis.seg.len(), m)?;
     if m == 0 {
         return Err(Error::Shape {
             arg: "psi0",
             detail: "no points: linearise at one point at least".into(),
         });
     }
-    if basis.p0.len() % m != 0 {
-        return Err(Error::Shape {
-            arg: "p0",
-            detail: format!(
-                "{} values are not one basis row for each of {m} points",
-                basis.p0.len()
-            ),
-        });
-    }
-    let n_coeffs = basis.p0.len() / m;
-    check_len("p2", basis.p2.len(), m * n_coeffs)?;
     let (terms, hold) = fov_linearise(&x0, &psi0, &a0, s, axis_b, st)?;
     let placed: Vec<usize> = (0..m).filter(|&i| terms[i].placed).collect();
     if !build {
@@ -94,6 +82,18 @@ pub fn rows_at_points(
             blocks: None,
         });
     }
+    check_len("seg", basis.seg.len(), m)?;
+    if basis.p0.len() % m != 0 {
+        return Err(Error::Shape {
+            arg: "p0",
+            detail: format!(
+                "{} values are not one basis row for each of {m} points",
+                basis.p0.len()
+            ),
+        });
+    }
+    let n_coeffs = basis.p0.len() / m;
+    check_len("p2", basis.p2.len(), m * n_coeffs)?;
     let gather = |v: &[f64], w: usize| -> Vec<f64> {
         placed
             .iter()
