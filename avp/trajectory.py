@@ -35,13 +35,24 @@ _GRID_CACHE_SAMPLES = 4096
 """Sample grids of at most this many steps are cached (:func:`_sample_grid`)."""
 
 
-@functools.lru_cache(maxsize=64)
 def _sample_grid(dt: float, steps: int, duration: float) -> Array:
     """``min(dt k, duration)`` for ``k = 0..steps``, read-only: :meth:`Trajectory._sample_rel`'s
-    grid, cached (the SQP steps of a plan score their candidates on the same one)."""
-    grid = np.minimum(dt * np.arange(steps + 1), duration)
-    grid.setflags(write=False)
-    return grid
+    grid, cached up to :data:`_GRID_CACHE_SAMPLES` steps (the SQP steps of a plan score their
+    candidates on the same one). A read-only view of a read-only array: it cannot be made
+    writable, so no caller can change the cached grid."""
+    if steps > _GRID_CACHE_SAMPLES:
+        return _read_only_view(np.minimum(dt * np.arange(steps + 1), duration))
+    return _cached_grid(dt, steps, duration).view()
+
+
+@functools.lru_cache(maxsize=64)
+def _cached_grid(dt: float, steps: int, duration: float) -> Array:
+    return _read_only_view(np.minimum(dt * np.arange(steps + 1), duration))
+
+
+def _read_only_view(a: Array) -> Array:
+    a.setflags(write=False)
+    return a.view()
 
 
 TIME_TOL = 1e-9
@@ -361,16 +372,15 @@ class Trajectory:
 
     def _sample_rel(self, dt: float) -> Array:
         """:meth:`sample` relative to ``t0``: ``0, dt, ...`` up to and including :attr:`duration`
-        (read-only: a grid of a few thousand samples or fewer is cached by its arguments)."""
+        (read-only: a grid of a few thousand samples or fewer is cached by its arguments,
+        :func:`_sample_grid`)."""
         dt = v.positive_float("dt", dt)
         span = self.duration / dt  # a float first: a dt of 1e-308 overflows ceil
         steps = max(1, math.ceil(span - 1e-9)) if span < MAX_SAMPLES else MAX_SAMPLES  # t0 and tf at least
         if steps >= MAX_SAMPLES:
             raise ConfigError("dt", f"{dt:g} s gives {span + 1:.3g} samples over {self.duration:.3g} s; at most "
                               f"{MAX_SAMPLES:g}: sample at dt >= {self.duration / (MAX_SAMPLES - 1):.3g} s")
-        if steps <= _GRID_CACHE_SAMPLES:  # the planner's scoring grid: every SQP step samples the same one
-            return _sample_grid(dt, int(steps), self.duration)
-        return np.minimum(dt * np.arange(int(steps) + 1), self.duration)
+        return _sample_grid(dt, int(steps), self.duration)
 
     # -- exports (avp.export) ---------------------------------------------------------------
     def to_json(self, path: Any = None, *, rate: float | None = None, indent: int | None = None,

@@ -8,8 +8,9 @@ BLAS) changes plans in the last bits, so ``bench_rounds.py``'s digests differ; t
 much and whether any decision moved. The corpus: the 12 standard scenarios of ``bench_plan.py``,
 Gao et al.'s 30/60/90 deg perches (``bench_rounds.py``), and ``--perches`` random perches
 (incline 20-100 deg, 1.2-8 m ahead, heights 1-2.5 m, lateral offsets up to 1.5 m, seeded as in
-``sweep_sqp_gain.py``), each planned with the default configuration and with rotor drag
-(``VehicleLimits(rotor_drag=0.3)``). Per plan it keeps the status (or the error's type), the
+``sweep_sqp_gain.py``), the standard and random perches each planned with the default
+configuration and with rotor drag (``VehicleLimits(rotor_drag=0.3)``), Gao et al.'s with their
+tight limits. Per plan it keeps the status (or the error's type), the
 log with its numbers masked (the decisions: durations tried, SQP steps, points placed,
 relaxations, certificates), the visibility of its SQP score and the coefficients.
 

@@ -588,7 +588,7 @@ def test_rows_on_a_spline_equal_fov_blocks_at_its_points_bit_for_bit(
                     margin=margin)
     new = linearise_on_spline(layout, knots, times, reference.coefficients, reference.knots_rel, tau, s, fov,
                               rotor_drag=drag, build_blocks=build)
-    assert (new.built is not None) == build
+    assert ("blocks" in new.__dict__) == build  # built in the call, or left to first access
     d = avp._avp_rust.eval_spline(reference.coefficients, reference.knots_rel, tau, [0, 1, 2])
     a0 = drag_acceleration(d[2, :, :3], d[1, :, :3], drag) if drag else d[2, :, :3]
     old = fov_blocks(layout, knots, times, d[0, :, :3], d[0, :, 3], a0, s, fov, rotor_drag=drag)
@@ -600,9 +600,31 @@ def test_rows_on_a_spline_equal_fov_blocks_at_its_points_bit_for_bit(
         u, v = getattr(new.rows, name), getattr(old.rows, name)
         assert u.shape == v.shape and np.array_equal(u, v), name
     assert new.rows.rotor_drag == old.rows.rotor_drag
-    for built in (new.blocks, fov_rows(new.rows)):
+    for built in (new.blocks, fov_rows(new.rows)):  # the blocks of the call (or of first access), and rebuilt
         assert [b.name for b in built] == [b.name for b in old.blocks]
         for b_new, b_old in zip(built, old.blocks, strict=True):
             for name in ("matrix", "lower", "upper"):
                 u, v = getattr(b_new, name), getattr(b_old, name)
                 assert u.shape == v.shape and np.array_equal(u, v), (b_new.name, name)
+
+
+def test_rows_on_a_spline_check_their_times() -> None:
+    """``linearise_on_spline`` takes one reference time per point: another count is a
+    ``ConfigError`` naming ``tau`` (not a linearisation at the wrong times), and no point is the
+    empty linearisation ``fov_blocks`` gives."""
+    from avp.qp.fov import linearise_on_spline
+    from avp.qp.layout import layout_for
+
+    reference = avp.Trajectory(np.ones((1, 4, 8)), [0.0, 1.0])
+    layout, knots = layout_for(1, 7), np.array([0.0, 1.0])
+    args = (reference.coefficients, reference.knots_rel)
+    for build in (True, False):
+        with pytest.raises(ConfigError, match="^tau: one relative time"):
+            linearise_on_spline(layout, knots, np.array([0.2, 0.4]), *args, np.array([0.2, 0.4, 0.6]),
+                                np.array([3.0, 0.0, 1.0]), FovConfig(), build_blocks=build)
+        none = linearise_on_spline(layout, knots, np.zeros(0), *args, np.zeros(0), np.array([3.0, 0.0, 1.0]),
+                                   FovConfig(), build_blocks=build)
+        same = fov_blocks(layout, knots, np.zeros(0), np.zeros((0, 3)), np.zeros(0), np.zeros((0, 3)),
+                          np.array([3.0, 0.0, 1.0]), FovConfig())
+        assert none.times.size == 0 and none.blocks == () and none.hold_at_linearisation
+        assert same.blocks == () and same.hold_at_linearisation

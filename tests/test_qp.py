@@ -207,8 +207,8 @@ def test_incremental_reduction_equals_a_fresh_one() -> None:
     assert la.M[:parent.M.shape[0]].tobytes() == parent.M.tobytes() and la.v is parent.v
     same = base.with_inequalities()  # no new rows: the parent's rows
     assert same.least_distance().M is base.least_distance().M
-    # the planner's order: a second child stacked before it is reduced takes its new rows as
-    # views of its stacked rows; the same reduction, bit for bit
+    # the planner's order: a second child stacked before it is reduced gets all three from the
+    # same kernel call (append_rows), whichever is asked first; the same reduction, bit for bit
     second = base.with_inequalities(*lin.blocks)
     second.stacked_inequalities()
     c = second.reduce()
@@ -438,7 +438,7 @@ def test_the_least_distance_form_is_the_reduced_qp_whitened(n, seed, shift, m) -
 
 
 @settings(max_examples=300, deadline=None)
-@given(seed=st.integers(0, 2**32 - 1), n=st.integers(1, 40), m=st.integers(1, 30), k0=st.integers(0, 6),
+@given(seed=st.integers(0, 2**32 - 1), n=st.integers(1, 40), m=st.integers(0, 30), k0=st.integers(0, 6),
        sizes=st.lists(st.integers(0, 12), min_size=0, max_size=4), density=st.sampled_from([0.1, 0.5, 1.0]),
        factor=st.sampled_from(["cholesky", "none", "singular"]), ldp=st.booleans())
 def test_appended_rows_equal_numpy_and_blas_reductions(seed, n, m, k0, sizes, density, factor, ldp) -> None:
@@ -455,7 +455,8 @@ def test_appended_rows_equal_numpy_and_blas_reductions(seed, n, m, k0, sizes, de
         Z = np.asfortranarray(Z)  # any layout is read by its values (the planner's Z is Fortran-ordered)
     A = rng.normal(size=(m, m))
     R = np.linalg.cholesky(A @ A.T + m * np.eye(m)).T  # upper, well conditioned; Fortran-ordered, as the planner's
-    if factor == "singular":
+    singular = factor == "singular" and m > 0  # no variables: no pivot to zero
+    if singular:
         R[m // 2, m // 2] = 0.0
     blocks = []
     for size in sizes:
@@ -482,7 +483,7 @@ def test_appended_rows_equal_numpy_and_blas_reductions(seed, n, m, k0, sizes, de
         fin = np.isfinite(bound)
         assert np.array_equal(got[~fin], bound[~fin])
         assert np.all(np.abs(got[fin] - (bound[fin] - gc[fin])) <= 1e-13 * (gc_scale[fin] + np.abs(bound[fin])))
-    if factor == "none" or not ldp or (factor == "singular" and new.shape[0]):
+    if factor == "none" or not ldp or (singular and new.shape[0]):
         assert M is None  # no factor or parent rows; or a zero pivot: 0/0 or x/0 in every new row
         return
     assert M is not None and M.shape == (G.shape[0], m) and M.flags.c_contiguous and M.flags.writeable
@@ -516,3 +517,38 @@ def test_append_rows_refuses_bad_shapes_naming_the_argument() -> None:
     with pytest.raises(avp._avp_rust.KernelError) as info:  # a factor of another size
         avp._avp_rust.append_rows(*e, [good], Z, c_p, np.eye(m + 1))
     assert info.value.arg == "r"
+
+
+def test_a_copy_of_a_qp_without_least_distance_form_reduces_its_new_rows_alone() -> None:
+    """A parent solved by a one-sided back end in the reduced form (OSQP) has stacked and
+    reduced rows but no least-distance form computed: a copy with more rows reduces only its new
+    rows (views of its stacked rows when those come first), equal to a fresh QP's to rounding,
+    and then gets the least-distance form of all its rows."""
+    from avp import perception
+    from avp.qp.assemble import PerchingQp
+    from avp.solve import solve_perching_qp
+    from avp.timing import initial_durations
+
+    sc = standard(60, 3.5)
+    cfg = avp.PlannerConfig(solver="osqp")
+    T = initial_durations(sc.state, sc.target, cfg)
+    base = build_perching_qp(sc.state, sc.target, cfg, T)
+    out = solve_perching_qp(base, cfg)
+    assert "_reduced" in base.__dict__ and "_least_distance" not in base.__dict__
+    lin = perception.linearise_on(base, base.trajectory(out.c_hat, cfg.g), sc.target, cfg)
+    for stacked_first in (True, False):
+        child = base.with_inequalities(*lin.blocks)
+        if stacked_first:
+            child.stacked_inequalities()
+        a = child.reduce()
+        assert "_least_distance" not in child.__dict__  # the old path: nothing filled ahead
+        fresh = PerchingQp(layout=base.layout, durations=base.durations, t0=base.t0, P=base.P,
+                           equalities=base.equalities, inequalities=child.inequalities)
+        b = fresh.reduce()
+        k = base.reduce().G.shape[0]
+        assert a.G[:k].tobytes() == base.reduce().G.tobytes()
+        for name in ("G", "lower", "upper"):
+            np.testing.assert_allclose(getattr(a, name), getattr(b, name), rtol=1e-13, atol=1e-13, err_msg=name)
+        la, lb = child.least_distance(), fresh.least_distance()
+        assert la is not None and lb is not None
+        np.testing.assert_allclose(la.M, lb.M, rtol=1e-12, atol=1e-12 * float(np.abs(lb.M).max()))

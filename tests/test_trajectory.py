@@ -171,3 +171,19 @@ def test_times_that_are_not_numbers_are_typed_errors(bad) -> None:
 
     for exact in (Fraction(1, 2), Decimal("0.5"), np.array([Fraction(1, 2)], dtype=object)):  # numbers as objects
         np.testing.assert_array_equal(np.reshape(traj(exact), 3), traj(0.5))
+
+
+def test_sample_grids_are_cached_read_only_and_their_copies_are_the_callers() -> None:
+    """The relative sample grid is cached (the SQP's scores share one) and read-only: it cannot
+    be made writable, and writing into what ``sample`` returns does not change a later call."""
+    tr = avp.Trajectory(np.zeros((1, 4, 2)), [0.0, 1.0])
+    for dt in (0.1, 1e-4):  # a cached grid, and one too long to cache
+        grid = tr._sample_rel(dt)
+        assert not grid.flags.writeable
+        with pytest.raises(ValueError):
+            grid.setflags(write=True)
+        assert np.array_equal(grid, np.minimum(dt * np.arange(grid.size), 1.0)) and grid[-1] == 1.0
+        out = tr.sample(dt)
+        out[1] = 7.0
+        assert tr.sample(dt)[1] == dt
+    assert tr._sample_rel(0.1) is not tr._sample_rel(0.1) and np.shares_memory(tr._sample_rel(0.1), tr._sample_rel(0.1))

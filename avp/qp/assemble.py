@@ -482,7 +482,7 @@ class PerchingQp:
     @cached_property
     def _stacked_inequalities(self) -> tuple[Array, Array, Array]:
         n = self.layout.n_variables
-        if self._appended():
+        if self._filled_from_parent():
             return self.__dict__["_stacked_inequalities"]  # type: ignore[no-any-return]
         parent = self.__dict__.get("_parent")
         if parent is not None and "_stacked_inequalities" in parent.__dict__:
@@ -607,7 +607,7 @@ class PerchingQp:
         R = self._cholesky
         if R is None:
             return None
-        if self._appended():
+        if self._filled_from_parent():
             return self.__dict__["_least_distance"]  # type: ignore[no-any-return]
         red = self._reduced
         parent = self.__dict__.get("_parent")
@@ -624,17 +624,18 @@ class PerchingQp:
             return None
         return LeastDistanceQp(R, M, v)
 
-    def _appended(self) -> bool:
+    def _filled_from_parent(self) -> bool:
         """For a copy with more blocks (:meth:`with_inequalities`) of a QP whose stacked, reduced
-        and least-distance rows all exist (a QP solved in the reduced form, as every SQP step's
-        base is): this copy's three, with the new rows appended, by one kernel call
-        (``avp._avp_rust.append_rows``) instead of a dozen NumPy calls, stored in place; ``True``
-        then (or when already stored). ``False`` otherwise: the properties compute them one by one.
+        and least-distance rows all exist (a QP solved by DAQP in the reduced form, as every SQP
+        step's base is), and before any of the copy's own: fills the copy's three, the new rows
+        appended, by one kernel call (``avp._avp_rust.append_rows``) instead of a dozen NumPy
+        calls, and returns ``True``; ``False`` otherwise (the properties then compute theirs one
+        by one). The caller is one of the three cached properties, which then reads its own.
         The new rows' products are the kernel's (left-to-right sums, a forward substitution), so
-        they can differ from BLAS's in the last bits."""
+        they can differ from BLAS's in the last bits. A parent without a least-distance form
+        (no factor, or rows that overflowed it) gives the copy none either: the copy's factor is
+        its parent's (:meth:`_same_equalities`), and its rows include the parent's."""
         d = self.__dict__
-        if "_reduced" in d and "_least_distance" in d and "_stacked_inequalities" in d:
-            return True
         parent = d.get("_parent")
         if parent is None or "_reduced" in d or "_least_distance" in d or "_stacked_inequalities" in d:
             return False
@@ -658,7 +659,7 @@ class PerchingQp:
 
     @cached_property
     def _reduced(self) -> ReducedQp:
-        if self._appended():
+        if self._filled_from_parent():
             return self.__dict__["_reduced"]  # type: ignore[no-any-return]
         Z, c_p, H, g = self.elimination
         parent = self.__dict__.get("_parent")

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import functools
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from functools import cached_property, lru_cache
 
@@ -29,6 +30,7 @@ from .. import _validate as v
 from .._typing import Array
 from ..camera import Camera
 from ..config import FovConfig
+from ..errors import ConfigError
 from ..frames import GRAVITY
 from .assemble import ConstraintBlock
 from .layout import DecisionLayout
@@ -175,16 +177,29 @@ def fov_rows(inp: FovRowInputs) -> tuple[ConstraintBlock, ...]:
         layout.n_segments, seg, p0, p2,
         np.ascontiguousarray(inp.gx), np.ascontiguousarray(inp.ga), np.ascontiguousarray(inp.gp),
     )
-    blocks = [ConstraintBlock(f"{FOV_PREFIX} rows (8)", row8, np.full(k, -np.inf), inp.rhs)]
-    for label, R, z0, r in (
-        ("x", Rx, inp.x0.reshape(-1), fov.trust_position),
-        ("a", Ra, inp.a0.reshape(-1), fov.trust_acceleration),
-    ):
+    trust = []
+    for R, z0, r in ((Rx, inp.x0.reshape(-1), fov.trust_position), (Ra, inp.a0.reshape(-1), fov.trust_acceleration),
+                     (Ryaw, inp.psi0, fov.trust_yaw)):
+        trust.append((R, z0 - r, z0 + r))
+    return _assembled(fov, inp.rhs, row8, trust)
+
+
+_ROW8 = f"{FOV_PREFIX} rows (8)"
+_TRUST = tuple(f"{FOV_PREFIX} trust region (9) {label}" for label in ("x", "a", "yaw"))
+
+
+def _assembled(fov: FovConfig, rhs: Array, row8: Array,
+               trust: Sequence[tuple[Array, Array, Array]]) -> tuple[ConstraintBlock, ...]:
+    """The FoV blocks of the placed points from their matrices: the rows (8) ``row8 <= rhs`` and
+    the trust region (9) ``(matrix, lower, upper)`` in position, acceleration and yaw (``trust``,
+    in that order), each only when its radius is finite. None without a placed point."""
+    if rhs.size == 0:
+        return ()
+    blocks = [ConstraintBlock(_ROW8, row8, np.full(rhs.size, -np.inf), rhs)]
+    radii = (fov.trust_position, fov.trust_acceleration, fov.trust_yaw)
+    for name, r, (R, lo, hi) in zip(_TRUST, radii, trust, strict=True):
         if math.isfinite(r):
-            blocks.append(ConstraintBlock(f"{FOV_PREFIX} trust region (9) {label}", R, z0 - r, z0 + r))
-    if math.isfinite(fov.trust_yaw):
-        blocks.append(ConstraintBlock(f"{FOV_PREFIX} trust region (9) yaw", Ryaw, inp.psi0 - fov.trust_yaw,
-                                      inp.psi0 + fov.trust_yaw))
+            blocks.append(ConstraintBlock(name, R, lo, hi))
     return tuple(blocks)
 
 
@@ -194,7 +209,8 @@ class FovLinearisation:
 
     ``blocks`` are built on first access (:func:`fov_rows`): a caller that only needs to know
     whether the rows hold at the linearisation point itself (:attr:`hold_at_linearisation`)
-    never builds them. The arrays are read-only.
+    never builds them. :func:`linearise_on_spline` builds them with the terms when asked
+    (``build_blocks``), in the same kernel call: the same blocks. The arrays are read-only.
     """
 
     times: Array  # relative times of the points
@@ -207,14 +223,10 @@ class FovLinearisation:
     (to 1e-9 relative to its right-hand side, as the rows are checked elsewhere), the trust
     region (9) is centred on it, and no row asks for progress (those need a decrease)."""
     rows: FovRowInputs | None = field(default=None, repr=False)
-    built: tuple[ConstraintBlock, ...] | None = field(default=None, repr=False)
-    """The blocks, when built with the rows (:func:`linearise_on_spline`)."""
 
     @cached_property
     def blocks(self) -> tuple[ConstraintBlock, ...]:
         """Blocks ``"fov rows (8)"`` and ``"fov trust region (9) x|a|yaw"`` (built once)."""
-        if self.built is not None:
-            return self.built
         return fov_rows(self.rows) if self.rows is not None else ()
 
     @property
@@ -263,9 +275,8 @@ def fov_blocks(
     t = np.array(times, dtype=float)  # a copy: it is returned read-only
     drag = v.nonnegative_float("limits.rotor_drag", rotor_drag)
     m = t.size
-    empty = np.zeros(0)
     if m == 0:
-        return FovLinearisation(t, empty, empty, np.zeros(0, bool), np.zeros(0, bool), True)
+        return _no_points(t)
     # row-major copies, kept by the rows: the caller's arrays may be views it reuses
     x0 = np.array(x0, dtype=float, order="C")
     a0 = np.array(a0, dtype=float, order="C")
@@ -292,8 +303,12 @@ def fov_blocks(
 
 
 _NO_BASIS = (np.zeros(0, dtype=np.int64), np.zeros((0, 0)), np.zeros((0, 0)))
-_ROW8 = f"{FOV_PREFIX} rows (8)"
-_TRUST = {label: f"{FOV_PREFIX} trust region (9) {label}" for label in ("x", "a", "yaw")}
+
+
+def _no_points(times: Array) -> FovLinearisation:
+    """The linearisation at no point: no row, and the rows (none) hold."""
+    empty = np.zeros(0)
+    return FovLinearisation(times, empty, empty, np.zeros(0, bool), np.zeros(0, bool), True)
 
 
 def linearise_on_spline(
@@ -320,6 +335,12 @@ def linearise_on_spline(
     theirs on the evaluated points. ``rotor_drag`` is taken as validated (the planner's
     configuration)."""
     t = np.array(times, dtype=float)
+    tau = np.ascontiguousarray(tau, dtype=float)
+    if t.ndim != 1 or tau.shape != t.shape:
+        raise ConfigError("tau", f"one relative time of the reference per entry of times: expected shape {t.shape}, "
+                                 f"got {tau.shape}")
+    if t.size == 0:
+        return _no_points(t)
     if build_blocks:
         seg, p0, p2 = _point_basis(layout, np.ascontiguousarray(knots_rel, dtype=np.float64).tobytes(), t.tobytes(),
                                    float(rotor_drag))
@@ -334,22 +355,13 @@ def linearise_on_spline(
     h0, reachable, placed, progress, hold = point
     gx, ga, gp, rhs, x0, a0, psi0 = inputs
     k = rhs.size
-    built: tuple[ConstraintBlock, ...] | None = None  # None: built on first access (fov_rows)
-    if mats is not None:
-        row8, Rx, x_lo, x_hi, Ra, a_lo, a_hi, Ryaw, y_lo, y_hi = mats
-        blocks: list[ConstraintBlock] = []
-        if k:
-            blocks.append(ConstraintBlock(_ROW8, row8, np.full(k, -np.inf), rhs))
-            if math.isfinite(fov.trust_position):
-                blocks.append(ConstraintBlock(_TRUST["x"], Rx, x_lo, x_hi))
-            if math.isfinite(fov.trust_acceleration):
-                blocks.append(ConstraintBlock(_TRUST["a"], Ra, a_lo, a_hi))
-            if math.isfinite(fov.trust_yaw):
-                blocks.append(ConstraintBlock(_TRUST["yaw"], Ryaw, y_lo, y_hi))
-        built = tuple(blocks)
     knots = np.array(knots_rel, dtype=float)
     rows = FovRowInputs(layout, knots, t if k == t.size else t[placed], gx, ga, gp, rhs, x0, a0, psi0, fov,
                         float(rotor_drag))
     for arr in (t, h0, reachable, placed, progress):
         arr.setflags(write=False)
-    return FovLinearisation(t, h0, reachable, placed, progress, hold, rows, built)
+    lin = FovLinearisation(t, h0, reachable, placed, progress, hold, rows)
+    if mats is not None:  # the blocks, built: what the cached property would build from the rows
+        row8, Rx, x_lo, x_hi, Ra, a_lo, a_hi, Ryaw, y_lo, y_hi = mats
+        lin.__dict__["blocks"] = _assembled(fov, rhs, row8, ((Rx, x_lo, x_hi), (Ra, a_lo, a_hi), (Ryaw, y_lo, y_hi)))
+    return lin

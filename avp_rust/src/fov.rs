@@ -13,7 +13,8 @@
 //! decrease, the point policy and whether every row holds at its linearisation point, in the
 //! order of operations of the NumPy code it replaced), [`fov_row_matrices`] (the dense rows
 //! (8)-(9)), [`visibility_fractions`] (the visibility score of plans, cone only) and
-//! [`spline_visibility`] (the same score of plans it evaluates itself).
+//! [`spline_visibility`] (the same score of plans it evaluates itself, at their
+//! [`attitude_points`]).
 use crate::error::{check_finite, check_len, Error, Result};
 
 type V3 = [f64; 3];
@@ -575,11 +576,41 @@ pub fn visibility_fractions(
     Ok(out)
 }
 
+/// The flat outputs of the plans in `spline` (axes x, y, z, yaw of each plan in turn) that set
+/// the attitude, at its relative `times`: position and yaw (order 0), then the acceleration of
+/// the thrust direction, `a + d v` with rotor drag `d > 0` (`avp.frames.drag_acceleration`; the
+/// yaw entry is the yaw's second derivative, unused). Laid out `(2, n, axes)`, as
+/// `avp._avp_rust.eval_spline` gives orders `[0, 2]`, whose values they are when `d = 0`.
+pub fn attitude_points(
+    spline: &crate::spline::SplineView<'_>,
+    times: &[f64],
+    rotor_drag: f64,
+) -> Result<Vec<f64>> {
+    if rotor_drag.is_nan() || rotor_drag < 0.0 || rotor_drag.is_infinite() {
+        return Err(Error::Invalid {
+            arg: "rotor_drag",
+            detail: format!("must be finite and >= 0, got {rotor_drag}"),
+        });
+    }
+    if rotor_drag == 0.0 {
+        return crate::spline::evaluate(spline, times, &[0, 2]);
+    }
+    let block = times.len() * spline.n_axes();
+    let mut pva = crate::spline::evaluate(spline, times, &[0, 1, 2])?;
+    let (pv, acc) = pva.split_at_mut(2 * block);
+    for (a4, v4) in acc.chunks_exact_mut(4).zip(pv[block..].chunks_exact(4)) {
+        for c in 0..3 {
+            a4[c] += rotor_drag * v4[c];
+        }
+    }
+    pva.drain(block..2 * block);
+    Ok(pva)
+}
+
 /// [`visibility_fractions`] of the `k = axes / 4` plans whose stacked coefficients `spline`
 /// holds (axes x, y, z, yaw of each plan in turn, all on the same knots) at its relative
-/// `times`: their positions, yaw and accelerations there (with rotor drag `d > 0` the
-/// acceleration of the thrust direction, `a + d v`), evaluated as `avp._avp_rust.eval_spline`
-/// does and laid out as `visibility_fractions` takes them, in one call.
+/// `times`, at their [`attitude_points`] (with rotor drag `d > 0` the thrust direction
+/// `a + d v`), in one call.
 pub fn spline_visibility(
     spline: &crate::spline::SplineView<'_>,
     times: &[f64],
@@ -596,28 +627,7 @@ pub fn spline_visibility(
             detail: format!("{axes} axes are not (x, y, z, yaw) of whole plans"),
         });
     }
-    if rotor_drag.is_nan() || rotor_drag < 0.0 || rotor_drag.is_infinite() {
-        return Err(Error::Invalid {
-            arg: "rotor_drag",
-            detail: format!("must be finite and >= 0, got {rotor_drag}"),
-        });
-    }
-    let n = times.len();
-    let flat = if rotor_drag != 0.0 {
-        let mut pva = crate::spline::evaluate(spline, times, &[0, 1, 2])?;
-        let block = n * axes;
-        let (pv, acc) = pva.split_at_mut(2 * block);
-        let vel = &pv[block..];
-        for (a4, v4) in acc.chunks_exact_mut(4).zip(vel.chunks_exact(4)) {
-            for c in 0..3 {
-                a4[c] += rotor_drag * v4[c];
-            }
-        }
-        pva.drain(block..2 * block);
-        pva
-    } else {
-        crate::spline::evaluate(spline, times, &[0, 2])?
-    };
+    let flat = attitude_points(spline, times, rotor_drag)?;
     visibility_fractions(times, &flat, axes / 4, s, axis_b, cos_half, g)
 }
 

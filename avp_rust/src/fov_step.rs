@@ -6,8 +6,10 @@
 //! operations, so the rows are the same bits as `avp.qp.fov.fov_blocks` gives on the
 //! evaluated points.
 use crate::error::{check_len, Error, Result};
-use crate::fov::{fov_linearise, fov_row_matrices, FovRowTerms, LinearisationSettings};
-use crate::spline::{evaluate, SplineView};
+use crate::fov::{
+    attitude_points, fov_linearise, fov_row_matrices, FovRowTerms, LinearisationSettings,
+};
+use crate::spline::SplineView;
 
 /// The basis rows of the `m` points on the QP's spline (`avp.qp.fov._point_basis`): each
 /// point's segment, its position basis `p0` and the basis `p2` of the rows' acceleration
@@ -143,8 +145,8 @@ pub fn rows_at_points(
 }
 
 /// The rows at the points of the `reference` spline (axes x, y, z, yaw) at its relative times
-/// `tau`: position and yaw, and the acceleration `a + d v` with rotor drag `d > 0` (`a` alone
-/// with `d = 0`), the attitude's thrust direction (`avp.frames.drag_acceleration`).
+/// `tau`: its [`attitude_points`] (position and yaw, and the thrust direction's acceleration
+/// `a + d v` with rotor drag `d > 0`).
 #[allow(clippy::too_many_arguments)]
 pub fn rows_on_spline(
     reference: &SplineView<'_>,
@@ -162,31 +164,16 @@ pub fn rows_on_spline(
             detail: format!("expected 4 axes (x, y, z, yaw), got {}", reference.n_axes()),
         });
     }
-    if rotor_drag.is_nan() || rotor_drag < 0.0 || rotor_drag.is_infinite() {
-        return Err(Error::Invalid {
-            arg: "rotor_drag",
-            detail: format!("must be finite and >= 0, got {rotor_drag}"),
-        });
-    }
     let m = tau.len();
-    let drag = rotor_drag != 0.0;
-    let orders: &[usize] = if drag { &[0, 1, 2] } else { &[0, 2] };
-    let d = evaluate(reference, tau, orders)?; // [order][time][axis]
-    let at = |order: usize, i: usize| &d[(order * m + i) * 4..][..4];
-    let acc = if drag { 2 } else { 1 };
+    // [order 0, then the thrust acceleration][time][axis]
+    let d = attitude_points(reference, tau, rotor_drag)?;
     let mut x0 = Vec::with_capacity(3 * m);
     let mut a0 = Vec::with_capacity(3 * m);
     let mut psi0 = Vec::with_capacity(m);
-    for i in 0..m {
-        let (p, a) = (at(0, i), at(acc, i));
+    for (p, a) in d[..4 * m].chunks_exact(4).zip(d[4 * m..].chunks_exact(4)) {
         x0.extend_from_slice(&p[..3]);
         psi0.push(p[3]);
-        if drag {
-            let v = at(1, i);
-            a0.extend((0..3).map(|k| a[k] + rotor_drag * v[k]));
-        } else {
-            a0.extend_from_slice(&a[..3]);
-        }
+        a0.extend_from_slice(&a[..3]);
     }
     rows_at_points(x0, psi0, a0, s, axis_b, st, basis, build)
 }

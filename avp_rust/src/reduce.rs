@@ -116,10 +116,10 @@ pub fn append_rows(
         for ((row, &lo), &hi) in b.matrix.chunks_exact(n).zip(b.lower).zip(b.upper) {
             gz.iter_mut().for_each(|v| *v = 0.0);
             let mut gc = 0.0;
-            for ((&gp, zp), &cp) in row.iter().zip(elim.z.chunks_exact(m)).zip(elim.c_p) {
+            for (p, (&gp, &cp)) in row.iter().zip(elim.c_p).enumerate() {
                 if gp != 0.0 {
                     gc += gp * cp;
-                    for (acc, &zv) in gz.iter_mut().zip(zp) {
+                    for (acc, &zv) in gz.iter_mut().zip(&elim.z[p * m..(p + 1) * m]) {
                         *acc += gp * zv;
                     }
                 }
@@ -144,10 +144,10 @@ pub fn append_rows(
 /// by column (`u_j = w_j / R_jj`, then `w_l -= R_jl u_j` for `l > j`) on the transposed rows,
 /// so each step is one pass over the `k` rows, not a chain of dependent operations.
 fn forward_substitution(gz: &[f64], r: &[f64], m: usize, out: &mut Vec<f64>) -> bool {
-    let k = gz.len() / m;
-    if k == 0 {
-        return true;
+    if m == 0 || gz.is_empty() {
+        return true; // no variables (rows of no columns) or no rows
     }
+    let k = gz.len() / m;
     let mut w = vec![0.0; m * k]; // column j of the rows at w[j k..(j + 1) k]
     for (i, row) in gz.chunks_exact(m).enumerate() {
         for (j, &v) in row.iter().enumerate() {
@@ -370,5 +370,27 @@ mod tests {
             .unwrap()
             .m_rows
             .is_none());
+    }
+
+    #[test]
+    fn equalities_that_fix_every_coefficient_leave_rows_of_no_columns() {
+        // Z is (2, 0): only the bounds move, by G c_p
+        let c_p = [1.0, 2.0];
+        let elim = Elimination {
+            z: &[],
+            c_p: &c_p,
+            r: Some(&[]),
+        };
+        let g = [1.0, 1.0, 0.0, 2.0];
+        let block = RowBlock {
+            matrix: &g,
+            lower: &[0.0, f64::NEG_INFINITY],
+            upper: &[5.0, 4.0],
+        };
+        let out = append_rows(empty(true), &[block], &elim).unwrap();
+        assert!(out.g_z.is_empty());
+        assert_eq!(out.lower_z, vec![-3.0, f64::NEG_INFINITY]);
+        assert_eq!(out.upper_z, vec![2.0, 0.0]);
+        assert_eq!(out.m_rows, Some(vec![]));
     }
 }

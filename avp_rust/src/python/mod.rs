@@ -1,7 +1,7 @@
 //! Thin PyO3 wrappers, one module per kernel family (`spline`, `fov`, `bounds`, `regions`,
 //! `time_scaling`, `qp_check`, `reduce`), sharing only [`common`]: convert NumPy arrays to
-//! slices, call a kernel, convert back. Every kernel error becomes `KernelError` (a `ValueError` with `.arg` and
-//! `.detail`); kernels return `Result` and do not panic on input paths.
+//! slices, call a kernel, convert back. Every kernel error becomes `KernelError` (a `ValueError`
+//! with `.arg` and `.detail`); kernels return `Result` and do not panic on input paths.
 use pyo3::prelude::*;
 
 mod bounds;
