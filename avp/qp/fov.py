@@ -192,7 +192,7 @@ def _assembled(fov: FovConfig, rhs: Array, row8: Array,
                trust: Sequence[tuple[Array, Array, Array]]) -> tuple[ConstraintBlock, ...]:
     """The FoV blocks of the placed points from their matrices: the rows (8) ``row8 <= rhs`` and
     the trust region (9) ``(matrix, lower, upper)`` in position, acceleration and yaw (``trust``,
-    in that order), each only when its radius is finite. None without a placed point."""
+    in that order), each only when its radius is finite. No block without a placed point."""
     if rhs.size == 0:
         return ()
     blocks = [ConstraintBlock(_ROW8, row8, np.full(rhs.size, -np.inf), rhs)]
