@@ -1,6 +1,6 @@
 //! What every wrapper family shares: the [`KernelError`] exception, error conversion and the
-//! NumPy-array-to-slice helpers. The families (`spline`, `fov`, `bounds`, `regions`) import only
-//! from here, never from each other.
+//! NumPy-array helpers. The families (`spline`, `fov`, `bounds`, `regions`, `time_scaling`,
+//! `qp_check`, `reduce`) import only from here, never from each other.
 use std::borrow::Cow;
 
 use numpy::ndarray::Dimension;
