@@ -17,13 +17,11 @@ from __future__ import annotations
 from dataclasses import replace
 from typing import TYPE_CHECKING, Any
 
-import numpy as np
-
 from ._typing import Array
 from .config import PlannerConfig
 from .metrics import _visibility_checked
 from .qp.assemble import ConstraintBlock, PerchingQp
-from .qp.fov import FovLinearisation, fov_blocks, fov_times, linearise_on_spline
+from .qp.fov import FovLinearisation, fov_times, linearise_on_spline
 from .solve import ITERATIVE_SOLVERS, KKT_TOL, backend, incompatibility
 from .trajectory import Trajectory
 from .types import PerchTarget, State
@@ -59,10 +57,7 @@ def linearise_on(
     """
     knots = qp.knots_rel
     tf = float(knots[-1])
-    times = fov_times(0.0, tf, cfg.fov)
-    if times.size == 0:
-        return fov_blocks(qp.layout, knots, times, np.zeros((0, 3)), np.zeros(0), np.zeros((0, 3)),
-                          target.point, cfg.fov, cfg.g)
+    times = fov_times(0.0, tf, cfg.fov)  # none when the gate covers the plan: no row (linearise_on_spline)
     start = max(qp.t0, reference.t0)
     t_ref = (qp.t0 + times * (reference.tf - start) / tf).clip(reference.t0, reference.tf)
     tau = reference._relative(t_ref)  # within the reference (clipped): Trajectory.derivatives' times, unchecked
