@@ -17,6 +17,8 @@ from __future__ import annotations
 from dataclasses import replace
 from typing import TYPE_CHECKING, Any
 
+import numpy as np
+
 from ._typing import Array
 from .config import PlannerConfig
 from .metrics import _visibility_checked
@@ -59,7 +61,7 @@ def linearise_on(
     tf = float(knots[-1])
     times = fov_times(0.0, tf, cfg.fov)  # none when the gate covers the plan: no row (linearise_on_spline)
     start = max(qp.t0, reference.t0)
-    t_ref = (qp.t0 + times * (reference.tf - start) / tf).clip(reference.t0, reference.tf)
+    t_ref = np.minimum(reference.tf, np.maximum(reference.t0, qp.t0 + times * (reference.tf - start) / tf))  # a clip
     tau = reference._relative(t_ref)  # within the reference (clipped): Trajectory.derivatives' times, unchecked
     # the reference's points and their rows in one kernel call; with rotor drag the attitude is
     # the one of the thrust a + g e3 + d v (VehicleLimits.rotor_drag)

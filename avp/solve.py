@@ -198,6 +198,19 @@ class TwoSidedSolution(qpsolvers.Solution):
     upper: Array | None = None
     lam: Array | None = None
 
+    @property  # type: ignore[misc]
+    def z(self) -> Array | None:
+        """The multipliers of the one-sided stacking, ``[lam^+; lam^-]``, computed from ``lam``
+        when read (nothing in avp reads them; qpsolvers' ``Solution`` has them), unless set."""
+        z = self.__dict__.get("_z")
+        if z is None and self.lam is not None:
+            return np.concatenate([np.maximum(self.lam, 0.0), -np.minimum(self.lam, 0.0)])
+        return z  # type: ignore[no-any-return]
+
+    @z.setter
+    def z(self, value: Array | None) -> None:
+        self.__dict__["_z"] = value
+
     def primal_residual(self) -> float:
         if not self.found or self.x is None or self.G is None or self.lower is None or self.upper is None:
             return math.inf
@@ -239,6 +252,19 @@ class TwoSidedSolution(qpsolvers.Solution):
         return self._kkt()[1]
 
 
+@functools.cache
+def _read_only_identity(n: int) -> Array:
+    eye = np.eye(n)
+    eye.setflags(write=False)
+    return eye
+
+
+def _identity(n: int) -> Array:
+    """A new ``(n, n)`` identity (DAQP takes a writable Hessian): a copy of a cached one, which
+    costs less than building it."""
+    return _read_only_identity(n).copy()
+
+
 def _solve_two_sided(H: Array, g: Array, G: Array, lower: Array, upper: Array,
                      options: dict[str, Any], ldp: LeastDistanceQp | None = None) -> TwoSidedSolution:
     """``min 1/2 z^T H z + g^T z`` s.t. ``lower <= G z <= upper`` by ``daqp.solve`` directly.
@@ -258,15 +284,14 @@ def _solve_two_sided(H: Array, g: Array, G: Array, lower: Array, upper: Array,
     if ldp is not None and not _VARIABLE_OPTIONS.isdisjoint(options):
         ldp = None  # a primal start or proximal term is given in z: DAQP gets the QP in z
     if ldp is not None:
-        x, obj, exitflag, info = daqp.solve(np.eye(H.shape[0]), ldp.v, ldp.M, bu, bl, sense, **options)
+        x, obj, exitflag, info = daqp.solve(_identity(H.shape[0]), ldp.v, ldp.M, bu, bl, sense, **options)
     else:
         x, obj, exitflag, info = daqp.solve(np.array(H), g, np.ascontiguousarray(G), bu, bl, sense, **options)
     solution = TwoSidedSolution(qpsolvers.Problem(P=H, q=g), G=G, lower=lower, upper=upper)
     solution.found = exitflag > 0
     if solution.found:
         solution.x, solution.obj = (ldp.reduced(x) if ldp is not None else x), obj
-        solution.lam = info["lam"]
-        solution.z = np.concatenate([np.maximum(solution.lam, 0.0), -np.minimum(solution.lam, 0.0)])
+        solution.lam = info["lam"]  # and z = [lam^+; lam^-] when read
     solution.solve_time = time.perf_counter() - t0
     solution.extras = {"exitflag": exitflag, "iterations": info.get("iterations")}
     return solution

@@ -293,7 +293,7 @@ class Trajectory:
         flat = arr.reshape(-1) - self._t0  # a new contiguous array
         if self._t0 != 0.0:  # tf (rounded to the clock) is the end of the spline
             flat[arr.reshape(-1) >= self._tf] = self.duration
-        return flat.clip(0.0, self.duration)
+        return np.minimum(self.duration, np.maximum(0.0, flat, out=flat), out=flat)  # clip's values, fewer calls
 
     def derivatives(self, t: Any, orders: Any = (0, 1, 2, 3, 4)) -> Array:
         """All four flat outputs for each order: shape ``(len(orders), *shape(t), 4)``."""

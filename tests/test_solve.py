@@ -246,6 +246,32 @@ def test_a_nan_multiplier_is_incompatible_not_a_pass() -> None:
     assert solve.incompatibility(dataclasses.replace(outcome, solution=no_duals)) is None
 
 
+@settings(max_examples=200, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), n=st.integers(1, 6), m=st.integers(1, 8))
+def test_the_one_sided_multipliers_are_those_qpsolvers_judges(seed, n, m) -> None:
+    """``z`` (computed from ``lam`` when read) is the multiplier vector of the one-sided stacking
+    ``[G; -G] x <= [upper; -lower]``: qpsolvers' own ``Solution`` on that problem, given ``x``
+    and this ``z``, finds the residuals the two-sided solution reports; a set ``z`` is kept."""
+    import numpy as np
+    import qpsolvers
+
+    rng = np.random.default_rng(seed)
+    A = rng.normal(size=(n, n))
+    H, g, G = A @ A.T + np.eye(n), 3.0 * rng.normal(size=n), rng.normal(size=(m, n))
+    lower, upper = -rng.uniform(0.0, 1.0, m), rng.uniform(0.0, 1.0, m)  # 0 is feasible
+    direct = solve._solve_two_sided(H, g, G, lower, upper, {})
+    assert direct.found and direct.lam is not None and direct.z is not None
+    np.testing.assert_array_equal(direct.z, np.concatenate([np.maximum(direct.lam, 0), -np.minimum(direct.lam, 0)]))
+    assert (direct.z >= 0).all()
+    one_sided = qpsolvers.Solution(qpsolvers.Problem(P=H, q=g, G=np.vstack([G, -G]), h=np.concatenate([upper, -lower])))
+    one_sided.found, one_sided.x, one_sided.z = True, direct.x, direct.z
+    scale = 1.0 + float(np.abs(g).max()) + float(np.abs(direct.z).max()) * float(np.abs(G).max())
+    assert one_sided.dual_residual() == pytest.approx(direct.dual_residual(), abs=1e-12 * scale)
+    assert one_sided.duality_gap() == pytest.approx(direct.duality_gap(), abs=1e-12 * scale * (1 + float(np.abs(direct.x).max())))
+    direct.z = np.ones(2 * m)
+    np.testing.assert_array_equal(direct.z, np.ones(2 * m))
+
+
 def test_the_kkt_figures_follow_every_array_they_read() -> None:
     """The residuals are recomputed when any array they read is replaced (not only ``x``)."""
     import numpy as np

@@ -51,14 +51,36 @@ impl QpRows {
         upper_z: &[f64],
         m_rows: Option<&[f64]>,
     ) -> Self {
+        Self::with_room(0, (0, 0), g, lower, upper, g_z, lower_z, upper_z, m_rows)
+    }
+
+    /// [`QpRows::from_parts`] with room for `extra` more rows of `(n, m)` columns (in `c` and
+    /// in `z`), so that appending them copies the rows so far once, not twice.
+    #[allow(clippy::too_many_arguments)]
+    pub fn with_room(
+        extra: usize,
+        (n, m): (usize, usize),
+        g: &[f64],
+        lower: &[f64],
+        upper: &[f64],
+        g_z: &[f64],
+        lower_z: &[f64],
+        upper_z: &[f64],
+        m_rows: Option<&[f64]>,
+    ) -> Self {
+        let copy = |v: &[f64], more: usize| {
+            let mut out = Vec::with_capacity(v.len() + more);
+            out.extend_from_slice(v);
+            out
+        };
         QpRows {
-            g: g.to_vec(),
-            lower: lower.to_vec(),
-            upper: upper.to_vec(),
-            g_z: g_z.to_vec(),
-            lower_z: lower_z.to_vec(),
-            upper_z: upper_z.to_vec(),
-            m_rows: m_rows.map(<[f64]>::to_vec),
+            g: copy(g, extra * n),
+            lower: copy(lower, extra),
+            upper: copy(upper, extra),
+            g_z: copy(g_z, extra * m),
+            lower_z: copy(lower_z, extra),
+            upper_z: copy(upper_z, extra),
+            m_rows: m_rows.map(|v| copy(v, extra * m)),
         }
     }
 }

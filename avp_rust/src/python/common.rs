@@ -79,6 +79,18 @@ pub(crate) fn columns(arg: &'static str, m: &PyReadonlyArray2<'_, f64>, n: usize
 pub(crate) fn row_major<'a, D: Dimension>(arr: &'a PyReadonlyArray<'_, f64, D>) -> Cow<'a, [f64]> {
     match arr.as_slice() {
         Ok(s) if arr.is_c_contiguous() => Cow::Borrowed(s),
+        Ok(s) if arr.ndim() == 2 => {
+            // a Fortran-ordered matrix (the elimination's basis and factor): its columns, one
+            // after another, transposed by plain loops (ndarray's general iterator is slower)
+            let (rows, cols) = (arr.shape()[0], arr.shape()[1]);
+            let mut out = vec![0.0; s.len()];
+            for (j, column) in s.chunks_exact(rows.max(1)).enumerate() {
+                for (i, &v) in column.iter().enumerate() {
+                    out[i * cols + j] = v;
+                }
+            }
+            Cow::Owned(out)
+        }
         _ => Cow::Owned(arr.as_array().iter().copied().collect()),
     }
 }

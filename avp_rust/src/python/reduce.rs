@@ -72,7 +72,10 @@ fn append_rows_py<'py>(
         })
         .collect();
     let m_values = m_rows.as_ref().map(|a| row_major(a));
-    let rows = QpRows::from_parts(
+    let extra = blocks.iter().map(|(_, lo, _)| lo.len()).sum();
+    let rows = QpRows::with_room(
+        extra,
+        (n, m),
         &row_major(&g),
         &row_major(&lower),
         &row_major(&upper),
