@@ -374,8 +374,9 @@ def max_violation(
     """Largest relative violation at ``c`` of ``a c = b`` and ``lower <= g c <= upper``: the
     maximum of 0, ``|a_i c - b_i| / max(1, |b_i|)`` and ``(g_i c - upper_i) / max(1,
     |upper_i|)``, ``(lower_i - g_i c) / max(1, |lower_i|)`` (an infinite bound scales by 1); NaN
-    when a residual is NaN. Row-major ``a`` ``(len(b), len(c))`` and ``g`` ``(len(lower),
-    len(c))``; ``KernelError`` naming the argument on a wrong shape or a column-major array."""
+    when a residual is NaN. ``a`` is ``(len(b), len(c))`` and ``g`` ``(len(lower),
+    len(c))``, of any layout and float dtype (read by their values); ``KernelError`` naming the
+    argument on a wrong shape."""
 
 def kkt_residuals(
     h: npt.NDArray[np.float64],
@@ -390,5 +391,5 @@ def kkt_residuals(
     upper`` at ``x`` with signed multipliers ``lam`` (``> 0``: upper bound active): ``max |h x +
     q + g^T lam|`` (0 for an empty ``x``) and ``|x^T h x + q^T x + sum_{lam > 0} upper lam +
     sum_{lam < 0} lower lam|``; NaN propagates, except from a row of ``g`` whose multiplier is
-    zero (not read). ``KernelError`` naming the argument on a wrong shape or a column-major
-    array."""
+    zero (not read). Arrays of any layout and float dtype are read by their values;
+    ``KernelError`` naming the argument on a wrong shape."""

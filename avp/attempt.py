@@ -379,7 +379,7 @@ def solve_fov(
         out0, traj0 = plain("QP (replan, before FoV)" if replan else "QP (first plan, before FoV)")
     if traj0 is None or out0 is None:
         return ledger.attempt(out0, None)
-    if fov_times(0.0, float(np.sum(T)), cfg.fov).size == 0:
+    if fov_times(0.0, float(T.sum()), cfg.fov).size == 0:
         log.append("no FoV points: the gate covers the whole plan")
         return ledger.attempt(out0, traj0, qp=base)
     worth0 = partial(worth_fov, traj0) if not replan and worth_fov is not None else None

@@ -175,10 +175,6 @@ def known_solvers() -> tuple[str, ...]:
 _INF = 1e30
 """DAQP's infinity for a missing bound."""
 
-_f64 = functools.partial(np.ascontiguousarray, dtype=np.float64)
-"""A row-major float64 view of an array (no copy when it is one already): what the Rust kernels
-take."""
-
 _VARIABLE_OPTIONS = frozenset({"primal_start", "eps_prox"})
 """DAQP settings whose meaning depends on the variables (a primal guess, a proximal term): with
 one of them in ``config.solver_options`` DAQP is given the reduced QP in ``z`` as asked, not its
@@ -231,8 +227,7 @@ class TwoSidedSolution(qpsolvers.Solution):
             m = lam.shape[0]
             lower = self.lower if self.lower is not None else np.full(m, -np.inf)
             upper = self.upper if self.upper is not None else np.full(m, np.inf)
-            residuals = _avp_rust.kkt_residuals(_f64(self.problem.P), _f64(self.problem.q), _f64(G), _f64(x),
-                                                 _f64(lam), _f64(lower), _f64(upper))
+            residuals = _avp_rust.kkt_residuals(self.problem.P, self.problem.q, G, x, lam, lower, upper)  # any layout
             cached = (inputs, residuals)
             self.__dict__["_kkt_cache"] = cached
         return cached[1]
@@ -276,9 +271,11 @@ def _solve_two_sided(H: Array, g: Array, G: Array, lower: Array, upper: Array,
     lives in the variables' space (:data:`_VARIABLE_OPTIONS`) sends the QP in ``z`` instead."""
     import daqp  # type: ignore[import-not-found]
 
-    options = {k: v for k, v in options.items() if k != "verbose"}  # a qpsolvers keyword
-    bu = np.where(np.isfinite(upper), upper, _INF)
-    bl = np.where(np.isfinite(lower), lower, -_INF)
+    if "verbose" in options:  # a qpsolvers keyword
+        options = {k: v for k, v in options.items() if k != "verbose"}
+    # DAQP's infinities for missing bounds (an upper bound of -inf, no request anyone makes, stays
+    # one: DAQP then finds the rows infeasible)
+    bu, bl = np.minimum(_INF, upper), np.maximum(-_INF, lower)
     sense = np.zeros(G.shape[0], dtype=np.intc)
     t0 = time.perf_counter()
     if ldp is not None and not _VARIABLE_OPTIONS.isdisjoint(options):
@@ -433,4 +430,4 @@ def _max_violation(qp: PerchingQp, c_hat: Array, G: Array, lo: Array, hi: Array)
     residual over ``max(1, |bound|)``; an infinite bound is never violated), by the Rust kernel:
     NaN when a residual is NaN (then not SOLVED)."""
     A, b = qp.stacked_equalities()
-    return float(_avp_rust.max_violation(_f64(c_hat), _f64(A), _f64(b), _f64(G), _f64(lo), _f64(hi)))
+    return float(_avp_rust.max_violation(c_hat, A, b, G, lo, hi))  # reads any layout and float dtype

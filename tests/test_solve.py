@@ -191,6 +191,38 @@ def test_kkt_residuals_kernel_against_exact_arithmetic(data, n, m) -> None:
     assert abs(gap - float(exact_gap)) <= 16 * (n + m + 2) * 2.0**-52 * mag_gap
 
 
+@settings(max_examples=150, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), n=st.integers(0, 6), m_eq=st.integers(0, 5), m_in=st.integers(0, 6),
+       layout=st.sampled_from(["F", "strided", "int"]))
+def test_the_qp_checks_read_any_layout_by_its_values(seed, n, m_eq, m_in, layout) -> None:
+    """The judges take the planner's arrays as they are (no conversion in Python): a
+    column-major matrix, a strided view or integer entries give the same figures, bit for bit,
+    as the same values in row-major float64."""
+    import numpy as np
+
+    from avp import _avp_rust
+
+    rng = np.random.default_rng(seed)
+
+    def shown(a):
+        if layout == "F":
+            return np.asfortranarray(a)
+        if layout == "strided":
+            wide = np.zeros(a.shape[:-1] + (2 * a.shape[-1],)) if a.ndim else a
+            wide[..., ::2] = a
+            return wide[..., ::2]
+        return a.astype(np.int64)
+
+    def ints(*shape):
+        return rng.integers(-9, 10, size=shape).astype(float)
+
+    c, A, b, G = ints(n), ints(m_eq, n), ints(m_eq), ints(m_in, n)
+    lo, hi = ints(m_in) - 10.0, ints(m_in) + 10.0
+    assert _avp_rust.max_violation(*map(shown, (c, A, b, G, lo, hi))) == _avp_rust.max_violation(c, A, b, G, lo, hi)
+    H, q, lam = ints(n, n), ints(n), ints(m_in)
+    assert _avp_rust.kkt_residuals(*map(shown, (H, q, G, c, lam, lo, hi))) == _avp_rust.kkt_residuals(H, q, G, c, lam, lo, hi)
+
+
 @pytest.mark.parametrize("call, arg", [
     (lambda r, np: r.max_violation(np.zeros(2), np.zeros((1, 3)), np.zeros(1), np.zeros((0, 2)), np.zeros(0),
                                    np.zeros(0)), "a"),
@@ -206,10 +238,8 @@ def test_kkt_residuals_kernel_against_exact_arithmetic(data, n, m) -> None:
                                    np.zeros(1), np.zeros(1)), "lam"),
     (lambda r, np: r.kkt_residuals(np.eye(3)[:2], np.zeros(3), np.zeros((0, 3)), np.zeros(3), np.zeros(0), np.zeros(0),
                                    np.zeros(0)), "h"),
-    (lambda r, np: r.max_violation(np.zeros(2), np.zeros((2, 2), order="F"), np.zeros(2), np.zeros((0, 2)),
-                                   np.zeros(0), np.zeros(0)), "a"),
 ], ids=["a columns", "upper length", "lower length", "b length without columns", "g rows", "g rows without columns",
-        "h rows", "column-major a"])
+        "h rows"])
 def test_qp_check_kernels_name_a_bad_argument(call, arg) -> None:
     import numpy as np
 

@@ -32,7 +32,7 @@ from ..camera import Camera
 from ..config import FovConfig
 from ..errors import ConfigError
 from ..frames import GRAVITY
-from .assemble import ConstraintBlock
+from .assemble import ConstraintBlock, _read_only
 from .layout import DecisionLayout
 
 __all__ = [
@@ -110,13 +110,18 @@ def fov_times(start: float, end: float, fov: FovConfig) -> Array:
     """The ``n_p`` linearisation times (relative), equally spaced over ``(start, end - gate]``.
 
     The start itself is excluded (the state there is fixed by the initial conditions). Empty when
-    the gate covers the whole remaining plan.
+    the gate covers the whole remaining plan. Read-only: the times of the last few requests are
+    kept (a plan asks for the same ones at every SQP step).
     """
-    last = end - fov.gate
+    return _equally_spaced(float(start), float(end) - fov.gate, fov.n_points)
+
+
+@lru_cache(maxsize=64)
+def _equally_spaced(start: float, last: float, n: int) -> Array:
     if last <= start + 1e-9:
-        return np.zeros(0)
-    k = np.arange(1, fov.n_points + 1)
-    return start + (last - start) * k / fov.n_points
+        return _read_only(np.zeros(0))
+    k = np.arange(1, n + 1)
+    return _read_only(start + (last - start) * k / n)
 
 
 @dataclass(frozen=True, eq=False)

@@ -1,13 +1,21 @@
 //! PyO3 wrappers of a QP solution's acceptance checks (`qp_check`).
 #![allow(clippy::useless_conversion)]
-use numpy::{PyReadonlyArray1, PyReadonlyArray2, PyUntypedArrayMethods};
+use numpy::{
+    AllowTypeChange, PyArrayLike1, PyArrayLike2, PyReadonlyArray1, PyReadonlyArray2,
+    PyUntypedArrayMethods,
+};
 use pyo3::prelude::*;
 
-use super::common::{columns, contiguous, kernel_err, to_py_err};
+use super::common::{columns, kernel_err, row_major, to_py_err};
 use crate::error::guarded;
 use crate::qp_check;
 
-/// `vector` (named `arg`) has one entry per row of `m` (named `matrix`).
+/// A float array of any layout or dtype (converted to `float64` when it is not): the judges
+/// read the planner's arrays as they are, without a conversion call in Python for each.
+type F1<'py> = PyArrayLike1<'py, f64, AllowTypeChange>;
+/// A float matrix of any layout or dtype.
+type F2<'py> = PyArrayLike2<'py, f64, AllowTypeChange>;
+
 fn one_per_row(
     arg: &'static str,
     len: usize,
@@ -25,75 +33,61 @@ fn one_per_row(
     }
 }
 
-/// The row-major slices of two-sided rows `lower <= g z <= upper` on `n` variables: `g` with
-/// `n` columns, one bound of each side per row (the rows both kernels check).
-fn two_sided_rows<'a>(
-    g: &'a PyReadonlyArray2<'_, f64>,
-    lower: &'a PyReadonlyArray1<'_, f64>,
-    upper: &'a PyReadonlyArray1<'_, f64>,
+fn two_sided_rows(
+    g: &PyReadonlyArray2<'_, f64>,
+    lower: &PyReadonlyArray1<'_, f64>,
+    upper: &PyReadonlyArray1<'_, f64>,
     n: usize,
-) -> PyResult<(&'a [f64], &'a [f64], &'a [f64])> {
+) -> PyResult<()> {
     columns("g", g, n)?;
     one_per_row("lower", lower.len(), "g", g)?;
-    one_per_row("upper", upper.len(), "g", g)?;
-    Ok((
-        contiguous("g", g)?,
-        contiguous("lower", lower)?,
-        contiguous("upper", upper)?,
-    ))
+    one_per_row("upper", upper.len(), "g", g)
 }
 
-/// Largest relative violation at `c` of `a c = b` and `lower <= g c <= upper` (0 at least;
-/// NaN when a residual is NaN).
 #[pyfunction(name = "max_violation")]
 fn max_violation_py(
-    c: PyReadonlyArray1<'_, f64>,
-    a: PyReadonlyArray2<'_, f64>,
-    b: PyReadonlyArray1<'_, f64>,
-    g: PyReadonlyArray2<'_, f64>,
-    lower: PyReadonlyArray1<'_, f64>,
-    upper: PyReadonlyArray1<'_, f64>,
+    c: F1<'_>,
+    a: F2<'_>,
+    b: F1<'_>,
+    g: F2<'_>,
+    lower: F1<'_>,
+    upper: F1<'_>,
 ) -> PyResult<f64> {
-    let cs = contiguous("c", &c)?;
-    columns("a", &a, cs.len())?;
+    let n = c.len();
+    columns("a", &a, n)?;
     one_per_row("b", b.len(), "a", &a)?;
-    let (gs, lo, hi) = two_sided_rows(&g, &lower, &upper, cs.len())?;
-    let (a_s, bs) = (contiguous("a", &a)?, contiguous("b", &b)?);
-    guarded(|| qp_check::max_violation(cs, a_s, bs, gs, lo, hi)).map_err(to_py_err)
+    two_sided_rows(&g, &lower, &upper, n)?;
+    let (cs, a_s, bs) = (row_major(&c), row_major(&a), row_major(&b));
+    let (gs, lo, hi) = (row_major(&g), row_major(&lower), row_major(&upper));
+    guarded(|| qp_check::max_violation(&cs, &a_s, &bs, &gs, &lo, &hi)).map_err(to_py_err)
 }
 
-/// `(dual residual, duality gap)` of `min 1/2 x^T h x + q^T x` s.t. `lower <= g x <= upper` at
-/// `x` with signed multipliers `lam`.
 #[pyfunction(name = "kkt_residuals")]
 #[allow(clippy::too_many_arguments)]
 fn kkt_residuals_py(
-    h: PyReadonlyArray2<'_, f64>,
-    q: PyReadonlyArray1<'_, f64>,
-    g: PyReadonlyArray2<'_, f64>,
-    x: PyReadonlyArray1<'_, f64>,
-    lam: PyReadonlyArray1<'_, f64>,
-    lower: PyReadonlyArray1<'_, f64>,
-    upper: PyReadonlyArray1<'_, f64>,
+    h: F2<'_>,
+    q: F1<'_>,
+    g: F2<'_>,
+    x: F1<'_>,
+    lam: F1<'_>,
+    lower: F1<'_>,
+    upper: F1<'_>,
 ) -> PyResult<(f64, f64)> {
-    let xs = contiguous("x", &x)?;
-    if h.shape() != [xs.len(), xs.len()] {
+    let n = x.len();
+    if h.shape() != [n, n] {
         return Err(kernel_err(
             "h",
             format!(
                 "wrong shape: expected ({n}, {n}) for len(x) = {n}, got {:?}",
-                h.shape(),
-                n = xs.len()
+                h.shape()
             ),
         ));
     }
     one_per_row("lam", lam.len(), "g", &g)?;
-    let (gs, lo, hi) = two_sided_rows(&g, &lower, &upper, xs.len())?;
-    let (hs, qs, ls) = (
-        contiguous("h", &h)?,
-        contiguous("q", &q)?,
-        contiguous("lam", &lam)?,
-    );
-    guarded(|| qp_check::kkt_residuals(hs, qs, gs, xs, ls, lo, hi)).map_err(to_py_err)
+    two_sided_rows(&g, &lower, &upper, n)?;
+    let (hs, qs, gs, xs) = (row_major(&h), row_major(&q), row_major(&g), row_major(&x));
+    let (ls, lo, hi) = (row_major(&lam), row_major(&lower), row_major(&upper));
+    guarded(|| qp_check::kkt_residuals(&hs, &qs, &gs, &xs, &ls, &lo, &hi)).map_err(to_py_err)
 }
 
 pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
