@@ -107,25 +107,47 @@ pub fn evaluate(spline: &SplineView<'_>, times: &[f64], orders: &[usize]) -> Res
     check_finite("times", times)?;
     let (n_s, a, n_c) = (spline.n_segments(), spline.n_axes(), spline.n_coeffs());
     let mut out = vec![0.0; orders.len() * times.len() * a];
-    let mut diff = vec![0.0; n_s * a * n_c];
+    if a == 0 {
+        return Ok(out); // no axis: nothing to evaluate
+    }
+    // the differentiated coefficients laid out [segment][power][axis]: at one time, the Horner
+    // passes of four axes at a time run side by side (independent chains, the same operations in
+    // the same order per axis as one pass at a time, so the same bits)
+    let mut diff = vec![0.0; n_s * n_c * a];
     for (oi, &order) in orders.iter().enumerate() {
         let len = n_c.saturating_sub(order); // differentiated coefficients per polynomial
         for seg in 0..n_s {
             for axis in 0..a {
                 let c = spline.poly(seg, axis);
-                let d = &mut diff[(seg * a + axis) * n_c..][..len];
-                for (j, dj) in d.iter_mut().enumerate() {
-                    *dj = c[j + order] * poly::falling_factorial(j + order, order);
+                for j in 0..len {
+                    diff[(seg * n_c + j) * a + axis] =
+                        c[j + order] * poly::falling_factorial(j + order, order);
                 }
             }
         }
         for (ti, &t) in times.iter().enumerate() {
             let seg = spline.segment_of(t);
             let tau = t - spline.knots()[seg];
-            let row = &mut out[(oi * times.len() + ti) * a..][..a];
-            for (axis, o) in row.iter_mut().enumerate() {
-                let d = &diff[(seg * a + axis) * n_c..][..len];
-                *o = d.iter().rev().fold(0.0, |acc, &dj| acc * tau + dj);
+            let row = &mut out[(oi * times.len() + ti) * a..][..a]; // zeros: Horner's start
+            let block = &diff[seg * n_c * a..][..len * a];
+            let mut groups = row.chunks_exact_mut(4);
+            for (g, o4) in (&mut groups).enumerate() {
+                let mut acc = [0.0f64; 4];
+                for d in block.chunks_exact(a).rev() {
+                    let d4 = &d[4 * g..4 * g + 4];
+                    for q in 0..4 {
+                        acc[q] = acc[q] * tau + d4[q];
+                    }
+                }
+                o4.copy_from_slice(&acc);
+            }
+            let done = a - groups.into_remainder().len();
+            for axis in done..a {
+                let mut acc = 0.0;
+                for d in block.chunks_exact(a).rev() {
+                    acc = acc * tau + d[axis];
+                }
+                row[axis] = acc;
             }
         }
     }
