@@ -131,17 +131,16 @@ class _Ledger:
     def run(self, qp: PerchingQp, cfg: PlannerConfig, label: str, strict: bool,
             initvals: Array | None) -> tuple[QpOutcome | None, str | None]:
         """Solve ``qp``; ``(outcome, None)`` or ``(None, reason)``. ``strict``: back-end errors
-        raise and warnings are re-emitted; otherwise (an FoV QP, where they are expected on an
-        incompatible problem (16)) both are logged."""
+        raise and warnings go to the caller's filters; otherwise (an FoV QP, where they are
+        expected on an incompatible problem (16)) both are logged."""
         try:
-            with warnings.catch_warnings(record=True) as caught:
-                warnings.simplefilter("always" if not strict else "default")
+            if strict:  # warnings reach the caller's filters as they are
                 out = solve_perching_qp(qp, cfg, initvals)
-            if not strict:
-                self.log.extend(f"{label}: {w.category.__name__}: {w.message}" for w in caught)
             else:
-                for w in caught:
-                    warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+                with warnings.catch_warnings(record=True) as caught:
+                    warnings.simplefilter("always")
+                    out = solve_perching_qp(qp, cfg, initvals)
+                self.log.extend(f"{label}: {w.category.__name__}: {w.message}" for w in caught)
         except InfeasibleError as exc:
             self.log.append(f"{label}: {exc}")
             return None, str(exc)

@@ -260,6 +260,22 @@ def _identity(n: int) -> Array:
     return _read_only_identity(n).copy()
 
 
+_last_cost: tuple[Array, Array, qpsolvers.Problem] | None = None
+"""The last :func:`_cost` (the QPs of a plan's SQP steps share their cost arrays)."""
+
+
+def _cost(H: Array, g: Array) -> qpsolvers.Problem:
+    """``qpsolvers.Problem(P=H, q=g)``: the same object again for the same array objects as the
+    last call (a plan's SQP steps). Nothing in avp writes a solution's problem or these arrays."""
+    global _last_cost
+    last = _last_cost  # one read: another thread may replace it
+    if last is not None and last[0] is H and last[1] is g:
+        return last[2]
+    problem = qpsolvers.Problem(P=H, q=g)
+    _last_cost = (H, g, problem)
+    return problem
+
+
 def _solve_two_sided(H: Array, g: Array, G: Array, lower: Array, upper: Array,
                      options: dict[str, Any], ldp: LeastDistanceQp | None = None) -> TwoSidedSolution:
     """``min 1/2 z^T H z + g^T z`` s.t. ``lower <= G z <= upper`` by ``daqp.solve`` directly.
@@ -284,7 +300,7 @@ def _solve_two_sided(H: Array, g: Array, G: Array, lower: Array, upper: Array,
         x, obj, exitflag, info = daqp.solve(_identity(H.shape[0]), ldp.v, ldp.M, bu, bl, sense, **options)
     else:
         x, obj, exitflag, info = daqp.solve(np.array(H), g, np.ascontiguousarray(G), bu, bl, sense, **options)
-    solution = TwoSidedSolution(qpsolvers.Problem(P=H, q=g), G=G, lower=lower, upper=upper)
+    solution = TwoSidedSolution(_cost(H, g), G=G, lower=lower, upper=upper)
     solution.found = exitflag > 0
     if solution.found:
         solution.x, solution.obj = (ldp.reduced(x) if ldp is not None else x), obj
