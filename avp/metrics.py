@@ -10,6 +10,7 @@ import numpy as np
 
 from . import _avp_rust, frames
 from . import _validate as v
+from ._typing import Array
 from .camera import Camera
 from .errors import ConfigError
 from .trajectory import Trajectory
@@ -108,6 +109,25 @@ def visibility_many(
     return _visibility_checked(trajectories, target, cam, step, drag)
 
 
+def _cone_only(cam: Camera) -> bool:
+    """The camera's FoV is its cone (7) alone: no rectangular limits, an unlimited range."""
+    return cam.horizontal_fov is None and cam.vertical_fov is None and not math.isfinite(cam.range)
+
+
+def _cone_fractions(coeffs: Array, first: Trajectory, t: Array, target: PerchTarget, cam: Camera,
+                    drag: float) -> tuple[Array, Array, Array]:
+    """``(time fractions, path fractions, relative time of the first loss or NaN)`` of the plans
+    whose coefficients are stacked along the axes in ``coeffs``, on ``first``'s knots, sampled at
+    its relative times ``t`` (two at least), for a camera whose FoV is its cone
+    (:func:`_cone_only`): h <= 0 with the Rust FoV kernel's own arithmetic (the same test as
+    ``Camera.sees``; a degenerate attitude gives a NaN h: not seen), and the trapezoid sums, in
+    one call for all samples of all plans, which it evaluates (position, yaw and the thrust's
+    a + d v, ``VehicleLimits.rotor_drag``)."""
+    return _avp_rust.spline_visibility(
+        coeffs, first.knots_rel, t, float(drag), np.ascontiguousarray(target.point, dtype=float), cam.axis_B,
+        math.cos(cam.half_fov), first.g)
+
+
 def _visibility_checked(trajectories: Sequence[Trajectory], target: PerchTarget, cam: Camera, step: float,
                         drag: float) -> list[Visibility]:
     """:func:`visibility_many` of arguments it has checked (the planner's SQP score calls it
@@ -122,14 +142,8 @@ def _visibility_checked(trajectories: Sequence[Trajectory], target: PerchTarget,
     t = first._sample_rel(step)  # since the plans' start: exact durations at any clock value
     t0 = first.t0
     coeffs = first.coefficients if k == 1 else np.concatenate([tr.coefficients for tr in trajectories], axis=1)
-    if cam.horizontal_fov is None and cam.vertical_fov is None and not math.isfinite(cam.range) and t.size >= 2:
-        # The cone (7) alone: h <= 0 with the Rust FoV kernel's own arithmetic (the same test as
-        # Camera.sees; a degenerate attitude gives a NaN h: not seen), and the trapezoid sums,
-        # in one call for all samples of all plans, which it evaluates (position, yaw and the
-        # thrust's a + d v, VehicleLimits.rotor_drag)
-        tf, pf, lost_at = _avp_rust.spline_visibility(
-            coeffs, first.knots_rel, t, float(drag), np.ascontiguousarray(target.point, dtype=float), cam.axis_B,
-            math.cos(cam.half_fov), first.g)
+    if _cone_only(cam) and t.size >= 2:
+        tf, pf, lost_at = _cone_fractions(coeffs, first, t, target, cam, drag)
         return [Visibility(float(a), float(b), None if math.isnan(c) else t0 + float(c))
                 for a, b, c in zip(tf, pf, lost_at, strict=True)]
     if drag:  # position and the thrust's a + d v (VehicleLimits.rotor_drag)

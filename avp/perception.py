@@ -21,7 +21,7 @@ import numpy as np
 
 from ._typing import Array
 from .config import PlannerConfig
-from .metrics import _visibility_checked
+from .metrics import _cone_fractions, _cone_only, _visibility_checked
 from .qp.assemble import ConstraintBlock, PerchingQp
 from .qp.fov import FovLinearisation, fov_times, linearise_on_spline
 from .solve import ITERATIVE_SOLVERS, KKT_TOL, backend, incompatibility
@@ -84,7 +84,15 @@ def _scores(trajs: tuple[Trajectory, ...], target: PerchTarget, cfg: PlannerConf
     camera = cfg.fov.score_camera
     if camera is None:  # no direction meets the rows: nothing to gain
         return [0.0] * len(trajs)
-    vis = _visibility_checked(trajs, target, camera, trajs[0].duration / _SCORE_GRID, cfg.limits.rotor_drag)
+    first = trajs[0]
+    t = first._sample_rel(first.duration / _SCORE_GRID)
+    if _cone_only(camera) and all(tr.knots_rel is first.knots_rel and tr.t0 == first.t0 and tr.g == first.g
+                                  for tr in trajs[1:]):
+        # the plans of one QP's copies (the same knots object): the fractions alone, summed
+        coeffs = first.coefficients if len(trajs) == 1 else np.concatenate([tr.coefficients for tr in trajs], axis=1)
+        tf, pf, _ = _cone_fractions(coeffs, first, t, target, camera, cfg.limits.rotor_drag)
+        return (tf + pf).tolist()  # type: ignore[no-any-return]
+    vis = _visibility_checked(trajs, target, camera, first.duration / _SCORE_GRID, cfg.limits.rotor_drag)
     return [v.time_fraction + v.path_fraction for v in vis]
 
 

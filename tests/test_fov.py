@@ -165,6 +165,43 @@ def test_fov_margin_is_scored_in_its_narrowed_cone() -> None:
     assert in_narrow[1] > in_narrow[0] + 0.1
 
 
+@settings(max_examples=40, deadline=None)
+@given(incline=st.sampled_from([0.0, 30.0, 60.0, 90.0, 120.0]), distance=st.floats(2.0, 6.0),
+       drag=st.sampled_from([0.0, 0.3]), shift=st.floats(-0.5, 0.5), margin=st.sampled_from([0.0, 0.04]))
+def test_the_sqp_score_is_the_visibility_fractions_summed(incline, distance, drag, shift, margin) -> None:
+    """The SQP's score of plans on one QP's knots (the kernel's fractions, summed in one pass)
+    is ``time_fraction + path_fraction`` of :func:`avp.metrics.visibility_many`'s checked path,
+    bit for bit, for one plan and for two; plans on knots of their own are scored one by one."""
+    from avp import perception
+    from avp.metrics import _visibility_checked
+    from avp.timing import initial_durations
+
+    target = PerchTarget.from_incline([distance, shift, 1.5], math.radians(incline))
+    start = State.hover([0.0, 0.0, 1.5])
+    cfg = PlannerConfig()
+    cfg = dataclasses.replace(cfg, fov=dataclasses.replace(cfg.fov, margin=margin),
+                              limits=dataclasses.replace(cfg.limits, rotor_drag=drag))
+    T = initial_durations(start, target, cfg)
+    qp = build_perching_qp(start, target, cfg, T)
+    A, b = qp.stacked_equalities()
+    c = qpsolvers.solve_qp(qp.P.copy(), np.zeros(qp.layout.n_variables), A=A.copy(), b=b.copy(), solver="daqp")
+    assume(c is not None)
+    one, other = qp.trajectory(c, cfg.g), qp.trajectory(c * (1.0 + 1e-3 * np.cos(np.arange(c.size))), cfg.g)
+    camera = cfg.fov.score_camera
+    assert camera is not None
+
+    def checked(trajs):
+        step = trajs[0].duration / perception._SCORE_GRID
+        return [v.time_fraction + v.path_fraction
+                for v in _visibility_checked(trajs, target, camera, step, cfg.limits.rotor_drag)]
+
+    for trajs in ((one,), (one, other), (other, one)):
+        assert perception._scores(trajs, target, cfg) == checked(trajs)
+    alone = avp.Trajectory.from_relative_knots(other.coefficients, other.knots_rel.copy(), other.t0, other.g)
+    assert alone.knots_rel is not one.knots_rel
+    assert perception._scores((one, alone), target, cfg) == checked((one, alone))
+
+
 LINEARISATION_BOUND = 0.03
 """Largest |h - h_lin| / |n_d0| inside the box trust region (9) for |n_d0| >= 1 m and thrust
 >= 4.8 m/s^2 (tilt < ~60 deg): about 1.7 deg of cone angle near the 35 deg edge (Fig. 6).
