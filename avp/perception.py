@@ -60,9 +60,11 @@ def linearise_on(
     knots = qp.knots_rel
     tf = float(knots[-1])
     times = fov_times(0.0, tf, cfg.fov)  # none when the gate covers the plan: no row (linearise_on_spline)
-    start = max(qp.t0, reference.t0)
-    t_ref = np.minimum(reference.tf, np.maximum(reference.t0, qp.t0 + times * (reference.tf - start) / tf))  # a clip
-    tau = reference._relative(t_ref)  # within the reference (clipped): Trajectory.derivatives' times, unchecked
+    t0, ref_t0, ref_tf = qp.t0, reference.t0, reference.tf
+    span = ref_tf - max(t0, ref_t0)
+    # within the reference (clipped): Trajectory.derivatives' times, unchecked; in Python floats
+    # (a handful of points: fewer calls than array operations, the same values)
+    tau = np.array([reference._relative_float(min(ref_tf, max(ref_t0, t0 + t * span / tf))) for t in times.tolist()])
     # the reference's points and their rows in one kernel call; with rotor drag the attitude is
     # the one of the thrust a + g e3 + d v (VehicleLimits.rotor_drag)
     return linearise_on_spline(qp.layout, knots, times, reference.coefficients, reference.knots_rel, tau,

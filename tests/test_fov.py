@@ -202,6 +202,44 @@ def test_the_sqp_score_is_the_visibility_fractions_summed(incline, distance, dra
     assert perception._scores((one, alone), target, cfg) == checked((one, alone))
 
 
+@settings(max_examples=60, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), t0=st.one_of(st.just(0.0), st.floats(0.0, 50.0), st.floats(1.0e9, 2.0e9)),
+       lag=st.floats(0.0, 0.5), stretch=st.floats(0.7, 1.3), build=st.booleans())
+def test_linearise_on_maps_times_as_the_array_formula(seed, t0, lag, stretch, build) -> None:
+    """``perception.linearise_on`` (the reference times in Python floats) linearises at the
+    reference's relative times of the array formula ``clip(t0 + t (tf_ref - max(t0, t0_ref)) /
+    tf, t0_ref, tf_ref)``, then ``Trajectory._relative``: the same linearisation, bit for bit, as
+    :func:`linearise_on_spline` given those times, for a replan's QP starting ``lag`` after its
+    reference, at any clock value, with the plans ending together or not."""
+    from avp.perception import linearise_on
+    from avp.qp.fov import linearise_on_spline
+    from avp.timing import initial_durations
+
+    rng = np.random.default_rng(seed)
+    target = PerchTarget.from_incline([rng.uniform(2.5, 5.0), rng.uniform(-1, 1), 1.5], math.radians(60))
+    start = State.hover([0.0, 0.0, 1.5])
+    cfg = PlannerConfig()
+    T = initial_durations(start, target, cfg)
+    ref_knots = np.concatenate([[0.0], np.cumsum(T * stretch)])
+    coeffs = rng.normal(0.0, 1.0, (T.size, 4, cfg.degree + 1))
+    reference = avp.Trajectory.from_relative_knots(coeffs, ref_knots, t0)
+    state = dataclasses.replace(start, time=t0 + lag)
+    qp = build_perching_qp(state, target, cfg, T)
+    tf = float(qp.knots_rel[-1])
+    times = fov_times(0.0, tf, cfg.fov)
+    start_t = max(qp.t0, reference.t0)
+    t_ref = np.clip(qp.t0 + times * (reference.tf - start_t) / tf, reference.t0, reference.tf)
+    tau = reference._relative(t_ref)
+    want = linearise_on_spline(qp.layout, qp.knots_rel, times, reference.coefficients, reference.knots_rel, tau,
+                               target.point, cfg.fov, cfg.g, rotor_drag=cfg.limits.rotor_drag, build_blocks=build)
+    got = linearise_on(qp, reference, target, cfg, build_blocks=build)
+    for name in ("times", "h0", "reachable", "placed", "progress"):
+        assert getattr(got, name).tobytes() == getattr(want, name).tobytes(), name
+    assert got.rows is not None and want.rows is not None
+    for name in ("x0", "a0", "psi0", "rhs"):
+        assert getattr(got.rows, name).tobytes() == getattr(want.rows, name).tobytes(), name
+
+
 LINEARISATION_BOUND = 0.03
 """Largest |h - h_lin| / |n_d0| inside the box trust region (9) for |n_d0| >= 1 m and thrust
 >= 4.8 m/s^2 (tilt < ~60 deg): about 1.7 deg of cone angle near the 35 deg edge (Fig. 6).
