@@ -23,6 +23,7 @@ __all__ = [
     "fov_step_rows",
     "kkt_residuals",
     "max_violation",
+    "physical_coefficients",
     "scaled_excess",
     "spline_visibility",
     "sturm_count",
@@ -51,6 +52,15 @@ def eval_spline(
     ``[knots[0], knots[-1]]`` extrapolate the first/last segment. Raises ``ValueError`` on bad
     shapes, non-finite values or non-increasing knots.
     """
+
+def physical_coefficients(
+    c_hat: npt.NDArray[np.float64], scale: npt.NDArray[np.float64]
+) -> tuple[npt.NDArray[np.float64], bool]:
+    """A decision vector ``c_hat`` (axis-major: axes x segments x powers, the QP's layout) as
+    spline coefficients ``(segments, axes, powers)`` in powers of ``t - t_i``: ``c[a, i, k] *
+    scale[i, k]`` with ``scale (segments, powers)`` (``T_i^-k``), one product per entry; and
+    whether they are all finite. Any layout and float dtype. ``KernelError`` naming ``scale`` or
+    ``c_hat`` when ``c_hat`` is not whole axes of ``scale.size`` coefficients."""
 
 def anticipate(
     coeffs: npt.NDArray[np.float64],

@@ -552,3 +552,32 @@ def test_a_copy_of_a_qp_without_least_distance_form_reduces_its_new_rows_alone()
         la, lb = child.least_distance(), fresh.least_distance()
         assert la is not None and lb is not None
         np.testing.assert_allclose(la.M, lb.M, rtol=1e-12, atol=1e-12 * float(np.abs(lb.M).max()))
+
+
+@settings(max_examples=200, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), n_seg=st.integers(1, 5), degree=st.integers(1, 9),
+       magnitude=st.sampled_from([1.0, 1e100, 1e300]), order=st.sampled_from(["C", "F", "int"]))
+def test_physical_coefficients_are_the_scaled_decision_vector_reordered(seed, n_seg, degree, magnitude,
+                                                                         order) -> None:
+    """``DecisionLayout.physical`` (one kernel call) gives NumPy's ``(c.reshape(4, S, N + 1) *
+    T_i^-k).transpose(1, 0, 2)``, bit for bit, and says whether it is all finite (an overflowing
+    product is not); ``to_physical`` and ``from_physical`` are inverse (to rounding); a decision
+    vector of another length is refused by name."""
+    rng = np.random.default_rng(seed)
+    layout = layout_for(n_seg, degree)
+    T = rng.uniform(1e-3, 3.0, n_seg)
+    c = rng.normal(0.0, magnitude, layout.n_variables)
+    scale = layout.physical_scale(T)
+    shown = {"C": scale, "F": np.asfortranarray(scale), "int": scale}[order]
+    given_c = np.round(c).astype(np.int64) if order == "int" and magnitude == 1.0 else c
+    with np.errstate(over="ignore"):  # the products of 1e300 overflow: the kernel says so
+        want = (given_c.astype(float).reshape(4, n_seg, degree + 1) * scale[None]).transpose(1, 0, 2)
+    coeffs, finite = layout.physical(given_c, shown)
+    assert coeffs.shape == (n_seg, 4, degree + 1) and coeffs.flags.c_contiguous
+    assert coeffs.tobytes() == np.ascontiguousarray(want).tobytes()
+    assert finite == bool(np.isfinite(want).all())
+    if finite and magnitude == 1.0:
+        np.testing.assert_allclose(layout.from_physical(coeffs, T), given_c, rtol=1e-9, atol=1e-12)
+    np.testing.assert_array_equal(layout.to_physical(given_c, T), coeffs)
+    with pytest.raises(avp.ConfigError, match="c_hat"):
+        layout.physical(c[:-1], scale)

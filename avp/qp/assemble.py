@@ -516,8 +516,8 @@ class PerchingQp:
     def trajectory(self, c_hat: Array, g: float) -> Trajectory:
         """The :class:`~avp.trajectory.Trajectory` of normalised coefficients ``c_hat``, starting
         at ``t0`` with this QP's durations."""
-        coeffs = self.layout.to_physical(c_hat, self.durations, scale=self._physical_scale)
-        if not (self._increasing and np.isfinite(coeffs).all()):
+        coeffs, finite = self.layout.physical(c_hat, self._physical_scale)
+        if not (self._increasing and finite):
             return Trajectory(coeffs, self.t0 + self.knots_rel, g=g)  # raises the typed error
         return Trajectory._trusted(coeffs, self.t0, self.knots_rel, g)
 

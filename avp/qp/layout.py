@@ -14,7 +14,9 @@ from functools import cached_property, lru_cache
 import numpy as np
 import numpy.typing as npt
 
+from .. import _avp_rust
 from .._typing import Array
+from ..errors import ConfigError
 
 N_AXES = 4
 """x, y, z, yaw."""
@@ -101,10 +103,16 @@ class DecisionLayout:
     def to_physical(self, c_hat: Array, durations: Array, scale: Array | None = None) -> Array:
         """Decision vector -> ``(S, 4, N + 1)`` coefficients in powers of ``t - t_i`` (seconds).
         ``scale``: :meth:`physical_scale` of ``durations`` when the caller has it."""
-        c = np.asarray(c_hat, dtype=float).reshape(N_AXES, self.n_segments, self.n_coeffs)
-        if scale is None:
-            scale = self.physical_scale(durations)
-        return np.ascontiguousarray((c * scale[None]).transpose(1, 0, 2))
+        return self.physical(c_hat, self.physical_scale(durations) if scale is None else scale)[0]
+
+    def physical(self, c_hat: Array, scale: Array) -> tuple[Array, bool]:
+        """:meth:`to_physical` with the :meth:`physical_scale` ``scale``, and whether every
+        coefficient is finite: one product per coefficient, by the Rust kernel
+        ``physical_coefficients`` (one call, not an array operation per step)."""
+        if np.shape(c_hat) != (self.n_variables,):
+            raise ConfigError("c_hat", f"expected {self.n_variables} coefficients, got shape {np.shape(c_hat)}")
+        coeffs, finite = _avp_rust.physical_coefficients(c_hat, scale)
+        return coeffs, finite
 
     def from_physical(self, coeffs: Array, durations: Array) -> Array:
         """Inverse of :meth:`to_physical`."""

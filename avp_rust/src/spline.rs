@@ -154,6 +154,49 @@ pub fn evaluate(spline: &SplineView<'_>, times: &[f64], orders: &[usize]) -> Res
     Ok(out)
 }
 
+/// A decision vector `c` of normalised coefficients, laid out axis-major (`axes x segments x
+/// powers`, the QP's layout), as spline coefficients `(segments, axes, powers)` in powers of
+/// `t - t_i`: `c[a, i, k] * scale[i, k]` (`scale[i, k] = T_i^-k`, row-major `(segments,
+/// powers)`), one product per entry; and whether they are all finite.
+pub fn physical_coefficients(
+    c: &[f64],
+    scale: &[f64],
+    n_coeffs: usize,
+) -> Result<(Vec<f64>, bool)> {
+    if n_coeffs == 0 || scale.len() % n_coeffs != 0 {
+        return Err(Error::Shape {
+            arg: "scale",
+            detail: format!("{} values are not (segments, {n_coeffs}) rows", scale.len()),
+        });
+    }
+    let block = scale.len(); // segments x powers: one axis of c
+    if block == 0 || c.len() % block != 0 {
+        return Err(Error::Shape {
+            arg: "c_hat",
+            detail: format!(
+                "{} values are not whole axes of {block} coefficients",
+                c.len()
+            ),
+        });
+    }
+    let axes = c.len() / block;
+    let mut out = vec![0.0; c.len()];
+    for (i, (row_scale, out_seg)) in scale
+        .chunks_exact(n_coeffs)
+        .zip(out.chunks_exact_mut(axes * n_coeffs))
+        .enumerate()
+    {
+        for (a, o) in out_seg.chunks_exact_mut(n_coeffs).enumerate() {
+            let src = &c[a * block + i * n_coeffs..][..n_coeffs];
+            for ((v, &x), &f) in o.iter_mut().zip(src).zip(row_scale) {
+                *v = x * f;
+            }
+        }
+    }
+    let finite = out.iter().all(|v| v.is_finite());
+    Ok((out, finite))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -162,6 +205,32 @@ mod tests {
         // axis 0: p1 = 1 + t, p2 = 2 + t ; axis 1: p1 = t^2, p2 = 1 + 2 tau + tau^2
         let coeffs = vec![1.0, 1.0, 0.0, 0.0, 0.0, 1.0, 2.0, 1.0, 0.0, 1.0, 2.0, 1.0];
         (coeffs, vec![0.0, 1.0, 3.0])
+    }
+
+    #[test]
+    fn physical_coefficients_reorder_and_scale() {
+        // 2 axes, 2 segments, 2 powers: c[a, i, k] = 10 a + 2 i + k
+        let c = [0.0, 1.0, 2.0, 3.0, 10.0, 11.0, 12.0, 13.0];
+        let scale = [1.0, 2.0, 1.0, 0.5];
+        let (out, finite) = physical_coefficients(&c, &scale, 2).unwrap();
+        assert!(finite);
+        assert_eq!(out, vec![0.0, 2.0, 10.0, 22.0, 2.0, 1.5, 12.0, 6.5]);
+        let (_, finite) = physical_coefficients(&[f64::MAX, 0.0], &[1.0, 4.0], 2).unwrap();
+        assert!(finite);
+        let (_, finite) = physical_coefficients(&[1.0, f64::MAX], &[1.0, 4.0], 2).unwrap();
+        assert!(!finite); // the product overflows
+        assert_eq!(
+            physical_coefficients(&c, &scale[..3], 2).unwrap_err().arg(),
+            "scale"
+        );
+        assert_eq!(
+            physical_coefficients(&c[..7], &scale, 2).unwrap_err().arg(),
+            "c_hat"
+        );
+        assert_eq!(
+            physical_coefficients(&c, &[], 2).unwrap_err().arg(),
+            "c_hat"
+        );
     }
 
     #[test]

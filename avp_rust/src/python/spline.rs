@@ -1,12 +1,13 @@
-//! PyO3 wrappers of the spline kernels: evaluation and the anticipation step (6).
+//! PyO3 wrappers of the spline kernels: evaluation, the anticipation step (6) and a decision
+//! vector's spline coefficients.
 #![allow(clippy::useless_conversion)]
 use numpy::{
-    IntoPyArray, PyArray2, PyArray3, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3,
-    PyUntypedArrayMethods,
+    AllowTypeChange, IntoPyArray, PyArray2, PyArray3, PyArrayLike1, PyArrayLike2, PyReadonlyArray1,
+    PyReadonlyArray2, PyReadonlyArray3, PyUntypedArrayMethods,
 };
 use pyo3::prelude::*;
 
-use super::common::{contiguous, kernel_err, matrix, spline_view, to_py_err};
+use super::common::{contiguous, kernel_err, matrix, row_major, spline_view, to_py_err};
 use crate::error::guarded;
 use crate::spline;
 
@@ -72,8 +73,28 @@ fn anticipate_py<'py>(
     matrix(py, crate::anticipation::ORDERS, n_axes, out)
 }
 
+/// A decision vector's spline coefficients `(segments, axes, powers)` and whether they are all
+/// finite (`crate::spline::physical_coefficients`); `c_hat` and `scale` of any layout and float
+/// dtype.
+#[pyfunction(name = "physical_coefficients")]
+fn physical_coefficients_py<'py>(
+    py: Python<'py>,
+    c_hat: PyArrayLike1<'py, f64, AllowTypeChange>,
+    scale: PyArrayLike2<'py, f64, AllowTypeChange>,
+) -> PyResult<(Bound<'py, PyArray3<f64>>, bool)> {
+    let (segments, powers) = (scale.shape()[0], scale.shape()[1]);
+    let (c, f) = (row_major(&c_hat), row_major(&scale));
+    let (out, finite) =
+        guarded(|| spline::physical_coefficients(&c, &f, powers)).map_err(to_py_err)?;
+    let axes = out.len() / (segments * powers).max(1);
+    let arr = numpy::ndarray::Array3::from_shape_vec((segments, axes, powers), out)
+        .map_err(|e| kernel_err("kernel", format!("internal shape error: {e}")))?;
+    Ok((arr.into_pyarray(py), finite))
+}
+
 pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(eval_spline_py, m)?)?;
     m.add_function(wrap_pyfunction!(anticipate_py, m)?)?;
+    m.add_function(wrap_pyfunction!(physical_coefficients_py, m)?)?;
     Ok(())
 }
