@@ -35,7 +35,7 @@ from .qp.perching import flip_time, is_overhang
 from .request import check_request
 from .safety import SafetyReport, check_endpoints
 from .solve import WARM_START_SOLVERS, QpOutcome
-from .time_search import DurationSearch, scaled_excess
+from .time_search import _ONE, DurationSearch, _excess
 from .timing import check_durations, initial_durations
 from .trajectory import Provenance, Trajectory
 from .types import PerchTarget, State
@@ -364,7 +364,8 @@ def plan_detailed(
     def within_sampled(traj: Trajectory) -> bool:
         # A sample beyond a limit is a proven violation of the certified quantity, so the SQP
         # step of the first plan would be wasted: the time search starts without it.
-        return float(scaled_excess(traj, cfg.limits, cfg.g, np.ones(1), per_segment=4)[0]) <= 0.0
+        # the kernel at scale 1 (s^-2 = 1) on checked arguments: scaled_excess without its validation
+        return float(_excess(traj, cfg.limits, cfg.g, _ONE, per_segment=4)[0]) <= 0.0
 
     # The initial workspace rows depend on the durations, the start and the target only (never
     # relaxed): built once per durations of this plan.
