@@ -64,7 +64,7 @@ def linearise_on(
     span = ref_tf - max(t0, ref_t0)
     # within the reference (clipped): Trajectory.derivatives' times, unchecked; in Python floats
     # (a handful of points: fewer calls than array operations, the same values)
-    tau = np.array([reference._relative_float(min(ref_tf, max(ref_t0, t0 + t * span / tf))) for t in times.tolist()])
+    tau = np.array(reference._relative_floats([min(ref_tf, max(ref_t0, t0 + t * span / tf)) for t in times.tolist()]))
     # the reference's points and their rows in one kernel call; with rotor drag the attitude is
     # the one of the thrust a + g e3 + d v (VehicleLimits.rotor_drag)
     return linearise_on_spline(qp.layout, knots, times, reference.coefficients, reference.knots_rel, tau,

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import functools
 import math
+import operator
 import re
 import time
 from dataclasses import dataclass, field
@@ -223,7 +224,7 @@ class TwoSidedSolution(qpsolvers.Solution):
         assert x is not None and lam is not None and G is not None  # the callers check
         inputs = (self.problem.P, self.problem.q, G, x, lam, self.lower, self.upper)
         cached = self.__dict__.get("_kkt_cache")
-        if cached is None or any(a is not b for a, b in zip(cached[0], inputs, strict=True)):
+        if cached is None or not all(map(operator.is_, cached[0], inputs)):  # the same 7 objects
             m = lam.shape[0]
             lower = self.lower if self.lower is not None else np.full(m, -np.inf)
             upper = self.upper if self.upper is not None else np.full(m, np.inf)

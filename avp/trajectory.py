@@ -295,12 +295,13 @@ class Trajectory:
             flat[arr.reshape(-1) >= self._tf] = self.duration
         return np.minimum(self.duration, np.maximum(0.0, flat, out=flat), out=flat)  # clip's values, fewer calls
 
-    def _relative_float(self, t: float) -> float:
-        """:meth:`_relative` of one finite time in Python floats, the same value (the same
+    def _relative_floats(self, times: list[float]) -> list[float]:
+        """:meth:`_relative` of finite times in Python floats, the same values (the same
         operations; a handful of times costs less this way than in array calls)."""
-        duration = self.duration
-        r = duration if self._t0 != 0.0 and t >= self._tf else t - self._t0
-        return min(duration, max(0.0, r))
+        duration, t0, tf = self.duration, self._t0, self._tf
+        if t0 == 0.0:
+            return [min(duration, max(0.0, t - t0)) for t in times]
+        return [min(duration, max(0.0, duration if t >= tf else t - t0)) for t in times]
 
     def derivatives(self, t: Any, orders: Any = (0, 1, 2, 3, 4)) -> Array:
         """All four flat outputs for each order: shape ``(len(orders), *shape(t), 4)``."""

@@ -62,16 +62,16 @@ def test_rust_eval_is_one_horner_pass_per_axis_bit_for_bit(spline, order, fracti
 @given(t0=st.one_of(st.just(0.0), st.floats(-1e4, 1e4), st.floats(1.0e9, 2.0e9)),
        durations=st.lists(st.floats(0.05, 3.0), min_size=1, max_size=4),
        fractions=st.lists(st.floats(0.0, 1.0), min_size=1, max_size=12))
-def test_relative_time_of_one_float_is_the_array_path_bit_for_bit(t0, durations, fractions) -> None:
-    """``Trajectory._relative_float`` (a time in Python floats, the FoV linearisation's) gives
-    ``_relative``'s value for the same time, bit for bit: at any clock value, at the knots and at
-    ``tf`` itself (the spline's end exactly)."""
+def test_relative_times_in_floats_are_the_array_path_bit_for_bit(t0, durations, fractions) -> None:
+    """``Trajectory._relative_floats`` (times in Python floats, the FoV linearisation's) gives
+    ``_relative``'s values for the same times, bit for bit: at any clock value, at the knots and
+    at ``tf`` itself (the spline's end exactly)."""
     rel = np.concatenate([[0.0], np.cumsum(durations)])
     traj = avp.Trajectory.from_relative_knots(np.zeros((len(durations), 4, 3)), rel, t0)
     times = [traj.t0 + f * (traj.tf - traj.t0) for f in fractions] + [traj.t0, traj.tf, *traj.knots.tolist()]
     times = [min(traj.tf, max(traj.t0, t)) for t in times]  # within the spline, as the caller clips them
     want = traj._relative(np.array(times))
-    got = np.array([traj._relative_float(t) for t in times])
+    got = np.array(traj._relative_floats(times))
     assert got.tobytes() == want.tobytes()
 
 

@@ -193,6 +193,10 @@ _ROW8 = f"{FOV_PREFIX} rows (8)"
 _TRUST = tuple(f"{FOV_PREFIX} trust region (9) {label}" for label in ("x", "a", "yaw"))
 
 
+_NO_LOWER = _read_only(np.full(256, -np.inf))
+"""The rows (8)'s lower bounds (none): read-only views of it (more points than this get their own)."""
+
+
 def _assembled(fov: FovConfig, rhs: Array, row8: Array,
                trust: Sequence[tuple[Array, Array, Array]]) -> tuple[ConstraintBlock, ...]:
     """The FoV blocks of the placed points from their matrices: the rows (8) ``row8 <= rhs`` and
@@ -200,7 +204,8 @@ def _assembled(fov: FovConfig, rhs: Array, row8: Array,
     in that order), each only when its radius is finite. No block without a placed point."""
     if rhs.size == 0:
         return ()
-    blocks = [ConstraintBlock(_ROW8, row8, np.full(rhs.size, -np.inf), rhs)]
+    k = rhs.size
+    blocks = [ConstraintBlock(_ROW8, row8, _NO_LOWER[:k] if k <= _NO_LOWER.size else np.full(k, -np.inf), rhs)]
     radii = (fov.trust_position, fov.trust_acceleration, fov.trust_yaw)
     for name, r, (R, lo, hi) in zip(_TRUST, radii, trust, strict=True):
         if math.isfinite(r):
