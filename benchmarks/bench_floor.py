@@ -36,9 +36,9 @@ computes those again where it did; a recorded exception is raised again. Differe
 The stages: building the QP (``build_perching_qp``), the workspace rows (``workspace_blocks``
 and ``refinement_blocks``), the FoV linearisation (``perception.linearise_on``) and the FoV
 rows it builds when a QP needs them (``qp.fov.fov_rows``), the visibility score of a first plan's
-SQP steps (``perception._scores``) and the sampled limit check before them (``scaled_excess``
-as the planner calls it there; the time search's own sampling stays), reducing and solving the QPs
-(``solve_perching_qp``; and, each taken away alone, its parts: the equality elimination and
+SQP steps (``perception._scores``) and the sampled limit check before them (the excess
+kernel's call, ``time_search._excess``, as the planner makes it there; the time search's own
+sampling stays), reducing and solving the QPs (``solve_perching_qp``; and, each taken away alone, its parts: the equality elimination and
 reduced rows of ``PerchingQp.reduce``, the DAQP call with its solution object, the lift and the
 feasibility check of ``solve._outcome``), the bound certificate (``planner._certify``) and the workspace certificate
 (``certify_workspace``). Nothing is asserted; the numbers are for this machine and its load.
@@ -79,7 +79,7 @@ STAGES: tuple[tuple[str, tuple[tuple[Any, str], ...]], ...] = (
     ("  of which: the DAQP call and its solution object", ((solve, "_solve_two_sided"),)),
     ("  of which: the lift and the feasibility check", ((solve, "_outcome"),)),
     ("FoV visibility score (first plans' SQP steps)", ((perception, "_scores"),)),
-    ("sampled limit check before the SQP (first plans)", ((planner, "scaled_excess"),)),
+    ("sampled limit check before the SQP (first plans)", ((planner, "_excess"),)),
     ("bound certificate (Algorithm 1)", ((planner, "_certify"),)),
     ("workspace certificate", ((attempt, "certify_workspace"),)),
 )
