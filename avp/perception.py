@@ -87,14 +87,15 @@ def _scores(trajs: tuple[Trajectory, ...], target: PerchTarget, cfg: PlannerConf
     if camera is None:  # no direction meets the rows: nothing to gain
         return [0.0] * len(trajs)
     first = trajs[0]
-    t = first._sample_rel(first.duration / _SCORE_GRID)
+    step = first.duration / _SCORE_GRID
     if _cone_only(camera) and all(tr.knots_rel is first.knots_rel and tr.t0 == first.t0 and tr.g == first.g
                                   for tr in trajs[1:]):
-        # the plans of one QP's copies (the same knots object): the fractions alone, summed
+        # the plans of one QP's copies (the same knots object, a shortcut of _visibility_checked's
+        # test by value): the fractions alone, summed
         coeffs = first.coefficients if len(trajs) == 1 else np.concatenate([tr.coefficients for tr in trajs], axis=1)
-        tf, pf, _ = _cone_fractions(coeffs, first, t, target, camera, cfg.limits.rotor_drag)
+        tf, pf, _ = _cone_fractions(coeffs, first, first._sample_rel(step), target, camera, cfg.limits.rotor_drag)
         return (tf + pf).tolist()  # type: ignore[no-any-return]
-    vis = _visibility_checked(trajs, target, camera, first.duration / _SCORE_GRID, cfg.limits.rotor_drag)
+    vis = _visibility_checked(trajs, target, camera, step, cfg.limits.rotor_drag)
     return [v.time_fraction + v.path_fraction for v in vis]
 
 

@@ -32,7 +32,7 @@ from . import _avp_rust
 from ._typing import Array
 from .config import PlannerConfig, QpForm
 from .errors import AvpError, ConfigError, SolverError
-from .qp.assemble import LeastDistanceQp, PerchingQp, ReducedQp
+from .qp.assemble import LeastDistanceQp, PerchingQp, ReducedQp, _read_only
 
 __all__ = [
     "BACKENDS",
@@ -195,14 +195,21 @@ class TwoSidedSolution(qpsolvers.Solution):
     upper: Array | None = None
     lam: Array | None = None
 
+    def __post_init__(self) -> None:
+        if self.__dict__.get("_z", 0) is None:  # the constructor's default: not set, computed when read
+            del self.__dict__["_z"]
+
     @property  # type: ignore[misc]
     def z(self) -> Array | None:
         """The multipliers of the one-sided stacking, ``[lam^+; lam^-]``, computed from ``lam``
-        when read (nothing in avp reads them; qpsolvers' ``Solution`` has them), unless set."""
-        z = self.__dict__.get("_z")
-        if z is None and self.lam is not None:
-            return np.concatenate([np.maximum(self.lam, 0.0), -np.minimum(self.lam, 0.0)])
-        return z  # type: ignore[no-any-return]
+        when first read (nothing in avp reads them; qpsolvers' ``Solution`` has them) unless set
+        (``None`` included)."""
+        d = self.__dict__
+        if "_z" not in d:
+            if self.lam is None:
+                return None
+            d["_z"] = np.concatenate([np.maximum(self.lam, 0.0), -np.minimum(self.lam, 0.0)])
+        return d["_z"]  # type: ignore[no-any-return]
 
     @z.setter
     def z(self, value: Array | None) -> None:
@@ -250,9 +257,7 @@ class TwoSidedSolution(qpsolvers.Solution):
 
 @functools.cache
 def _read_only_identity(n: int) -> Array:
-    eye = np.eye(n)
-    eye.setflags(write=False)
-    return eye
+    return _read_only(np.eye(n))
 
 
 def _identity(n: int) -> Array:

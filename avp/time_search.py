@@ -55,6 +55,7 @@ MAX_SAMPLES_PER_SEGMENT = 100_000
 """The most samples per segment :func:`scaled_excess` takes (the kernel's own bound)."""
 
 _ONE = np.ones(1)
+_ONE.setflags(write=False)  # handed to the kernel as s^-2 at scale 1 too (the planner)
 
 
 def _excess(traj: Trajectory, limits: VehicleLimits, g: float, s2: Array,

@@ -296,8 +296,8 @@ class Trajectory:
         return np.minimum(self.duration, np.maximum(0.0, flat, out=flat), out=flat)  # clip's values, fewer calls
 
     def _relative_floats(self, times: list[float]) -> list[float]:
-        """:meth:`_relative` of finite times in Python floats, the same values (the same
-        operations; a handful of times costs less this way than in array calls)."""
+        """:meth:`_relative` of finite times within ``[t0, tf]`` in Python floats, the same values
+        (the same operations; a handful of times costs less this way than in array calls)."""
         duration, t0, tf = self.duration, self._t0, self._tf
         if t0 == 0.0:
             return [min(duration, max(0.0, t - t0)) for t in times]

@@ -195,11 +195,32 @@ def test_the_sqp_score_is_the_visibility_fractions_summed(incline, distance, dra
         return [v.time_fraction + v.path_fraction
                 for v in _visibility_checked(trajs, target, camera, step, cfg.limits.rotor_drag)]
 
+    paths = {"fast": 0, "checked": 0}
+
+    def counted(name, fn):
+        def call(*args, **kwargs):
+            paths[name] += 1
+            return fn(*args, **kwargs)
+        return call
+
+    fast, slow = perception._cone_fractions, perception._visibility_checked
     for trajs in ((one,), (one, other), (other, one)):
-        assert perception._scores(trajs, target, cfg) == checked(trajs)
+        expected = checked(trajs)
+        perception._cone_fractions, perception._visibility_checked = counted("fast", fast), counted("checked", slow)
+        try:
+            assert perception._scores(trajs, target, cfg) == expected
+        finally:
+            perception._cone_fractions, perception._visibility_checked = fast, slow
+    assert paths == {"fast": 3, "checked": 0}  # one QP's plans: the kernel's fractions, summed
     alone = avp.Trajectory.from_relative_knots(other.coefficients, other.knots_rel.copy(), other.t0, other.g)
     assert alone.knots_rel is not one.knots_rel
-    assert perception._scores((one, alone), target, cfg) == checked((one, alone))
+    expected = checked((one, alone))
+    perception._visibility_checked = counted("checked", slow)
+    try:
+        assert perception._scores((one, alone), target, cfg) == expected
+    finally:
+        perception._visibility_checked = slow
+    assert paths == {"fast": 3, "checked": 1}  # knots of their own: the checked path
 
 
 @settings(max_examples=60, deadline=None)

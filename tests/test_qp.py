@@ -581,3 +581,6 @@ def test_physical_coefficients_are_the_scaled_decision_vector_reordered(seed, n_
     np.testing.assert_array_equal(layout.to_physical(given_c, T), coeffs)
     with pytest.raises(avp.ConfigError, match="c_hat"):
         layout.physical(c[:-1], scale)
+    with pytest.raises(avp.ConfigError, match="durations"):  # durations of another layout
+        layout.to_physical(given_c, np.ones(n_seg + 1))
+    np.testing.assert_array_equal(layout.to_physical(given_c.reshape(4, -1), T), coeffs)  # any shape, in order

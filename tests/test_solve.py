@@ -298,8 +298,45 @@ def test_the_one_sided_multipliers_are_those_qpsolvers_judges(seed, n, m) -> Non
     scale = 1.0 + float(np.abs(g).max()) + float(np.abs(direct.z).max()) * float(np.abs(G).max())
     assert one_sided.dual_residual() == pytest.approx(direct.dual_residual(), abs=1e-12 * scale)
     assert one_sided.duality_gap() == pytest.approx(direct.duality_gap(), abs=1e-12 * scale * (1 + float(np.abs(direct.x).max())))
+    assert direct.z is direct.z  # computed once: what is written into it stays
     direct.z = np.ones(2 * m)
     np.testing.assert_array_equal(direct.z, np.ones(2 * m))
+    direct.z = None  # set, even to None: kept
+    assert direct.z is None
+
+
+@pytest.mark.parametrize("action", ["error", "always"])
+def test_a_back_end_warning_of_a_strict_solve_reaches_the_callers_filters(monkeypatch, action) -> None:
+    """The QP without FoV rows is solved without catching its warnings: under the caller's
+    "error" filter the back-end's warning is a typed ``SolverError`` naming the back-end; under
+    "always" it reaches the caller (once per solve) and the plan is made. The FoV QPs' warnings,
+    expected on an incompatible problem (16), are logged, not emitted."""
+    import warnings
+
+    import daqp
+    from scenarios import standard
+
+    real = daqp.solve
+
+    def noisy(*args, **kwargs):
+        warnings.warn("back-end says hi", RuntimeWarning, stacklevel=1)
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(daqp, "solve", noisy)
+    sc = standard(60, 7.5)  # a first plan with three SQP steps: one strict solve, three FoV solves
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter(action)
+        if action == "error":
+            with pytest.raises(avp.SolverError, match="daqp.*back-end says hi"):
+                avp.plan_detailed(sc.state, sc.target, PlannerConfig())
+            return
+        result = avp.plan_detailed(sc.state, sc.target, PlannerConfig())
+    assert result.status is avp.PlanStatus.SOLVED
+    fov_solves = sum("FoV points placed" in line and "daqp: solved" in line for line in result.log)
+    logged = sum("RuntimeWarning: back-end says hi" in line for line in result.log)
+    shown = [w for w in caught if "back-end says hi" in str(w.message)]
+    assert fov_solves == 3 and logged == fov_solves  # each FoV solve's warning in the log, not shown
+    assert len(shown) == 1 and shown[0].category is RuntimeWarning  # the strict solve's, to the caller
 
 
 def test_the_kkt_figures_follow_every_array_they_read() -> None:

@@ -194,7 +194,8 @@ _TRUST = tuple(f"{FOV_PREFIX} trust region (9) {label}" for label in ("x", "a", 
 
 
 _NO_LOWER = _read_only(np.full(256, -np.inf))
-"""The rows (8)'s lower bounds (none): read-only views of it (more points than this get their own)."""
+"""The rows (8)'s lower bounds (none): read-only views of it (more points than this get a
+read-only array of their own)."""
 
 
 def _assembled(fov: FovConfig, rhs: Array, row8: Array,
@@ -205,7 +206,8 @@ def _assembled(fov: FovConfig, rhs: Array, row8: Array,
     if rhs.size == 0:
         return ()
     k = rhs.size
-    blocks = [ConstraintBlock(_ROW8, row8, _NO_LOWER[:k] if k <= _NO_LOWER.size else np.full(k, -np.inf), rhs)]
+    no_lower = _NO_LOWER[:k] if k <= _NO_LOWER.size else _read_only(np.full(k, -np.inf))
+    blocks = [ConstraintBlock(_ROW8, row8, no_lower, rhs)]
     radii = (fov.trust_position, fov.trust_acceleration, fov.trust_yaw)
     for name, r, (R, lo, hi) in zip(_TRUST, radii, trust, strict=True):
         if math.isfinite(r):

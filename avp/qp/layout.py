@@ -109,8 +109,13 @@ class DecisionLayout:
         """:meth:`to_physical` with the :meth:`physical_scale` ``scale``, and whether every
         coefficient is finite: one product per coefficient, by the Rust kernel
         ``physical_coefficients`` (one call, not an array operation per step)."""
+        if np.ndim(c_hat) != 1:  # any shape of the right size, read in order
+            c_hat = np.reshape(c_hat, -1)
         if np.shape(c_hat) != (self.n_variables,):
             raise ConfigError("c_hat", f"expected {self.n_variables} coefficients, got shape {np.shape(c_hat)}")
+        if np.shape(scale) != (self.n_segments, self.n_coeffs):
+            raise ConfigError("durations", f"expected {self.n_segments} segment durations (a scale of shape "
+                                           f"({self.n_segments}, {self.n_coeffs})), got shape {np.shape(scale)}")
         coeffs, finite = _avp_rust.physical_coefficients(c_hat, scale)
         return coeffs, finite
 

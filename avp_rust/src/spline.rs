@@ -170,7 +170,13 @@ pub fn physical_coefficients(
         });
     }
     let block = scale.len(); // segments x powers: one axis of c
-    if block == 0 || c.len() % block != 0 {
+    if block == 0 {
+        return Err(Error::Shape {
+            arg: "scale",
+            detail: "no segment: a spline has one at least".into(),
+        });
+    }
+    if c.is_empty() || c.len() % block != 0 {
         return Err(Error::Shape {
             arg: "c_hat",
             detail: format!(
@@ -229,6 +235,10 @@ mod tests {
         );
         assert_eq!(
             physical_coefficients(&c, &[], 2).unwrap_err().arg(),
+            "scale"
+        );
+        assert_eq!(
+            physical_coefficients(&[], &scale, 2).unwrap_err().arg(),
             "c_hat"
         );
     }

@@ -5,8 +5,8 @@ use std::borrow::Cow;
 
 use numpy::ndarray::Dimension;
 use numpy::{
-    Element, IntoPyArray, PyArray2, PyReadonlyArray, PyReadonlyArray1, PyReadonlyArray2,
-    PyReadonlyArray3, PyUntypedArrayMethods,
+    AllowTypeChange, Element, IntoPyArray, PyArray2, PyArrayLike1, PyArrayLike2, PyReadonlyArray,
+    PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3, PyUntypedArrayMethods,
 };
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
@@ -73,6 +73,13 @@ pub(crate) fn columns(arg: &'static str, m: &PyReadonlyArray2<'_, f64>, n: usize
         ))
     }
 }
+
+/// A float array of any layout or dtype (converted to `float64` when it is not), read by its
+/// values ([`row_major`]): the kernels that take the planner's arrays as they are, without a
+/// conversion call in Python for each.
+pub(crate) type F1<'py> = PyArrayLike1<'py, f64, AllowTypeChange>;
+/// A float matrix of any layout or dtype.
+pub(crate) type F2<'py> = PyArrayLike2<'py, f64, AllowTypeChange>;
 
 /// The values of `arr` in row-major order: its own buffer when it is C-contiguous, a copy
 /// otherwise (a Fortran-ordered factor, a strided view).

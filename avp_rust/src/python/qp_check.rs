@@ -1,21 +1,13 @@
 //! PyO3 wrappers of a QP solution's acceptance checks (`qp_check`).
 #![allow(clippy::useless_conversion)]
-use numpy::{
-    AllowTypeChange, PyArrayLike1, PyArrayLike2, PyReadonlyArray1, PyReadonlyArray2,
-    PyUntypedArrayMethods,
-};
+use numpy::{PyReadonlyArray1, PyReadonlyArray2, PyUntypedArrayMethods};
 use pyo3::prelude::*;
 
-use super::common::{columns, kernel_err, row_major, to_py_err};
+use super::common::{columns, kernel_err, row_major, to_py_err, F1, F2};
 use crate::error::guarded;
 use crate::qp_check;
 
-/// A float array of any layout or dtype (converted to `float64` when it is not): the judges
-/// read the planner's arrays as they are, without a conversion call in Python for each.
-type F1<'py> = PyArrayLike1<'py, f64, AllowTypeChange>;
-/// A float matrix of any layout or dtype.
-type F2<'py> = PyArrayLike2<'py, f64, AllowTypeChange>;
-
+/// `vector` (named `arg`) has one entry per row of `m` (named `matrix`).
 fn one_per_row(
     arg: &'static str,
     len: usize,
@@ -33,6 +25,8 @@ fn one_per_row(
     }
 }
 
+/// Two-sided rows `lower <= g z <= upper` on `n` variables: `g` with `n` columns, one bound of
+/// each side per row (the rows both kernels check).
 fn two_sided_rows(
     g: &PyReadonlyArray2<'_, f64>,
     lower: &PyReadonlyArray1<'_, f64>,
@@ -44,6 +38,9 @@ fn two_sided_rows(
     one_per_row("upper", upper.len(), "g", g)
 }
 
+/// Largest relative violation at `c` of `a c = b` and `lower <= g c <= upper` (0 at least;
+/// NaN when a residual is NaN). The arrays are read by their values, of any layout and float
+/// dtype (the planner's, without a conversion in Python).
 #[pyfunction(name = "max_violation")]
 fn max_violation_py(
     c: F1<'_>,
@@ -62,6 +59,8 @@ fn max_violation_py(
     guarded(|| qp_check::max_violation(&cs, &a_s, &bs, &gs, &lo, &hi)).map_err(to_py_err)
 }
 
+/// `(dual residual, duality gap)` of `min 1/2 x^T h x + q^T x` s.t. `lower <= g x <= upper` at
+/// `x` with signed multipliers `lam`; arrays of any layout and float dtype.
 #[pyfunction(name = "kkt_residuals")]
 #[allow(clippy::too_many_arguments)]
 fn kkt_residuals_py(

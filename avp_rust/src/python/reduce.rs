@@ -1,12 +1,9 @@
 //! PyO3 wrapper of the rows appended to an eliminated QP (`crate::reduce`).
 #![allow(clippy::useless_conversion)]
-use numpy::{
-    AllowTypeChange, IntoPyArray, PyArray1, PyArray2, PyArrayLike1, PyArrayLike2,
-    PyUntypedArrayMethods,
-};
+use numpy::{IntoPyArray, PyArray1, PyArray2, PyUntypedArrayMethods};
 use pyo3::prelude::*;
 
-use super::common::{columns, matrix, row_major, to_py_err};
+use super::common::{columns, matrix, row_major, to_py_err, F1, F2};
 use crate::error::guarded;
 use crate::reduce::{append_rows, Elimination, QpRows, RowBlock};
 
@@ -19,11 +16,6 @@ type Rows<'py> = (
     Bound<'py, PyArray1<f64>>,
     Option<Bound<'py, PyArray2<f64>>>,
 );
-
-/// A float array of any layout or dtype (converted to `float64` when it is not).
-type F1<'py> = PyArrayLike1<'py, f64, AllowTypeChange>;
-/// A float matrix of any layout or dtype.
-type F2<'py> = PyArrayLike2<'py, f64, AllowTypeChange>;
 
 /// The QP's rows `(g, lower, upper)` in the coefficients, `(g_z, lower_z, upper_z)` in `z` and
 /// `m_rows` in `u = R z` (or `None`), with the rows of `blocks` (`(matrix, lower, upper)`

@@ -2,12 +2,12 @@
 //! vector's spline coefficients.
 #![allow(clippy::useless_conversion)]
 use numpy::{
-    AllowTypeChange, IntoPyArray, PyArray2, PyArray3, PyArrayLike1, PyArrayLike2, PyReadonlyArray1,
-    PyReadonlyArray2, PyReadonlyArray3, PyUntypedArrayMethods,
+    IntoPyArray, PyArray2, PyArray3, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3,
+    PyUntypedArrayMethods,
 };
 use pyo3::prelude::*;
 
-use super::common::{contiguous, kernel_err, matrix, row_major, spline_view, to_py_err};
+use super::common::{contiguous, kernel_err, matrix, row_major, spline_view, to_py_err, F1, F2};
 use crate::error::guarded;
 use crate::spline;
 
@@ -79,8 +79,8 @@ fn anticipate_py<'py>(
 #[pyfunction(name = "physical_coefficients")]
 fn physical_coefficients_py<'py>(
     py: Python<'py>,
-    c_hat: PyArrayLike1<'py, f64, AllowTypeChange>,
-    scale: PyArrayLike2<'py, f64, AllowTypeChange>,
+    c_hat: F1<'py>,
+    scale: F2<'py>,
 ) -> PyResult<(Bound<'py, PyArray3<f64>>, bool)> {
     let (segments, powers) = (scale.shape()[0], scale.shape()[1]);
     let (c, f) = (row_major(&c_hat), row_major(&scale));
