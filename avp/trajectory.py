@@ -298,9 +298,7 @@ class Trajectory:
     def _relative_floats(self, times: list[float]) -> list[float]:
         """:meth:`_relative` of finite times within ``[t0, tf]`` in Python floats, the same values
         (the same operations; a handful of times costs less this way than in array calls)."""
-        duration, t0, tf = self.duration, self._t0, self._tf
-        if t0 == 0.0:
-            return [min(duration, max(0.0, t - t0)) for t in times]
+        duration, t0, tf = self.duration, self._t0, self._tf  # at t0 = 0, t >= tf gives duration either way
         return [min(duration, max(0.0, duration if t >= tf else t - t0)) for t in times]
 
     def derivatives(self, t: Any, orders: Any = (0, 1, 2, 3, 4)) -> Array:

@@ -41,21 +41,9 @@ pub struct QpRows {
 }
 
 impl QpRows {
-    /// A QP's rows so far, to append to (`m_rows`: `None` when it has no least-distance form).
-    pub fn from_parts(
-        g: &[f64],
-        lower: &[f64],
-        upper: &[f64],
-        g_z: &[f64],
-        lower_z: &[f64],
-        upper_z: &[f64],
-        m_rows: Option<&[f64]>,
-    ) -> Self {
-        Self::with_room(0, (0, 0), g, lower, upper, g_z, lower_z, upper_z, m_rows)
-    }
-
-    /// [`QpRows::from_parts`] with room for `extra` more rows of `(n, m)` columns (in `c` and
-    /// in `z`), so that appending them copies the rows so far once, not twice.
+    /// A QP's rows so far, to append to (`m_rows`: `None` when it has no least-distance form),
+    /// with room for `extra` more rows of `(n, m)` columns (in `c` and in `z`), so that appending
+    /// them copies the rows so far once, not twice.
     #[allow(clippy::too_many_arguments)]
     pub fn with_room(
         extra: usize,
@@ -211,7 +199,9 @@ mod tests {
     }
 
     fn empty(with_m: bool) -> QpRows {
-        QpRows::from_parts(
+        QpRows::with_room(
+            0,
+            (0, 0),
             &[],
             &[],
             &[],
@@ -266,7 +256,9 @@ mod tests {
             c_p: &c_p,
             r: Some(&r),
         };
-        let rows = QpRows::from_parts(
+        let rows = QpRows::with_room(
+            0,
+            (0, 0),
             &[7.0, 8.0],
             &[-1.0],
             &[1.0],
@@ -355,7 +347,9 @@ mod tests {
         let c_p = [0.0, 0.0];
         let r = [1.0, 0.0, 0.0, 1.0];
         let parent = || {
-            QpRows::from_parts(
+            QpRows::with_room(
+                0,
+                (0, 0),
                 &[7.0, 8.0],
                 &[-1.0],
                 &[1.0],
