@@ -35,6 +35,7 @@ table :data:`avp.solve.BACKENDS`). The FoV rows themselves are built by :mod:`av
 
 from __future__ import annotations
 
+import threading
 import time
 import warnings
 from collections.abc import Callable
@@ -117,6 +118,15 @@ class Attempt:
         return self.safety is None or self.safety.certified
 
 
+_CAPTURE = threading.Lock()
+"""Held while an FoV solve's warnings are captured. ``warnings.catch_warnings`` swaps the
+process's filter list and restores the one it found: two threads inside it at once, the second
+leaving last, would restore the first's list with its "always" filter, for good. Threads
+planning with avp take turns here instead (most of a solve is Python code, which runs one
+thread at a time anyway). A warning another thread raises meanwhile, outside avp, is still captured into the log:
+Python's filters are the process's, not a thread's."""
+
+
 @dataclass
 class _Ledger:
     """The log lines and seconds an attempt accumulates (returned with it)."""
@@ -137,7 +147,7 @@ class _Ledger:
             if strict:  # warnings reach the caller's filters as they are
                 out = solve_perching_qp(qp, cfg, initvals)
             else:
-                with warnings.catch_warnings(record=True) as caught:
+                with _CAPTURE, warnings.catch_warnings(record=True) as caught:  # one thread at a time
                     warnings.simplefilter("always")
                     out = solve_perching_qp(qp, cfg, initvals)
                 self.log.extend(f"{label}: {w.category.__name__}: {w.message}" for w in caught)

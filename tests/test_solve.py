@@ -4,6 +4,7 @@ and a missing back-end is a typed SolverError."""
 from __future__ import annotations
 
 import dataclasses
+import time
 
 import pytest
 from hypothesis import given, settings
@@ -458,3 +459,57 @@ def test_a_nan_residual_is_a_violation_not_a_pass() -> None:
     judged = solve._outcome(qp, cfg, qp.reduce(), out.solution, np.vstack([G, big]), np.append(lo, -math.inf),
                             np.append(hi, math.inf), 0.0, 0.0)
     assert judged.status is solve.QpStatus.INACCURATE and math.isnan(judged.max_violation)
+
+
+def test_threads_logging_fov_warnings_leave_the_process_filters_as_they_were(monkeypatch) -> None:
+    """Two threads in the FoV solves' warning capture at once: ``warnings.catch_warnings`` swaps
+    the process's filter list, so a thread that entered second and leaves last would put back the
+    list the first had (its "always" filter included) for good. The capture is serialised: the
+    second thread's solve starts only after the first left, and the filters are those of before.
+    The interleaving is forced: the second thread's solve waits for the first to leave."""
+    import threading
+    import types
+    import warnings
+
+    from avp import attempt
+
+    first_inside, second_tried, first_left = threading.Event(), threading.Event(), threading.Event()
+    overlapped: list[bool] = []
+
+    def fake_solve(qp, cfg, initvals):
+        if threading.current_thread().name == "first":
+            first_inside.set()
+            second_tried.wait(5.0)
+            time.sleep(0.2)  # time for the second to enter, were it let in
+        else:
+            overlapped.append(not first_left.is_set())
+            first_left.wait(5.0)  # leave after the first did: the order that corrupts
+        warnings.warn("expected on an incompatible problem", RuntimeWarning, stacklevel=1)
+        return types.SimpleNamespace(build_time=0.0, solve_time=0.0)
+
+    monkeypatch.setattr(attempt, "solve_perching_qp", fake_solve)
+    logs: dict[str, list[str]] = {}
+
+    def first() -> None:
+        ledger = attempt._Ledger()
+        ledger.run(None, None, "FoV", False, None)  # type: ignore[arg-type]
+        logs["first"] = ledger.log
+        first_left.set()
+
+    def second() -> None:
+        first_inside.wait(5.0)
+        second_tried.set()
+        ledger = attempt._Ledger()
+        ledger.run(None, None, "FoV", False, None)  # type: ignore[arg-type]
+        logs["second"] = ledger.log
+
+    before = list(warnings.filters)
+    threads = [threading.Thread(target=first, name="first"), threading.Thread(target=second, name="second")]
+    for th in threads:
+        th.start()
+    for th in threads:
+        th.join(10.0)
+    assert overlapped == [False]  # the second solve started after the first had left
+    assert warnings.filters == before
+    for name in ("first", "second"):  # each thread's warning in its own log
+        assert logs[name] == ["FoV: RuntimeWarning: expected on an incompatible problem"]
