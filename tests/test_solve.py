@@ -464,26 +464,27 @@ def test_a_nan_residual_is_a_violation_not_a_pass() -> None:
 def test_threads_logging_fov_warnings_leave_the_process_filters_as_they_were(monkeypatch) -> None:
     """Two threads in the FoV solves' warning capture at once: ``warnings.catch_warnings`` swaps
     the process's filter list, so a thread that entered second and leaves last would put back the
-    list the first had (its "always" filter included) for good. The capture is serialised: the
-    second thread's solve starts only after the first left, and the filters are those of before.
-    The interleaving is forced: the second thread's solve waits for the first to leave."""
+    list the first had (its "always" filter and recorder) for good. The capture is serialised:
+    the second thread's solve runs inside its own capture only, and the filters are those of
+    before. The first solve waits for the second to start (it cannot while the first holds the
+    turn, so that wait runs out); the second leaves after the first: the order that corrupted."""
     import threading
     import types
     import warnings
 
     from avp import attempt
 
-    first_inside, second_tried, first_left = threading.Event(), threading.Event(), threading.Event()
-    overlapped: list[bool] = []
+    first_inside, second_inside, first_left = threading.Event(), threading.Event(), threading.Event()
+    waited_out: list[bool] = []  # whether the first solve's wait for the second ran out
+    before = list(warnings.filters)
 
     def fake_solve(qp, cfg, initvals):
         if threading.current_thread().name == "first":
             first_inside.set()
-            second_tried.wait(5.0)
-            time.sleep(0.2)  # time for the second to enter, were it let in
+            waited_out.append(not second_inside.wait(0.5))  # set at once without the turns
         else:
-            overlapped.append(not first_left.is_set())
-            first_left.wait(5.0)  # leave after the first did: the order that corrupts
+            second_inside.set()
+            first_left.wait(5.0)
         warnings.warn("expected on an incompatible problem", RuntimeWarning, stacklevel=1)
         return types.SimpleNamespace(build_time=0.0, solve_time=0.0)
 
@@ -498,18 +499,51 @@ def test_threads_logging_fov_warnings_leave_the_process_filters_as_they_were(mon
 
     def second() -> None:
         first_inside.wait(5.0)
-        second_tried.set()
         ledger = attempt._Ledger()
         ledger.run(None, None, "FoV", False, None)  # type: ignore[arg-type]
         logs["second"] = ledger.log
 
-    before = list(warnings.filters)
     threads = [threading.Thread(target=first, name="first"), threading.Thread(target=second, name="second")]
     for th in threads:
         th.start()
     for th in threads:
         th.join(10.0)
-    assert overlapped == [False]  # the second solve started after the first had left
+    assert waited_out == [True]  # the second solve could not start while the first was inside
     assert warnings.filters == before
     for name in ("first", "second"):  # each thread's warning in its own log
         assert logs[name] == ["FoV: RuntimeWarning: expected on an incompatible problem"]
+
+
+@pytest.mark.skipif(not hasattr(__import__("os"), "fork"), reason="POSIX fork")
+def test_a_fork_during_another_threads_fov_capture_waits_for_it(monkeypatch) -> None:
+    """A fork while another thread captures an FoV solve's warnings waits for the capture to
+    end: the child starts with the process's filters as they were, and can capture itself (the
+    turn is free there)."""
+    import os
+    import threading
+    import types
+    import warnings
+
+    from avp import attempt
+
+    inside = threading.Event()
+
+    def fake_solve(qp, cfg, initvals):
+        inside.set()
+        time.sleep(0.3)  # the fork is asked for meanwhile
+        return types.SimpleNamespace(build_time=0.0, solve_time=0.0)
+
+    monkeypatch.setattr(attempt, "solve_perching_qp", fake_solve)
+    before = list(warnings.filters)
+    thread = threading.Thread(target=lambda: attempt._Ledger().run(None, None, "FoV", False, None))  # type: ignore[arg-type]
+    thread.start()
+    inside.wait(5.0)
+    pid = os.fork()
+    if pid == 0:  # the child: only this thread lives on
+        ok = warnings.filters == before
+        ok = ok and attempt._CAPTURE.acquire(timeout=2.0)  # free (a lock held at the fork would stay held)
+        os._exit(0 if ok else 1)
+    thread.join(10.0)
+    _, status = os.waitpid(pid, 0)
+    assert os.waitstatus_to_exitcode(status) == 0
+    assert warnings.filters == before
