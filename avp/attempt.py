@@ -127,11 +127,10 @@ for good (every later warning of the process, under any filter, appended to a li
 reads). Threads planning with avp take turns here instead, so FoV solves of different threads
 run one at a time (two threads planning standard scenario 8 together took about 4 % longer);
 a wait here is in no build or solve time, and a deadline (wall time) learns of it only after
-the solve. Another library's
-``catch_warnings`` in another thread can still interleave with this one, and a warning another
-thread raises meanwhile is captured into this log: Python's filters are the process's, not a
-thread's. A fork waits for a capture in progress (the child starts with the filters as they
-were, and this lock free)."""
+the solve. Another library's ``catch_warnings`` in another thread can still interleave with
+this one, and a warning another thread raises meanwhile is captured into this log: Python's
+filters are the process's, not a thread's. A fork waits for a capture in progress (the child
+starts with the filters as they were, and this lock free)."""
 
 if hasattr(os, "register_at_fork"):  # the forking thread holds the lock over the fork, then frees it in both
     os.register_at_fork(before=_CAPTURE.acquire, after_in_parent=_CAPTURE.release, after_in_child=_CAPTURE.release)
